@@ -1,0 +1,300 @@
+"""What both worlds share: action and observation layout, the control loop, fall detection.
+
+Timing: physics at ``physics_dt`` (default 1 ms = 1 kHz; explicit PD on the armature-free NAO links is
+not accurate at 2 ms, see ``robots.nao.GAINS``), control at ``control_dt`` (10 ms =
+100 Hz); each ``step(action)`` holds the joint targets for ``control_dt / physics_dt`` physics
+steps, in each of which the PD law ``tau = kp (q* - q) - kd qdot``, clipped to the URDF effort,
+acts on every joint (MuJoCo: actuators with that law; PyBullet: the same law in Python with
+``TORQUE_CONTROL``).
+
+Action: targets [rad] for the 23 actuated joints (``RobotModel.actuated_joint_names``; the right
+HipYawPitch follows the left one), clipped to the joint limits. Wrong shape, NaN or infinity
+raise ``ValueError``.
+
+Observation: what a NAO measures, a flat float64 vector whose named fields are given by
+:class:`ObservationLayout` (``q`` encoders [rad] (24), ``dq`` joint velocities [rad/s] (24),
+``gyro`` torso angular velocity in the torso frame [rad/s] (3), ``acc`` accelerometer (specific
+force in the torso frame, ~ +9.81 z when upright) [m/s^2] (3), ``angle`` torso roll and pitch
+[rad] (2), ``fsr`` total normal force under the left/right foot [N] (2), ``cop`` centre of
+pressure of each foot in its sole frame [m] (4: Lx, Ly, Rx, Ry; 0 without contact)).
+
+Ground truth rides in ``info`` only: ``time`` [s], ``base_pos`` (3, torso origin, world, m),
+``base_quat`` (4, w x y z), ``base_linvel``/``base_angvel`` (3, world), ``com`` (3, world, m),
+``cop_world`` (3, whole-robot centre of pressure on the ground; zeros and ``cop_valid`` False
+without contact),
+``terrain_height`` under the torso [m], ``fall_reason`` (None, "torso_low", "tilt", "unstable").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from robots import RobotModel, nao_h25
+from terrain import Heightfield
+
+GRAVITY = 9.81
+#: Fall thresholds (walk_engines.md §9): torso origin lower than this above the terrain [m] ...
+FALL_TORSO_HEIGHT = 0.20
+#: ... or torso tilted more than this from upright [rad].
+FALL_TILT = math.radians(45.0)
+#: Joint speeds above this [rad/s] mean the simulation blew up.
+UNSTABLE_JOINT_SPEED = 200.0
+FOOT_CONTACT_FORCE = 1.0  # [N] a foot with less normal force has no CoP
+
+
+class ObservationLayout:
+    """Names and slices of the observation vector's fields (see module docstring)."""
+
+    def __init__(self, robot: RobotModel):
+        self.sizes = {"q": len(robot.joint_names), "dq": len(robot.joint_names), "gyro": 3, "acc": 3,
+                      "angle": 2, "fsr": 2, "cop": 4}
+        self.slices: dict[str, slice] = {}
+        i = 0
+        for k, n in self.sizes.items():
+            self.slices[k] = slice(i, i + n)
+            i += n
+        self.size = i
+        j = robot.joint_names
+        self.names: list[str] = ([f"q.{n}" for n in j] + [f"dq.{n}" for n in j] + ["gyro.x", "gyro.y", "gyro.z"]
+                                 + ["acc.x", "acc.y", "acc.z", "angle.roll", "angle.pitch", "fsr.L", "fsr.R",
+                                    "cop.Lx", "cop.Ly", "cop.Rx", "cop.Ry"])
+
+    def split(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """Field name -> view of ``obs`` (works on (..., size) arrays)."""
+        return {k: obs[..., s] for k, s in self.slices.items()}
+
+    def __getitem__(self, key: str) -> slice:
+        return self.slices[key]
+
+
+def quat_to_mat(q: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of two 3-vectors (``np.cross`` is ~10x slower on tiny arrays)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def roll_pitch(R: np.ndarray) -> tuple[float, float]:
+    """Torso roll and pitch [rad] (ZYX Euler convention) from a rotation matrix (3, 3)."""
+    return math.atan2(R[2, 1], R[2, 2]), math.asin(max(-1.0, min(1.0, -R[2, 0])))
+
+
+def make_terrain(terrain) -> Heightfield | None:
+    """None/"flat" -> None (a plane); a Heightfield passes; anything else -> ValueError."""
+    if terrain is None or (isinstance(terrain, str) and terrain == "flat"):
+        return None
+    if isinstance(terrain, Heightfield):
+        return terrain
+    raise ValueError(f"terrain must be None, 'flat' or a terrain.Heightfield, got {terrain!r}")
+
+
+@dataclass
+class StepState:
+    """Raw state an engine backend reports after a control step (all world frame, SI)."""
+
+    q: np.ndarray
+    dq: np.ndarray
+    base_pos: np.ndarray
+    base_quat: np.ndarray  # w x y z
+    base_linvel: np.ndarray  # of the torso origin
+    base_angvel: np.ndarray
+    accel_point_vel: np.ndarray  # world velocity of the accelerometer point
+    foot_force: np.ndarray  # (2,) normal force L, R [N]
+    foot_cop_world: np.ndarray  # (2, 3) CoP of each foot (NaN without contact)
+
+
+class NaoEnv(gym.Env):
+    """Common control loop of :class:`envs.NaoSimEnv` and :class:`envs.NaoRealEnv` (abstract).
+
+    Args:
+        robot: the robot (default :func:`robots.nao_h25`).
+        fixed_base: hang the torso at ``hang_height`` [m] (actuator tests); no falls then.
+        physics_dt, control_dt: [s]; ``control_dt`` must be a multiple of ``physics_dt``.
+        initial_pose: a :meth:`RobotModel.pose` name the robot starts in (standing on the ground).
+        max_episode_seconds: truncate after this long (None: never).
+
+    Raises:
+        ValueError: inconsistent time steps, unknown pose.
+    """
+
+    metadata = {"render_modes": []}
+    world = "abstract"
+
+    def __init__(self, robot: RobotModel | None = None, *, fixed_base: bool = False, physics_dt: float = 0.001,
+                 control_dt: float = 0.01, initial_pose: str = "crouch", hang_height: float = 0.6,
+                 max_episode_seconds: float | None = None):
+        self.robot = robot or nao_h25()
+        n_sub = control_dt / physics_dt
+        if physics_dt <= 0 or control_dt <= 0 or abs(n_sub - round(n_sub)) > 1e-9:
+            raise ValueError(f"control_dt ({control_dt}) must be a positive multiple of physics_dt ({physics_dt})")
+        self.physics_dt, self.control_dt, self.n_substeps = float(physics_dt), float(control_dt), int(round(n_sub))
+        self.fixed_base = bool(fixed_base)
+        self.hang_height = float(hang_height)
+        self.initial_pose = initial_pose
+        self.q0 = self.robot.pose(initial_pose)
+        self.max_episode_seconds = max_episode_seconds
+        r = self.robot
+        self.action_space = gym.spaces.Box(r.lower[r.actuated_index], r.upper[r.actuated_index], dtype=np.float64)
+        self.layout = ObservationLayout(r)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (self.layout.size,), dtype=np.float64)
+        self._terrain: Heightfield | None = None
+        self._accel_offset = np.array(r.frames["accel"].offset)
+        self._step_count = 0
+        self._last_obs: np.ndarray | None = None
+        self._prev_accel_vel = np.zeros(3)
+        self._noise_rng = np.random.default_rng(0)
+        self.last_applied = np.zeros(len(r.actuated_joint_names))
+
+    # ---------------------------------------------------------------- engine hooks
+    def _reset_world(self, seed: int | None, options: dict) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _advance(self, targets: np.ndarray) -> None:  # pragma: no cover - abstract
+        """Run ``n_substeps`` physics steps holding joint ``targets`` (24,)."""
+        raise NotImplementedError
+
+    def _state(self) -> StepState:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _com(self) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _sensor_noise(self, obs: dict[str, np.ndarray]) -> None:
+        """Hook for the real world's sensor bias and noise (in place)."""
+
+    # ---------------------------------------------------------------- helpers
+    @property
+    def terrain(self) -> Heightfield | None:
+        """The current episode's heightfield (None = flat plane at z = 0)."""
+        return self._terrain
+
+    @property
+    def time(self) -> float:
+        return self._step_count * self.control_dt
+
+    def terrain_height(self, x, y) -> np.ndarray:
+        """Ground height [m] at (x, y); outside the heightfield the nearest edge value."""
+        if self._terrain is None:
+            return np.zeros(np.broadcast(x, y).shape)
+        hx, hy = self._terrain.half_extent
+        return self._terrain.height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy))
+
+    def validate_action(self, action) -> np.ndarray:
+        """Return the action as float64 (23,) clipped to the joint limits.
+
+        Raises:
+            ValueError: wrong shape, or a NaN/infinite entry (named by joint).
+        """
+        a = np.asarray(action, dtype=np.float64)
+        n = self.action_space.shape[0]
+        if a.shape != (n,):
+            raise ValueError(f"action must have shape ({n},) (targets [rad] for {n} actuated joints), got {a.shape}")
+        bad = ~np.isfinite(a)
+        if bad.any():
+            names = [self.robot.actuated_joint_names[i] for i in np.flatnonzero(bad)]
+            raise ValueError(f"action contains NaN or infinite targets for {', '.join(names)}")
+        return np.clip(a, self.action_space.low, self.action_space.high)
+
+    def _observe(self, st: StepState) -> np.ndarray:
+        R = quat_to_mat(st.base_quat)
+        gyro = R.T @ st.base_angvel
+        acc_world = (st.accel_point_vel - self._prev_accel_vel) / self.control_dt
+        acc = R.T @ (acc_world + np.array([0.0, 0.0, GRAVITY]))
+        self._prev_accel_vel = st.accel_point_vel
+        roll, pitch = roll_pitch(R)
+        cop = np.zeros(4)
+        for k, sole in enumerate(("l_sole", "r_sole")):
+            if st.foot_force[k] > FOOT_CONTACT_FORCE and np.all(np.isfinite(st.foot_cop_world[k])):
+                cop[2 * k: 2 * k + 2] = self._to_sole(sole, st.foot_cop_world[k])[:2]
+        fields = {"q": st.q.copy(), "dq": st.dq.copy(), "gyro": gyro, "acc": acc, "angle": np.array([roll, pitch]),
+                  "fsr": st.foot_force.copy(), "cop": cop}
+        self._sensor_noise(fields)
+        return np.concatenate([fields[k] for k in self.layout.sizes])
+
+    def _to_sole(self, sole: str, p_world: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _info(self, st: StepState, fall_reason: str | None) -> dict:
+        f = st.foot_force
+        tot = f.sum()
+        cop_valid = bool(tot > FOOT_CONTACT_FORCE)
+        cop_world = np.zeros(3)
+        if cop_valid:
+            for k in range(2):
+                if f[k] > 0 and np.isfinite(st.foot_cop_world[k, 0]):
+                    cop_world += f[k] * st.foot_cop_world[k]
+            cop_world /= tot
+        return {
+            "time": self.time,
+            "base_pos": st.base_pos.copy(), "base_quat": st.base_quat.copy(),
+            "base_linvel": st.base_linvel.copy(), "base_angvel": st.base_angvel.copy(),
+            "com": self._com(), "cop_world": cop_world, "cop_valid": cop_valid,
+            "terrain_height": float(self.terrain_height(st.base_pos[0], st.base_pos[1])),
+            "fall_reason": fall_reason,
+            "applied_action": self.last_applied.copy(),
+        }
+
+    def _fall_reason(self, st: StepState) -> str | None:
+        check = np.abs(st.dq).max() + np.abs(st.q).max() + np.abs(st.base_pos).max() + np.abs(st.base_quat).max()
+        if not np.isfinite(check) or np.abs(st.dq).max() > UNSTABLE_JOINT_SPEED:
+            return "unstable"
+        if self.fixed_base:
+            return None
+        if st.base_pos[2] - float(self.terrain_height(st.base_pos[0], st.base_pos[1])) < FALL_TORSO_HEIGHT:
+            return "torso_low"
+        R = quat_to_mat(st.base_quat)
+        if R[2, 2] < math.cos(FALL_TILT):
+            return "tilt"
+        return None
+
+    # ---------------------------------------------------------------- gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode. ``seed`` seeds everything random in the episode (terrain, effects,
+        sensor noise). ``options`` may hold ``terrain`` (a Heightfield, or None for flat) and
+        ``pose`` (a pose name)."""
+        super().reset(seed=seed)
+        options = dict(options or {})
+        if "pose" in options:
+            self.q0 = self.robot.pose(options["pose"])
+        self._reset_world(seed, options)
+        self._step_count = 0
+        self.last_applied = self.q0[self.robot.actuated_index].copy()
+        st = self._state()
+        self._prev_accel_vel = st.accel_point_vel
+        obs = self._observe(st)
+        self._last_obs = obs
+        return obs, self._info(st, None)
+
+    def step(self, action):
+        if self._last_obs is None:
+            raise RuntimeError("call reset() before step()")
+        a = self.validate_action(action)
+        self.last_applied = a
+        with np.errstate(all="ignore"):
+            self._advance(self.robot.expand_action(a))
+            self._step_count += 1
+            st = self._state()
+            reason = self._fall_reason(st)
+        if reason == "unstable":
+            obs = self._last_obs.copy()  # the physics state is no longer meaningful
+            info = {"time": self.time, "fall_reason": reason, "applied_action": a.copy()}
+            self._last_obs = None  # the episode must be reset
+            return obs, 0.0, True, False, info
+        obs = self._observe(st)
+        self._last_obs = obs
+        info = self._info(st, reason)
+        reward = float(st.base_linvel[0])  # forward speed [m/s]; the walk fitness is computed from recordings
+        truncated = self.max_episode_seconds is not None and self.time >= self.max_episode_seconds - 1e-9
+        return obs, reward, reason is not None, bool(truncated), info

@@ -1,0 +1,201 @@
+"""The "real" world's extra physics: a documented, seeded profile of effects the sim leaves out.
+
+A :class:`RealProfile` holds, for each effect, the range ``(low, high)`` a value is drawn from
+uniformly at every episode reset (from the episode's seed); ``draw(rng, robot)`` returns the
+:class:`EffectDraw` that the PyBullet world applies for that episode. Per-joint effects draw one
+value per joint.
+
+Effects and how the real world (``envs.bullet_world``) applies them:
+
+=====================  ==========  ========================================================
+field                  unit        implementation
+=====================  ==========  ========================================================
+kp_scale, kd_scale     --          per-joint scale of the PD gains inside the explicit PD loop
+latency_s              s           command FIFO at the physics rate in front of the PD
+                                   (``round(latency / physics_dt)`` physics steps)
+backlash_rad           rad         per-joint dead band of that full width on the PD position
+                                   error (gear play: no restoring torque inside the band)
+coulomb_friction_nm    N m         per-joint PyBullet velocity motor with target 0 and max force
+                                   = the friction torque, beside the PD torque
+                                   (``reference/sysid.md`` §7)
+viscous_damping        N m s/rad   per-joint extra ``-b * qdot`` in the PD torque
+torque_limit_scale     --          scales the URDF effort limit the PD torque is clipped to
+mass_scale             --          per-link mass and inertia scale (``changeDynamics``)
+foot_friction          --          absolute lateral friction coefficient of both feet
+encoder_bias_rad       rad         per-joint calibration offset: seen by the servo and the
+                                   encoder reading alike
+encoder_noise_rad      rad         std of white noise on the measured joint positions
+gyro_bias, gyro_noise  rad/s       per-axis gyro offset; std of white noise
+accel_noise            m/s^2       std of white noise on the accelerometer
+angle_noise_rad        rad         std of white noise on the torso roll/pitch estimate
+terrain_amplitude      m           amplitude of the episode's lumpy heightfield
+=====================  ==========  ========================================================
+
+The values of the "real" profile are plausible for a NAO (``reference/nao_h25.md`` §8: real
+output torque 20-30 % below the URDF effort, a 10-12 ms DCM cycle; friction and backlash are
+estimates). ``"none"`` draws the identity for every effect and flat ground: a real world that
+should agree with the sim up to the engine gap.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+Range = tuple[float, float]
+
+_IDENTITY: dict[str, float] = {
+    "kp_scale": 1.0, "kd_scale": 1.0, "latency_s": 0.0, "backlash_rad": 0.0, "coulomb_friction_nm": 0.0,
+    "viscous_damping": 0.0, "torque_limit_scale": 1.0, "mass_scale": 1.0, "foot_friction": 0.8,
+    "encoder_bias_rad": 0.0, "encoder_noise_rad": 0.0, "gyro_bias": 0.0, "gyro_noise": 0.0,
+    "accel_noise": 0.0, "angle_noise_rad": 0.0, "terrain_amplitude": 0.0,
+}
+#: Effects drawn once per joint (24 values) or per link (25 values); the rest are scalars,
+#: except ``gyro_bias`` (3 values, one per axis).
+PER_JOINT = ("kp_scale", "kd_scale", "backlash_rad", "coulomb_friction_nm", "viscous_damping", "encoder_bias_rad")
+PER_LINK = ("mass_scale",)
+EFFECTS = tuple(_IDENTITY)
+#: Nominal foot friction coefficient, the same in the sim (nao_h25.md §4 assumes 0.7-0.8).
+NOMINAL_FOOT_FRICTION = _IDENTITY["foot_friction"]
+
+
+def _fixed(v: float) -> Range:
+    return (float(v), float(v))
+
+
+@dataclass(frozen=True)
+class RealProfile:
+    """Ranges ``(low, high)`` of the real world's effects, drawn uniformly per episode.
+
+    Raises:
+        ValueError: a range is not two finite numbers with low <= high, or is physically invalid
+            (negative latency/friction/noise, non-positive scales).
+    """
+
+    name: str = "custom"
+    kp_scale: Range = _fixed(1.0)
+    kd_scale: Range = _fixed(1.0)
+    latency_s: Range = _fixed(0.0)
+    backlash_rad: Range = _fixed(0.0)
+    coulomb_friction_nm: Range = _fixed(0.0)
+    viscous_damping: Range = _fixed(0.0)
+    torque_limit_scale: Range = _fixed(1.0)
+    mass_scale: Range = _fixed(1.0)
+    foot_friction: Range = _fixed(NOMINAL_FOOT_FRICTION)
+    encoder_bias_rad: Range = _fixed(0.0)
+    encoder_noise_rad: Range = _fixed(0.0)
+    gyro_bias: Range = _fixed(0.0)
+    gyro_noise: Range = _fixed(0.0)
+    accel_noise: Range = _fixed(0.0)
+    angle_noise_rad: Range = _fixed(0.0)
+    terrain_amplitude: Range = _fixed(0.0)
+
+    def __post_init__(self) -> None:
+        for f in EFFECTS:
+            r = getattr(self, f)
+            try:
+                lo, hi = (float(r[0]), float(r[1]))
+            except (TypeError, ValueError, IndexError):
+                raise ValueError(f"effect {f!r}: expected a (low, high) pair, got {r!r}") from None
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+                raise ValueError(f"effect {f!r}: need finite low <= high, got ({lo}, {hi})")
+            positive = f.endswith("_scale") or f == "foot_friction"
+            if (positive and lo <= 0) or (not positive and f not in ("encoder_bias_rad", "gyro_bias") and lo < 0):
+                raise ValueError(f"effect {f!r}: range ({lo}, {hi}) is out of its physical domain")
+            object.__setattr__(self, f, (lo, hi))
+
+    @property
+    def is_identity(self) -> bool:
+        """True if every effect is fixed at its identity value (the "none" profile)."""
+        return all(getattr(self, f) == _fixed(_IDENTITY[f]) for f in EFFECTS)
+
+    def active(self) -> list[str]:
+        """Names of the effects that differ from identity."""
+        return [f for f in EFFECTS if getattr(self, f) != _fixed(_IDENTITY[f])]
+
+    def with_effect(self, name: str, value: float | Range, **kw) -> "RealProfile":
+        """A copy with effect ``name`` set to ``value`` (a number = a fixed range)."""
+        if name not in EFFECTS:
+            raise ValueError(f"unknown effect {name!r}; known: {', '.join(EFFECTS)}")
+        rng = value if isinstance(value, (tuple, list)) else _fixed(value)
+        return dataclasses.replace(self, **{name: tuple(rng)}, **kw)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, **{f: list(getattr(self, f)) for f in EFFECTS}}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RealProfile":
+        unknown = set(d) - set(EFFECTS) - {"name"}
+        if unknown:
+            raise ValueError(f"unknown effect(s) {sorted(unknown)}; known: {', '.join(EFFECTS)}")
+        return cls(**{k: (tuple(v) if k != "name" else v) for k, v in d.items()})
+
+    def draw(self, rng: np.random.Generator, n_joints: int, n_links: int) -> "EffectDraw":
+        """Draw one episode's effect values from ``rng`` (see :class:`EffectDraw`)."""
+        vals = {}
+        for f in EFFECTS:
+            lo, hi = getattr(self, f)
+            n = n_joints if f in PER_JOINT else n_links if f in PER_LINK else 3 if f == "gyro_bias" else None
+            vals[f] = rng.uniform(lo, hi, n) if n else float(rng.uniform(lo, hi))
+        return EffectDraw(profile=self.name, **vals)
+
+
+@dataclass
+class EffectDraw:
+    """One episode's effect values: per-joint arrays (24,), per-link (25,), gyro_bias (3,), else floats."""
+
+    profile: str
+    kp_scale: np.ndarray
+    kd_scale: np.ndarray
+    latency_s: float
+    backlash_rad: np.ndarray
+    coulomb_friction_nm: np.ndarray
+    viscous_damping: np.ndarray
+    torque_limit_scale: float
+    mass_scale: np.ndarray
+    foot_friction: float
+    encoder_bias_rad: np.ndarray
+    encoder_noise_rad: float
+    gyro_bias: np.ndarray
+    gyro_noise: float
+    accel_noise: float
+    angle_noise_rad: float
+    terrain_amplitude: float
+    extra: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        """JSON-able values (arrays as lists) for a recording's metadata."""
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            out[f.name] = v.tolist() if isinstance(v, np.ndarray) else v
+        return out
+
+
+PROFILES: dict[str, RealProfile] = {
+    "none": RealProfile("none"),
+    "real": RealProfile(
+        "real",
+        kp_scale=(0.85, 1.0), kd_scale=(0.8, 1.2), latency_s=(0.010, 0.020), backlash_rad=(0.002, 0.006),
+        coulomb_friction_nm=(0.02, 0.06), viscous_damping=(0.005, 0.02), torque_limit_scale=(0.75, 0.9),
+        mass_scale=(0.95, 1.08), foot_friction=(0.5, 0.9), encoder_bias_rad=(-0.005, 0.005),
+        encoder_noise_rad=(0.001, 0.001), gyro_bias=(-0.01, 0.01), gyro_noise=(0.01, 0.01),
+        accel_noise=(0.1, 0.1), angle_noise_rad=(0.005, 0.005), terrain_amplitude=(0.005, 0.015)),
+}
+
+
+def get_profile(profile: str | dict | RealProfile) -> RealProfile:
+    """A profile by name (``"none"``, ``"real"``), from a dict of ranges, or passed through.
+
+    Raises:
+        ValueError: unknown profile name, or invalid ranges.
+    """
+    if isinstance(profile, RealProfile):
+        return profile
+    if isinstance(profile, dict):
+        return RealProfile.from_dict(profile)
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile {profile!r}; known profiles: {', '.join(PROFILES)}")
+    return PROFILES[profile]

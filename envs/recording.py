@@ -1,0 +1,261 @@
+"""One rollout as a :class:`Recording`, saved and loaded as Parquet; :func:`rollout` makes one.
+
+Parquet schema (one row per control step; all columns float64 unless noted)
+-----------------------------------------------------------------------------
+
+Sample timing: row k holds the observation measured at ``t[k]`` and the command issued right
+after it, held until ``t[k+1] = t[k] + control_dt``. The first row is the state after reset
+(``t = 0``); the observation after the last command is not stored.
+
+==================================  ==========  =========  =============================================
+column(s)                           unit        required   meaning
+==================================  ==========  =========  =============================================
+``t``                               s           yes        time of the sample, strictly increasing
+``cmd.<joint>`` (23 actuated)       rad         yes        joint target the controller commanded
+``q.<joint>`` (24 hinges)           rad         yes        measured joint position (encoder)
+``app.<joint>`` (23 actuated)       rad         no         target actually applied (after grounding);
+                                                           equals ``cmd`` when absent
+``dq.<joint>`` (24)                 rad/s       no         measured joint velocity
+``gyro.x|y|z``                      rad/s       no         torso angular velocity, torso frame
+``acc.x|y|z``                       m/s^2       no         accelerometer (specific force), torso frame
+``angle.roll|pitch``                rad         no         torso roll/pitch estimate
+``fsr.L|R``                         N           no         total normal force under each foot
+``cop.Lx|Ly|Rx|Ry``                 m           no         centre of pressure in each sole frame
+``gt.base.x|y|z``                   m           no         ground truth: torso origin, world frame
+``gt.quat.w|x|y|z``                 --          no         ground truth: torso orientation
+``gt.vel.x|y|z``, ``gt.angvel.*``   m/s, rad/s  no         ground truth: torso velocities, world frame
+``gt.com.x|y|z``                    m           no         ground truth: whole-body CoM, world frame
+``gt.cop.x|y|z``                    m           no         ground truth: CoP on the ground (NaN: none)
+==================================  ==========  =========  =============================================
+
+Joint names are NAO names (``LHipYawPitch`` ... ``RAnkleRoll``); the 23 actuated joints omit
+``RHipYawPitch``, which follows ``LHipYawPitch``. A column group given in part (e.g. ``gyro.x``
+without ``gyro.y``) is an error. ``cmd``, ``app`` and ``q`` must be finite; ``gt.cop`` may be NaN.
+
+Metadata: a JSON object stored under the key ``sgatwalk`` of the Parquet schema metadata.
+Required keys: ``robot`` (``"nao_h25"``), ``control_dt`` [s]. Optional: ``schema_version`` (1),
+``world`` (``sim``/``real``/``grounded``/any label), ``physics_dt``, ``seed``, ``terrain``,
+``profile``, ``effects`` (the episode's drawn effect values), ``params`` (gait parameters),
+``fixed_base``, ``fell`` (bool), ``fall_time`` [s], ``fall_reason``, ``source`` (free text).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from robots import RobotModel, nao_h25
+
+SCHEMA_VERSION = 1
+META_KEY = b"sgatwalk"
+GROUPS: dict[str, tuple[str, ...]] = {
+    "gyro": ("gyro.x", "gyro.y", "gyro.z"),
+    "acc": ("acc.x", "acc.y", "acc.z"),
+    "angle": ("angle.roll", "angle.pitch"),
+    "fsr": ("fsr.L", "fsr.R"),
+    "cop": ("cop.Lx", "cop.Ly", "cop.Rx", "cop.Ry"),
+    "gt.base": ("gt.base.x", "gt.base.y", "gt.base.z"),
+    "gt.quat": ("gt.quat.w", "gt.quat.x", "gt.quat.y", "gt.quat.z"),
+    "gt.vel": ("gt.vel.x", "gt.vel.y", "gt.vel.z"),
+    "gt.angvel": ("gt.angvel.x", "gt.angvel.y", "gt.angvel.z"),
+    "gt.com": ("gt.com.x", "gt.com.y", "gt.com.z"),
+    "gt.cop": ("gt.cop.x", "gt.cop.y", "gt.cop.z"),
+}
+_MAY_BE_NAN = ("gt.cop",)
+
+
+class RecordingError(ValueError):
+    """A recording is malformed; the message names the column or key."""
+
+
+def _joint_groups(robot: RobotModel) -> dict[str, tuple[str, ...]]:
+    return {
+        "cmd": tuple(f"cmd.{n}" for n in robot.actuated_joint_names),
+        "app": tuple(f"app.{n}" for n in robot.actuated_joint_names),
+        "q": tuple(f"q.{n}" for n in robot.joint_names),
+        "dq": tuple(f"dq.{n}" for n in robot.joint_names),
+    }
+
+
+@dataclass
+class Recording:
+    """A rollout: ``columns`` (name -> float64 array of shape (N,)) and ``meta`` (JSON-able dict).
+
+    Use :meth:`group` for (N, k) blocks, e.g. ``rec.group("q")`` -> (N, 24) joint angles.
+    Construct from data with :meth:`from_arrays` or load with :meth:`from_parquet`; both validate.
+    """
+
+    columns: dict[str, np.ndarray]
+    meta: dict = field(default_factory=dict)
+
+    # ---------------------------------------------------------------- access
+    def __len__(self) -> int:
+        return len(self.columns["t"])
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.columns["t"]
+
+    @property
+    def robot(self) -> RobotModel:
+        if self.meta.get("robot") != "nao_h25":
+            raise RecordingError(f"recording is of robot {self.meta.get('robot')!r}; this package models 'nao_h25'")
+        return nao_h25()
+
+    def has(self, group: str) -> bool:
+        """Whether a column group (``"dq"``, ``"gyro"``, ``"gt.base"``, ...) is present."""
+        return self._names(group)[0] in self.columns
+
+    def _names(self, group: str) -> tuple[str, ...]:
+        jg = _joint_groups(self.robot)
+        if group in jg:
+            return jg[group]
+        if group in GROUPS:
+            return GROUPS[group]
+        raise KeyError(f"unknown column group {group!r}; known: {', '.join([*jg, *GROUPS])}")
+
+    def group(self, group: str) -> np.ndarray:
+        """Columns of ``group`` stacked, shape (N, k). ``"app"`` falls back to ``"cmd"``.
+
+        Raises:
+            KeyError: unknown group, or a group absent from this recording.
+        """
+        if group == "app" and not self.has("app"):
+            group = "cmd"
+        names = self._names(group)
+        if names[0] not in self.columns:
+            raise KeyError(f"recording has no {group!r} columns")
+        return np.stack([self.columns[n] for n in names], axis=1)
+
+    @property
+    def fell(self) -> bool:
+        return bool(self.meta.get("fell", False))
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def from_arrays(cls, meta: dict, t: np.ndarray, **groups: np.ndarray) -> "Recording":
+        """Build from (N, k) arrays per group, e.g. ``q=Q, cmd=A, gt_base=P`` (``gt_`` -> ``gt.``)."""
+        cols = {"t": np.asarray(t, dtype=np.float64)}
+        rec = cls(cols, dict(meta))
+        for key, arr in groups.items():
+            if arr is None:
+                continue
+            arr = np.asarray(arr, dtype=np.float64)
+            names = rec._names(key.replace("gt_", "gt.", 1))
+            if arr.ndim != 2 or arr.shape[1] != len(names):
+                raise RecordingError(f"group {key!r} must have shape (N, {len(names)}), got {arr.shape}")
+            cols.update({n: arr[:, i].copy() for i, n in enumerate(names)})
+        rec.meta.setdefault("schema_version", SCHEMA_VERSION)
+        rec.validate()
+        return rec
+
+    def validate(self) -> None:
+        """Check the schema above.
+
+        Raises:
+            RecordingError: naming the missing key, missing/partial/non-numeric column, length
+                mismatch, non-finite value (with its row) or non-increasing time.
+        """
+        for key in ("robot", "control_dt"):
+            if key not in self.meta:
+                raise RecordingError(f"recording metadata lacks the required key {key!r}")
+        robot = self.robot
+        try:
+            dt = float(self.meta["control_dt"])
+        except (TypeError, ValueError):
+            raise RecordingError(f"metadata 'control_dt' must be a number of seconds, got {self.meta['control_dt']!r}")
+        if not (dt > 0 and np.isfinite(dt)):
+            raise RecordingError(f"metadata 'control_dt' must be positive, got {dt}")
+        if "t" not in self.columns:
+            raise RecordingError("recording lacks the required column 't'")
+        n = len(self.columns["t"])
+        if n == 0:
+            raise RecordingError("recording is empty (0 rows)")
+        for name, col in self.columns.items():
+            if col.ndim != 1 or len(col) != n:
+                raise RecordingError(f"column {name!r} has shape {col.shape}, expected ({n},)")
+        jg = _joint_groups(robot)
+        for g in ("cmd", "q"):
+            missing = [c for c in jg[g] if c not in self.columns]
+            if missing:
+                raise RecordingError(f"recording lacks required column(s) {', '.join(missing[:5])}"
+                                     + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
+        known = {"t"}
+        for g, names in {**jg, **GROUPS}.items():
+            known.update(names)
+            present = [c for c in names if c in self.columns]
+            if present and len(present) != len(names):
+                missing = [c for c in names if c not in self.columns]
+                raise RecordingError(f"column group {g!r} is incomplete: missing {', '.join(missing)}")
+            if present and g not in _MAY_BE_NAN:
+                for c in names:
+                    bad = ~np.isfinite(self.columns[c])
+                    if bad.any():
+                        raise RecordingError(f"column {c!r} has a non-finite value at row {int(np.argmax(bad))}")
+        t = self.columns["t"]
+        if not np.all(np.isfinite(t)):
+            raise RecordingError(f"column 't' has a non-finite value at row {int(np.argmax(~np.isfinite(t)))}")
+        if n > 1 and np.any(np.diff(t) <= 0):
+            raise RecordingError(f"column 't' is not strictly increasing (row {int(np.argmax(np.diff(t) <= 0)) + 1})")
+
+    # ---------------------------------------------------------------- Parquet
+    def to_table(self) -> pa.Table:
+        names = (["t"] if "t" in self.columns else []) + sorted(c for c in self.columns if c != "t")
+        table = pa.table({c: pa.array(self.columns[c], type=pa.float64()) for c in names})
+        return table.replace_schema_metadata({META_KEY: json.dumps(self.meta, default=_json_default).encode()})
+
+    def to_parquet(self, path: str | os.PathLike) -> str:
+        """Write atomically (temporary file, then rename); returns the path."""
+        path = os.fspath(path)
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        tmp = f"{path}.{os.getpid()}.tmp"
+        pq.write_table(self.to_table(), tmp)
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def from_parquet(cls, path: str | os.PathLike) -> "Recording":
+        """Load and validate a recording.
+
+        Raises:
+            FileNotFoundError: no such file.
+            RecordingError: not a Parquet file, no ``sgatwalk`` metadata, or a schema violation.
+        """
+        path = os.fspath(path)
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no recording at {path!r}")
+        try:
+            table = pq.read_table(path)
+        except (pa.ArrowInvalid, OSError) as exc:
+            raise RecordingError(f"{path!r} is not a readable Parquet file: {exc}") from None
+        md = table.schema.metadata or {}
+        if META_KEY not in md:
+            raise RecordingError(f"{path!r} has no 'sgatwalk' metadata (robot, control_dt); see envs/recording.py")
+        try:
+            meta = json.loads(md[META_KEY])
+        except json.JSONDecodeError as exc:
+            raise RecordingError(f"{path!r}: metadata is not valid JSON ({exc})") from None
+        if not isinstance(meta, dict):
+            raise RecordingError(f"{path!r}: metadata must be a JSON object")
+        cols = {}
+        for name in table.column_names:
+            col = table.column(name)
+            if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type)):
+                raise RecordingError(f"column {name!r} has type {col.type}, expected numbers")
+            cols[name] = col.to_numpy(zero_copy_only=False).astype(np.float64)
+        rec = cls(cols, meta)
+        rec.validate()
+        return rec
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    raise TypeError(f"{type(o).__name__} is not JSON serialisable")

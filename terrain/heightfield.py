@@ -1,0 +1,264 @@
+"""Heightfield terrain shared by both engines, and its seeded generators.
+
+A :class:`Heightfield` is a grid of heights ``heights[iy, ix]`` [m] (row index = y, column
+index = x) with square cells of ``cell_size`` [m], centred on the world origin: node (iy, ix)
+sits at ``x = -half_x + ix * cell_size``, ``y = -half_y + iy * cell_size``.
+
+Between nodes the surface is the triangulation MuJoCo uses: each cell is split along its
+(x0, y0)-(x1, y1) diagonal (``shared/reference/engines.md`` §3). :meth:`Heightfield.height_at`
+evaluates exactly that surface, and the PyBullet world builds a transposed, x-reversed, 90°-yawed
+copy so that Bullet's other diagonal lands on the same one (engines.md §3.1).
+
+Generators (all seeded through a :class:`numpy.random.Generator` or an int seed):
+``flat``, ``lumpy`` (Gaussian bumps like foam under turf), ``fractal`` (spectral fBm noise),
+``steps`` (stairs along +x), ``slope`` (incline along +x). Each keeps a flat start pad of radius
+``start_radius`` [m] around the origin so the robot can be placed; the pad blends smoothly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Default field: 6 m x 3 m at 4 cm cells (151 x 76 nodes), robot spawned at the origin.
+DEFAULT_SIZE = (6.0, 3.0)
+DEFAULT_CELL = 0.04
+TERRAINS = ("flat", "lumpy", "fractal", "steps", "slope")
+
+
+@dataclass(frozen=True, eq=False)
+class Heightfield:
+    """Heights [m] on a regular grid centred at the origin.
+
+    Args:
+        heights: array of shape (ny, nx), ny, nx >= 2, finite values [m].
+        cell_size: grid spacing [m] (> 0), the same along x and y.
+        name: a label for reports (e.g. ``"lumpy(a=0.02)"``).
+
+    Raises:
+        ValueError: wrong shape, non-finite heights or non-positive cell size.
+    """
+
+    heights: np.ndarray
+    cell_size: float
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        h = np.ascontiguousarray(self.heights, dtype=np.float64)
+        if h.ndim != 2 or min(h.shape) < 2:
+            raise ValueError(f"heights must have shape (ny, nx) with ny, nx >= 2, got {h.shape}")
+        if not np.all(np.isfinite(h)):
+            raise ValueError("heights contain NaN or infinite values")
+        if not (np.isfinite(self.cell_size) and self.cell_size > 0):
+            raise ValueError(f"cell_size must be a positive number of metres, got {self.cell_size!r}")
+        h.setflags(write=False)
+        object.__setattr__(self, "heights", h)
+        object.__setattr__(self, "cell_size", float(self.cell_size))
+
+    # ------------------------------------------------------------------ geometry
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.heights.shape
+
+    @property
+    def half_extent(self) -> tuple[float, float]:
+        """(half_x, half_y) [m]: the field spans [-half_x, half_x] x [-half_y, half_y]."""
+        ny, nx = self.heights.shape
+        return (nx - 1) * self.cell_size / 2.0, (ny - 1) * self.cell_size / 2.0
+
+    @property
+    def x(self) -> np.ndarray:
+        """Node x coordinates [m], shape (nx,)."""
+        return -self.half_extent[0] + self.cell_size * np.arange(self.heights.shape[1])
+
+    @property
+    def y(self) -> np.ndarray:
+        """Node y coordinates [m], shape (ny,)."""
+        return -self.half_extent[1] + self.cell_size * np.arange(self.heights.shape[0])
+
+    @property
+    def min_height(self) -> float:
+        return float(self.heights.min())
+
+    @property
+    def max_height(self) -> float:
+        return float(self.heights.max())
+
+    def height_at(self, x, y) -> np.ndarray:
+        """Surface height [m] at points (x, y) [m] (arrays broadcast), MuJoCo's triangulation.
+
+        Each cell is split along the diagonal from (x0, y0) to (x1, y1): for local fractions
+        (u, v) in the cell, u >= v lies in the triangle (00, 10, 11), else in (00, 01, 11).
+
+        Raises:
+            ValueError: a point lies outside the field.
+        """
+        x = np.asarray(x, dtype=float)
+        y = np.asarray(y, dtype=float)
+        hx, hy = self.half_extent
+        if np.any(np.abs(x) > hx + 1e-12) or np.any(np.abs(y) > hy + 1e-12):
+            raise ValueError(f"points outside the heightfield (|x| <= {hx:g} m, |y| <= {hy:g} m)")
+        ny, nx = self.heights.shape
+        fx = (x + hx) / self.cell_size
+        fy = (y + hy) / self.cell_size
+        ix = np.clip(np.floor(fx).astype(int), 0, nx - 2)
+        iy = np.clip(np.floor(fy).astype(int), 0, ny - 2)
+        u = fx - ix
+        v = fy - iy
+        h = self.heights
+        h00, h10, h01, h11 = h[iy, ix], h[iy, ix + 1], h[iy + 1, ix], h[iy + 1, ix + 1]
+        lower = h00 + u * (h10 - h00) + v * (h11 - h10)   # u >= v: triangle 00-10-11
+        upper = h00 + v * (h01 - h00) + u * (h11 - h01)   # u <  v: triangle 00-01-11
+        return np.where(u >= v, lower, upper)
+
+    def roughness(self) -> float:
+        """Standard deviation of the node heights [m]."""
+        return float(self.heights.std())
+
+    def to_dict(self) -> dict:
+        """Metadata (no heights): name, shape, cell size, min/max [m]."""
+        return {"name": self.name, "shape": list(self.shape), "cell_size": self.cell_size,
+                "min": self.min_height, "max": self.max_height}
+
+
+# ---------------------------------------------------------------------------- generators
+def _rng(seed) -> np.random.Generator:
+    return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+
+
+def _grid(size, cell_size):
+    sx, sy = size
+    if not (sx > 0 and sy > 0 and cell_size > 0):
+        raise ValueError(f"size and cell_size must be positive, got size={size}, cell_size={cell_size}")
+    nx = int(round(sx / cell_size)) + 1
+    ny = int(round(sy / cell_size)) + 1
+    x = (np.arange(nx) - (nx - 1) / 2.0) * cell_size
+    y = (np.arange(ny) - (ny - 1) / 2.0) * cell_size
+    return np.meshgrid(x, y)  # X, Y of shape (ny, nx)
+
+
+def _start_pad(X, Y, start_radius: float) -> np.ndarray:
+    """Weight in [0, 1]: 0 inside ``start_radius`` of the origin, smooth ramp to 1 over 0.15 m."""
+    if start_radius <= 0:
+        return np.ones_like(X)
+    r = np.hypot(X, Y)
+    t = np.clip((r - start_radius) / 0.15, 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def flat(size=DEFAULT_SIZE, cell_size=DEFAULT_CELL, height: float = 0.0) -> Heightfield:
+    """A flat field at ``height`` [m]."""
+    X, _ = _grid(size, cell_size)
+    return Heightfield(np.full(X.shape, float(height)), cell_size, "flat")
+
+
+def lumpy(seed=0, amplitude: float = 0.02, bump_radius: float = 0.08, density: float = 40.0,
+          size=DEFAULT_SIZE, cell_size=DEFAULT_CELL, start_radius: float = 0.25) -> Heightfield:
+    """Random Gaussian bumps and dents, like foam under artificial turf.
+
+    Bumps of random sign and height in [0.3, 1] * ``amplitude`` with standard deviation
+    ``bump_radius`` [m] are scattered at ``density`` bumps per m^2; the sum is rescaled so that
+    the largest excursion from 0 equals ``amplitude`` [m].
+
+    Raises:
+        ValueError: negative amplitude, non-positive bump radius or density.
+    """
+    if amplitude < 0 or bump_radius <= 0 or density <= 0:
+        raise ValueError(f"lumpy terrain needs amplitude >= 0, bump_radius > 0, density > 0; got "
+                         f"{amplitude}, {bump_radius}, {density}")
+    rng = _rng(seed)
+    X, Y = _grid(size, cell_size)
+    n = max(1, int(density * size[0] * size[1]))
+    cx = rng.uniform(X.min(), X.max(), n)
+    cy = rng.uniform(Y.min(), Y.max(), n)
+    amp = rng.uniform(0.3, 1.0, n) * rng.choice([-1.0, 1.0], n)
+    h = np.zeros_like(X)
+    r = 3.0 * bump_radius  # truncate each Gaussian at 3 sigma: local windows keep this O(n)
+    k = int(np.ceil(r / cell_size))
+    ny, nx = X.shape
+    x0, y0 = X[0, 0], Y[0, 0]
+    for bx, by, a in zip(cx, cy, amp):
+        ix, iy = int(round((bx - x0) / cell_size)), int(round((by - y0) / cell_size))
+        sx = slice(max(ix - k, 0), min(ix + k + 1, nx))
+        sy = slice(max(iy - k, 0), min(iy + k + 1, ny))
+        d2 = (X[sy, sx] - bx) ** 2 + (Y[sy, sx] - by) ** 2
+        h[sy, sx] += a * np.exp(-0.5 * d2 / bump_radius**2)
+    h *= _start_pad(X, Y, start_radius)
+    peak = np.abs(h).max()
+    if peak > 0:
+        h *= amplitude / peak
+    return Heightfield(h, cell_size, f"lumpy(a={amplitude:g},r={bump_radius:g})")
+
+
+def fractal(seed=0, amplitude: float = 0.02, hurst: float = 0.8, min_wavelength: float = 0.1,
+            size=DEFAULT_SIZE, cell_size=DEFAULT_CELL, start_radius: float = 0.25) -> Heightfield:
+    """Fractal (fractional Brownian motion) noise by spectral synthesis.
+
+    Power spectrum ~ f^-(2H+2) with Hurst exponent ``hurst`` in (0, 1), wavelengths below
+    ``min_wavelength`` [m] removed; scaled so the largest excursion from 0 is ``amplitude`` [m].
+    """
+    if amplitude < 0 or not (0 < hurst < 1) or min_wavelength <= 0:
+        raise ValueError("fractal terrain needs amplitude >= 0, 0 < hurst < 1, min_wavelength > 0")
+    rng = _rng(seed)
+    X, Y = _grid(size, cell_size)
+    ny, nx = X.shape
+    fx = np.fft.fftfreq(nx, cell_size)
+    fy = np.fft.fftfreq(ny, cell_size)
+    F = np.hypot(*np.meshgrid(fx, fy))
+    amp_spec = np.zeros_like(F)
+    keep = (F > 0) & (F <= 1.0 / min_wavelength)
+    amp_spec[keep] = F[keep] ** (-(hurst + 1.0))
+    noise = rng.standard_normal((ny, nx)) + 1j * rng.standard_normal((ny, nx))
+    h = np.real(np.fft.ifft2(noise * amp_spec))
+    h -= h.mean()
+    h *= _start_pad(X, Y, start_radius)
+    peak = np.abs(h).max()
+    if peak > 0:
+        h *= amplitude / peak
+    return Heightfield(h, cell_size, f"fractal(a={amplitude:g},H={hurst:g})")
+
+
+def steps(seed=0, amplitude: float = 0.02, step_length: float = 0.3, size=DEFAULT_SIZE,
+          cell_size=DEFAULT_CELL, start_radius: float = 0.25) -> Heightfield:
+    """Stairs along +x: every ``step_length`` [m] the height changes by a random amount in
+    [-``amplitude``, ``amplitude``] [m] (up or down), starting past the start pad."""
+    if amplitude < 0 or step_length <= 0:
+        raise ValueError("steps terrain needs amplitude >= 0 and step_length > 0")
+    rng = _rng(seed)
+    X, Y = _grid(size, cell_size)
+    x = X[0]
+    edges = np.arange(start_radius, x.max() + step_length, step_length)
+    rises = rng.uniform(-amplitude, amplitude, len(edges))
+    level = np.zeros_like(x)
+    for e, dh in zip(edges, rises):
+        level[x >= e] += dh
+    # mirror for x < 0 so walking backwards meets steps too
+    back = np.arange(-start_radius, x.min() - step_length, -step_length)
+    for e, dh in zip(back, rng.uniform(-amplitude, amplitude, len(back))):
+        level[x <= e] += dh
+    return Heightfield(np.broadcast_to(level, X.shape).copy(), cell_size, f"steps(a={amplitude:g})")
+
+
+def slope(seed=0, amplitude: float = 0.05, size=DEFAULT_SIZE, cell_size=DEFAULT_CELL,
+          start_radius: float = 0.25) -> Heightfield:
+    """An incline along +x with grade ``amplitude`` (rise per metre; 0.05 = 5 %, 2.9°), flat
+    within ``start_radius`` [m] of the origin. ``seed`` is accepted for a uniform signature."""
+    del seed
+    X, _ = _grid(size, cell_size)
+    h = amplitude * np.where(np.abs(X) > start_radius, np.sign(X) * (np.abs(X) - start_radius), 0.0)
+    return Heightfield(h, cell_size, f"slope(grade={amplitude:g})")
+
+
+def make(kind: str, seed=0, amplitude: float = 0.02, **kwargs) -> Heightfield:
+    """Build terrain ``kind`` (one of :data:`TERRAINS`) with ``amplitude`` [m] from ``seed``.
+
+    Raises:
+        ValueError: unknown kind.
+    """
+    if kind == "flat":
+        return flat(**{k: v for k, v in kwargs.items() if k in ("size", "cell_size")})
+    gens = {"lumpy": lumpy, "fractal": fractal, "steps": steps, "slope": slope}
+    if kind not in gens:
+        raise ValueError(f"unknown terrain {kind!r}; choose one of {', '.join(TERRAINS)}")
+    return gens[kind](seed=seed, amplitude=amplitude, **kwargs)

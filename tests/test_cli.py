@@ -1,0 +1,51 @@
+"""The sgatwalk command line: one JSON object with --json, clear errors with exit status 2."""
+
+import json
+
+import pytest
+
+from envs import Recording
+from experiments.cli import build_parser, main
+
+
+def test_help_lists_commands(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    assert "stand" in capsys.readouterr().out
+
+
+def test_stand_json_and_recording(capsys, tmp_path):
+    out = tmp_path / "rec.parquet"
+    rc = main(["stand", "--world", "sim,real", "--seconds", "1", "--profile", "none", "--record", str(out), "--json"])
+    assert rc == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [w["world"] for w in res["worlds"]] == ["sim", "real"]
+    assert all(w["fell"] is False for w in res["worlds"])
+    sim = Recording.from_parquet(res["worlds"][0]["recording"])
+    assert sim.meta["world"] == "sim" and len(sim) == 100
+
+
+def test_stand_table_output(capsys):
+    assert main(["stand", "--world", "sim", "--seconds", "0.5", "--terrain", "lumpy", "--amplitude", "0.01"]) == 0
+    out = capsys.readouterr().out
+    assert "world" in out and "sim" in out and "lumpy" in out
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["stand", "--world", "moon"], "unknown world 'moon'"),
+    (["stand", "--world", "real", "--profile", "nope"], "unknown profile 'nope'"),
+    (["stand", "--seconds", "-1"], "--seconds must be positive"),
+    (["stand", "--pose", "yoga"], "unknown pose 'yoga'"),
+])
+def test_bad_input_exits_2(capsys, argv, msg):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert msg in err and "Traceback" not in err
+
+
+def test_every_command_has_json_flag():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name, p in sub.choices.items():
+        assert any("--json" in a.option_strings for a in p._actions), name
