@@ -26,24 +26,18 @@ import sys
 from collections import deque
 
 import numpy as np
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
-
-from envs.base import NaoEnv, StepState, cross, make_terrain, quat_to_mat
-from envs.effects import EffectDraw, RealProfile, get_profile
-from robots import RobotModel
-from terrain import Heightfield, lumpy
 
 
 @contextlib.contextmanager
-def _quiet_stdout():
-    """Silence C-level stdout (Bullet prints ``argv[0]=`` on connect, which would corrupt ``--json``)."""
+def _quiet_fd(stream):
+    """Silence a C-level stream: Bullet prints ``pybullet build time`` (stderr) on import and
+    ``argv[0]=`` (stdout) on connect; the latter would corrupt ``--json`` output."""
     try:
-        fd = sys.stdout.fileno()
-    except (AttributeError, OSError, ValueError):  # captured stdout (pytest): nothing to silence
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):  # captured stream (pytest): nothing to silence
         yield
         return
-    sys.stdout.flush()
+    stream.flush()
     saved = os.dup(fd)
     try:
         with open(os.devnull, "w") as devnull:
@@ -52,6 +46,16 @@ def _quiet_stdout():
     finally:
         os.dup2(saved, fd)
         os.close(saved)
+
+
+with _quiet_fd(sys.stderr):
+    import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+from envs.base import NaoEnv, StepState, cross, make_terrain, quat_to_mat
+from envs.effects import EffectDraw, RealProfile, get_profile
+from robots import RobotModel
+from terrain import Heightfield, lumpy
 
 
 def _xyzw_to_wxyz(q) -> np.ndarray:
@@ -104,7 +108,7 @@ class NaoRealEnv(NaoEnv):
             raise ValueError(f"terrain must be 'lumpy', 'flat', None or a Heightfield, got {terrain!r}")
         self.terrain_spec = terrain
         self.solver_iterations = int(solver_iterations)
-        with _quiet_stdout():
+        with _quiet_fd(sys.stdout):
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
         r = self.robot
         self.effects: EffectDraw = self.profile.draw(np.random.default_rng(0), len(r.joint_names), len(r.links))

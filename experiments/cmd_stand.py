@@ -13,7 +13,6 @@ import time
 
 import numpy as np
 
-from envs import HoldPose, make_world, rollout
 from terrain import TERRAINS, make
 
 
@@ -44,6 +43,8 @@ def _record_path(path: str, world: str, n_worlds: int) -> str:
 
 
 def run(args) -> dict:
+    from envs import HoldPose, make_world, rollout  # engines load only when the command runs
+
     worlds = [w.strip() for w in args.world.split(",") if w.strip()]
     for w in worlds:
         if w not in ("sim", "real"):
