@@ -1,0 +1,190 @@
+"""Executors: run ``fn(task)`` for many tasks, serially, in a local process pool, or on Ray.
+
+Every task carries its own seed, so results never depend on the executor or on the order tasks
+finish in (``reference/ecosystem.md`` §3.3). ``map`` returns results in task order.
+
+* :class:`SerialExecutor` -- in this process (tests, debugging).
+* :class:`ProcessExecutor` -- the default: ``concurrent.futures.ProcessPoolExecutor`` with the
+  ``forkserver`` start method, one worker per core, ``OMP_NUM_THREADS=1`` and one torch thread per
+  worker. A worker that dies (segfault, OOM kill) breaks the pool: the pool is rebuilt and the
+  unfinished tasks are re-submitted; a task that fails twice raises :class:`TaskFailed`.
+* :class:`RayExecutor` -- only when a cluster address is given; ``ray`` is imported lazily.
+  Ray retries a task whose worker died once (``max_retries=1``).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing as mp
+import os
+import sys
+import warnings
+from concurrent.futures.process import BrokenProcessPool
+from typing import Any, Callable, Sequence
+
+
+class TaskFailed(RuntimeError):
+    """A task failed twice (an exception or a dead worker); the message names the task."""
+
+
+def _worker_init() -> None:
+    os.environ["OMP_NUM_THREADS"] = "1"
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+class SerialExecutor:
+    """Run tasks one after another in this process."""
+
+    workers = 1
+    name = "serial"
+
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None) -> list:
+        out = []
+        for i, t in enumerate(tasks):
+            try:
+                out.append(fn(t))
+            except Exception as exc:
+                warnings.warn(f"task {i} raised {type(exc).__name__}: {exc}; retrying once")
+                try:
+                    out.append(fn(t))
+                except Exception as exc2:
+                    raise TaskFailed(f"task {i} failed twice: {type(exc2).__name__}: {exc2}") from exc2
+            if progress:
+                progress(1)
+        return out
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class ProcessExecutor(SerialExecutor):
+    """A local process pool (default: one worker per core)."""
+
+    name = "process"
+
+    def __init__(self, workers: int | None = None, start_method: str = "forkserver"):
+        self.workers = max(1, int(workers or os.cpu_count() or 1))
+        self.start_method = start_method
+        self._pool: cf.ProcessPoolExecutor | None = None
+
+    def _ensure(self) -> cf.ProcessPoolExecutor:
+        if self._pool is None:
+            ctx = mp.get_context(self.start_method)
+            self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_worker_init)
+        return self._pool
+
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None) -> list:
+        tasks = list(tasks)
+        results: list[Any] = [None] * len(tasks)
+        done = [False] * len(tasks)
+        attempts = [0] * len(tasks)
+        while not all(done):
+            pool = self._ensure()
+            pending = {}
+            for i, t in enumerate(tasks):
+                if not done[i]:
+                    attempts[i] += 1
+                    pending[pool.submit(fn, t)] = i
+            broken = False
+            for fut in cf.as_completed(pending):
+                i = pending[fut]
+                try:
+                    results[i] = fut.result()
+                    done[i] = True
+                    if progress:
+                        progress(1)
+                except BrokenProcessPool:
+                    broken = True
+                except Exception as exc:
+                    if attempts[i] >= 2:
+                        raise TaskFailed(f"task {i} failed twice: {type(exc).__name__}: {exc}") from exc
+                    warnings.warn(f"task {i} raised {type(exc).__name__}: {exc}; retrying once")
+            if broken:
+                lost = [i for i in range(len(tasks)) if not done[i]]
+                over = [i for i in lost if attempts[i] >= 2]
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = None
+                if over:
+                    raise TaskFailed(f"task(s) {over} lost their worker twice (crash or kill); giving up")
+                print(f"executor: a worker died; rebuilt the pool and retrying {len(lost)} task(s)", file=sys.stderr)
+        return results
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+class RayExecutor(SerialExecutor):
+    """Tasks on a Ray cluster (``address``: ``"auto"``, ``"local"``, ``"ray://host:10001"``, ...)."""
+
+    name = "ray"
+
+    def __init__(self, address: str):
+        try:
+            import ray
+        except ImportError:
+            raise ValueError("--ray-address needs Ray: pip install 'sgatwalk[ray]'") from None
+        self._ray = ray
+        if not ray.is_initialized():
+            pkg_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+            kw = dict(include_dashboard=False, log_to_driver=False,
+                      runtime_env={"env_vars": {"PYTHONPATH": pkg_root, "OMP_NUM_THREADS": "1"}})
+            if address == "local":
+                ray.init(**kw)
+            else:
+                ray.init(address=address, **kw)
+            self._owns = True
+        else:
+            self._owns = False
+        self.workers = int(ray.cluster_resources().get("CPU", 1))
+        self._remote = {}
+
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None) -> list:
+        ray = self._ray
+        if fn not in self._remote:
+            self._remote[fn] = ray.remote(max_retries=1, retry_exceptions=True)(fn)
+        refs = [self._remote[fn].remote(t) for t in tasks]
+        index = {r: i for i, r in enumerate(refs)}
+        out: list[Any] = [None] * len(refs)
+        remaining = list(refs)
+        while remaining:
+            ready, remaining = ray.wait(remaining, num_returns=1)
+            for r in ready:
+                try:
+                    out[index[r]] = ray.get(r)
+                except Exception as exc:
+                    raise TaskFailed(f"task {index[r]} failed on Ray after a retry: {exc}") from exc
+                if progress:
+                    progress(1)
+        return out
+
+    def close(self) -> None:
+        if self._owns and self._ray.is_initialized():  # never shut down a cluster we joined
+            self._ray.shutdown()
+
+
+def make_executor(workers: int | None = None, ray_address: str | None = None):
+    """``ray_address`` -> :class:`RayExecutor`; ``workers == 1`` -> serial; else a process pool.
+
+    Raises:
+        ValueError: workers < 1.
+    """
+    if ray_address:
+        return RayExecutor(ray_address)
+    if workers is not None and workers < 1:
+        raise ValueError(f"--workers must be >= 1, got {workers}")
+    if workers == 1:
+        return SerialExecutor()
+    return ProcessExecutor(workers)

@@ -1,0 +1,298 @@
+"""Forward model of the real world and inverse model of the sim (SGAT paper §III, Algorithm 1).
+
+* :class:`ForwardModel` ``f_real(s_t, a_t)`` predicts the state change ``s_{t+1} - s_t``.
+  SGAT: a diagonal Gaussian (mean and log standard deviation per dimension, log sigma clamped
+  to ``[LOG_STD_MIN, LOG_STD_MAX]``), trained by Gaussian negative log-likelihood; GAT: the same
+  network with a mean head only, trained by mean squared error.
+* :class:`InverseModel` ``f_sim^-1(s_t, s_{t+1})`` predicts the action from ``[s_t, s_{t+1} - s_t]``
+  by mean squared error.
+
+Both are MLPs with two hidden layers of 64 tanh units (the paper's size; configurable) plus a
+linear skip path from input to output (``reference/grounding.md`` §3), with input and output
+normalisation stored inside the model, so weights and statistics travel together. ``fit`` trains
+with Adam, mini-batches, a validation split and early stopping that restores the best epoch.
+``save``/``load`` use plain tensors and a JSON-able config: ``torch.load(weights_only=True)``.
+
+Inference for the per-step action transformer runs in NumPy (:meth:`numpy_params`): for one
+sample a 2x64 MLP costs a few microseconds, far less than a torch call.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import nn
+
+LOG_STD_MIN, LOG_STD_MAX = -10.0, 2.0
+
+
+class ModelFileError(ValueError):
+    """A saved model is corrupted, of the wrong kind or of the wrong shape."""
+
+
+class _MLP(nn.Module):
+    def __init__(self, n_in: int, n_out: int, hidden: tuple[int, ...]):
+        super().__init__()
+        layers, d = [], n_in
+        for h in hidden:
+            layers += [nn.Linear(d, h), nn.Tanh()]
+            d = h
+        layers.append(nn.Linear(d, n_out))
+        self.body = nn.Sequential(*layers)
+        self.skip = nn.Linear(n_in, n_out, bias=False)
+        nn.init.zeros_(self.skip.weight)
+
+    def forward(self, x):
+        return self.body(x) + self.skip(x)
+
+
+@dataclass
+class FitReport:
+    """What :meth:`_Model.fit` did: epochs run, best epoch, train/validation loss at the best epoch."""
+
+    epochs: int
+    best_epoch: int
+    train_loss: float
+    val_loss: float
+    n_train: int
+    n_val: int
+
+
+class _Model(nn.Module):
+    """Common part: normalisers (buffers), MLP, training loop, save/load, NumPy export."""
+
+    kind = "model"
+
+    def __init__(self, n_in: int, n_out: int, hidden=(64, 64), n_heads: int = 1):
+        super().__init__()
+        self.n_in, self.n_out, self.hidden, self.n_heads = int(n_in), int(n_out), tuple(int(h) for h in hidden), n_heads
+        self.net = _MLP(self.n_in, self.n_out * n_heads, self.hidden)
+        self.register_buffer("x_mean", torch.zeros(self.n_in, dtype=torch.float64))
+        self.register_buffer("x_std", torch.ones(self.n_in, dtype=torch.float64))
+        self.register_buffer("y_mean", torch.zeros(self.n_out, dtype=torch.float64))
+        self.register_buffer("y_std", torch.ones(self.n_out, dtype=torch.float64))
+        self.register_buffer("fitted", torch.zeros((), dtype=torch.bool))
+        self.double()
+
+    # -- normalisation -------------------------------------------------------------------
+    def _set_stats(self, X: np.ndarray, Y: np.ndarray) -> None:
+        def stats(A):
+            m, s = A.mean(0), A.std(0)
+            return torch.as_tensor(m), torch.as_tensor(np.where(s > 1e-8, s, 1.0))
+        self.x_mean, self.x_std = stats(X)
+        self.y_mean, self.y_std = stats(Y)
+
+    def _loss(self, out, y):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # -- training --------------------------------------------------------------------------
+    def fit(self, X: np.ndarray, Y: np.ndarray, *, val_fraction: float = 0.2, batch_size: int = 128,
+            lr: float = 1e-3, weight_decay: float = 0.0, max_epochs: int = 300, patience: int = 15,
+            seed: int = 0, progress=None) -> FitReport:
+        """Train on inputs ``X`` (N, n_in) and targets ``Y`` (N, n_out) (unnormalised).
+
+        A random ``val_fraction`` of the rows (seeded) is held out; training stops after
+        ``patience`` epochs without a better validation loss and restores the best weights.
+
+        Raises:
+            ValueError: wrong shapes, non-finite data, fewer than 10 rows.
+        """
+        X = np.asarray(X, dtype=np.float64)
+        Y = np.asarray(Y, dtype=np.float64)
+        if X.ndim != 2 or X.shape[1] != self.n_in or Y.ndim != 2 or Y.shape[1] != self.n_out or len(X) != len(Y):
+            raise ValueError(f"{self.kind}: expected X (N, {self.n_in}) and Y (N, {self.n_out}), got {X.shape}, {Y.shape}")
+        if len(X) < 10:
+            raise ValueError(f"{self.kind}: need at least 10 samples, got {len(X)}")
+        if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Y))):
+            raise ValueError(f"{self.kind}: training data contain NaN or infinite values")
+        g = torch.Generator().manual_seed(int(seed))
+        torch.manual_seed(int(seed))
+        perm = np.random.default_rng(seed).permutation(len(X))
+        n_val = max(1, int(round(val_fraction * len(X))))
+        vi, ti = perm[:n_val], perm[n_val:]
+        self._set_stats(X[ti], Y[ti])
+        Xn = (torch.as_tensor(X) - self.x_mean) / self.x_std
+        Yn = (torch.as_tensor(Y) - self.y_mean) / self.y_std
+        Xt, Yt, Xv, Yv = Xn[ti], Yn[ti], Xn[vi], Yn[vi]
+        opt = torch.optim.Adam(self.net.parameters(), lr=lr, weight_decay=weight_decay)
+        best, best_state, best_epoch, bad, train_loss = math.inf, None, 0, 0, math.inf
+        epoch = 0
+        for epoch in range(1, max_epochs + 1):
+            self.train()
+            order = torch.randperm(len(Xt), generator=g)
+            total = 0.0
+            for k in range(0, len(Xt), batch_size):
+                idx = order[k:k + batch_size]
+                loss = self._loss(self.net(Xt[idx]), Yt[idx])
+                opt.zero_grad()
+                loss.backward()
+                opt.step()
+                total += float(loss.detach()) * len(idx)
+            self.eval()
+            with torch.no_grad():
+                val = float(self._loss(self.net(Xv), Yv))
+            if progress is not None:
+                progress(epoch, total / len(Xt), val)
+            if val < best - 1e-9:
+                best, best_epoch, bad, train_loss = val, epoch, 0, total / len(Xt)
+                best_state = {k: v.detach().clone() for k, v in self.net.state_dict().items()}
+            else:
+                bad += 1
+                if bad >= patience:
+                    break
+        self.net.load_state_dict(best_state)
+        self.fitted = torch.ones((), dtype=torch.bool)
+        self._np = None
+        return FitReport(epoch, best_epoch, train_loss, best, len(ti), len(vi))
+
+    # -- inference ---------------------------------------------------------------------------
+    def numpy_params(self) -> dict:
+        """Weights and normalisers as NumPy arrays for :func:`mlp_forward` (cached)."""
+        if getattr(self, "_np", None) is None:
+            lin = [m for m in self.net.body if isinstance(m, nn.Linear)]
+            self._np = {
+                "W": [m.weight.detach().numpy().T.copy() for m in lin],
+                "b": [m.bias.detach().numpy().copy() for m in lin],
+                "S": self.net.skip.weight.detach().numpy().T.copy(),
+                "x_mean": self.x_mean.numpy().copy(), "x_std": self.x_std.numpy().copy(),
+                "y_mean": self.y_mean.numpy().copy(), "y_std": self.y_std.numpy().copy(),
+            }
+        return self._np
+
+    def _raw(self, X: np.ndarray) -> np.ndarray:
+        """Normalised network output for unnormalised inputs X (..., n_in)."""
+        p = self.numpy_params()
+        return mlp_forward(p, (np.asarray(X, dtype=np.float64) - p["x_mean"]) / p["x_std"])
+
+    # -- persistence ---------------------------------------------------------------------------
+    def config(self) -> dict:
+        return {"kind": self.kind, "n_in": self.n_in, "n_out": self.n_out, "hidden": list(self.hidden)}
+
+    def save(self, path: str | os.PathLike) -> str:
+        """Write config + state dict atomically; loadable with ``torch.load(weights_only=True)``."""
+        path = os.fspath(path)
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        tmp = f"{path}.{os.getpid()}.tmp"
+        torch.save({"config": self.config(), "state_dict": self.state_dict()}, tmp)
+        os.replace(tmp, path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, expect_in: int | None = None, expect_out: int | None = None):
+        """Load a model saved by :meth:`save`.
+
+        Raises:
+            FileNotFoundError: no such file.
+            ModelFileError: not a model file, another kind of model, or a shape that differs from
+                ``expect_in``/``expect_out`` or from its own config.
+        """
+        path = os.fspath(path)
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no model file at {path!r}")
+        try:
+            blob = torch.load(path, weights_only=True, map_location="cpu")
+            cfg, sd = blob["config"], blob["state_dict"]
+        except Exception as exc:  # torch raises many types for corrupt files
+            raise ModelFileError(f"{path!r} is not a readable sgatwalk model file ({type(exc).__name__}: {exc})") from None
+        if cfg.get("kind") != cls.kind:
+            raise ModelFileError(f"{path!r} holds a {cfg.get('kind')!r} model, expected {cls.kind!r}")
+        for name, want, have in (("inputs", expect_in, cfg["n_in"]), ("outputs", expect_out, cfg["n_out"])):
+            if want is not None and want != have:
+                raise ModelFileError(f"{path!r}: model has {have} {name}, this setting needs {want}")
+        model = cls.from_config(cfg)
+        try:
+            model.load_state_dict(sd)
+        except RuntimeError as exc:
+            raise ModelFileError(f"{path!r}: weights do not match the model's shape ({exc})") from None
+        return model
+
+
+def mlp_forward(p: dict, x: np.ndarray) -> np.ndarray:
+    """NumPy forward pass of :class:`_MLP` (tanh hidden layers + linear skip), x (..., n_in)."""
+    h = x
+    for W, b in zip(p["W"][:-1], p["b"][:-1]):
+        h = np.tanh(h @ W + b)
+    return h @ p["W"][-1] + p["b"][-1] + x @ p["S"]
+
+
+class ForwardModel(_Model):
+    """``f_real``: (state history, action) -> distribution of the state change.
+
+    Args:
+        state_dim: grounding-state size S; history: frames k (input holds the last k states).
+        action_dim: grounded-action size A.
+        stochastic: True for SGAT (Gaussian, NLL), False for GAT (mean, MSE).
+        hidden: hidden layer sizes (paper: (64, 64)).
+
+    Input layout: ``[s_{t-k+1}, ..., s_t, a_t]`` of size k*S + A; output: Δs of size S.
+    """
+
+    kind = "forward"
+
+    def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, stochastic: bool = True,
+                 hidden=(64, 64)):
+        self.state_dim, self.action_dim, self.history, self.stochastic = int(state_dim), int(action_dim), int(history), bool(stochastic)
+        super().__init__(self.history * self.state_dim + self.action_dim, self.state_dim, hidden,
+                         n_heads=2 if self.stochastic else 1)
+
+    def config(self) -> dict:
+        return {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim,
+                "history": self.history, "stochastic": self.stochastic}
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> "ForwardModel":
+        return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], stochastic=cfg["stochastic"],
+                   hidden=tuple(cfg["hidden"]))
+
+    def _loss(self, out, y):
+        if not self.stochastic:
+            return ((out - y) ** 2).mean()
+        mu, log_std = out[:, :self.n_out], out[:, self.n_out:].clamp(LOG_STD_MIN, LOG_STD_MAX)
+        return (0.5 * ((y - mu) / log_std.exp()) ** 2 + log_std).mean() + 0.5 * math.log(2 * math.pi)
+
+    def predict(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and standard deviation of Δs (unnormalised), each (..., S); std is 0 for GAT."""
+        out = self._raw(X)
+        p = self.numpy_params()
+        mu = out[..., :self.n_out] * p["y_std"] + p["y_mean"]
+        if not self.stochastic:
+            return mu, np.zeros_like(mu)
+        log_std = np.clip(out[..., self.n_out:], LOG_STD_MIN, LOG_STD_MAX)
+        return mu, np.exp(log_std) * p["y_std"]
+
+    def sample(self, X: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """A sample of Δs ~ N(mu, sigma^2) (SGAT); the mean for GAT."""
+        mu, std = self.predict(X)
+        return mu if not self.stochastic else mu + std * rng.standard_normal(mu.shape)
+
+
+class InverseModel(_Model):
+    """``f_sim^-1``: (state history, state change) -> action.
+
+    Input layout: ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` of size k*S + S; output: action (A).
+    """
+
+    kind = "inverse"
+
+    def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, hidden=(64, 64)):
+        self.state_dim, self.action_dim, self.history = int(state_dim), int(action_dim), int(history)
+        super().__init__((self.history + 1) * self.state_dim, self.action_dim, hidden)
+
+    def config(self) -> dict:
+        return {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history}
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> "InverseModel":
+        return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], hidden=tuple(cfg["hidden"]))
+
+    def _loss(self, out, y):
+        return ((out - y) ** 2).mean()
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        """Action (unnormalised), (..., A)."""
+        p = self.numpy_params()
+        return self._raw(X) * p["y_std"] + p["y_mean"]

@@ -1,0 +1,144 @@
+"""SGAT grounding: models recover known maps, the transformer grounds a known mismatch."""
+
+import numpy as np
+import pytest
+import torch
+
+from sgat.grounding import Transitions, fit_transformer, trajectory_transitions
+from sgat.models import ForwardModel, InverseModel, ModelFileError
+from sgat.transformer import ActionTransformer, GroundedEnv, GroundingSpec
+
+M = np.array([[0.5, -0.2], [0.1, 0.8], [-0.3, 0.4]])
+SIGMA = np.array([0.05, 0.10, 0.20])
+
+
+def synthetic(n, seed, noise=True):
+    rng = np.random.default_rng(seed)
+    s = rng.uniform(-1, 1, (n, 3))
+    a = rng.uniform(-1, 1, (n, 2))
+    ds = a @ M.T + (rng.normal(0, 1, (n, 3)) * SIGMA if noise else 0.0)
+    return s, a, ds
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    s, a, ds = synthetic(4000, 0)
+    sgat = ForwardModel(3, 2, stochastic=True)
+    sgat.fit(np.hstack([s, a]), ds, seed=0, lr=3e-3)
+    gat = ForwardModel(3, 2, stochastic=False)
+    gat.fit(np.hstack([s, a]), ds, seed=0, lr=3e-3)
+    s2, a2, ds2 = synthetic(3000, 1, noise=False)
+    inv = InverseModel(3, 2)
+    inv.fit(np.hstack([s2, ds2]), a2, seed=0, lr=3e-3)
+    return sgat, gat, inv
+
+
+def test_forward_models_recover_mean_and_sigma(fitted):
+    sgat, gat, _ = fitted
+    s, a, _ = synthetic(1000, 7)
+    x = np.hstack([s, a])
+    true_mean = a @ M.T
+    for model in (sgat, gat):
+        mu, std = model.predict(x)
+        rel = np.linalg.norm(mu - true_mean, axis=1).mean() / np.linalg.norm(true_mean, axis=1).mean()
+        assert rel < 0.10, (model.stochastic, rel)
+    _, std = sgat.predict(x)
+    assert np.all(np.abs(std.mean(0) / SIGMA - 1) < 0.10), std.mean(0)
+    assert np.all(gat.predict(x)[1] == 0)
+    # samples spread like the real noise
+    draws = sgat.sample(np.repeat(x[:1], 5000, 0), np.random.default_rng(0))
+    assert np.all(np.abs(draws.std(0) / SIGMA - 1) < 0.15)
+
+
+def test_inverse_model_recovers_action(fitted):
+    _, _, inv = fitted
+    s, a, ds = synthetic(1000, 8, noise=False)
+    pred = inv.predict(np.hstack([s, ds]))
+    assert np.sqrt(((pred - a) ** 2).mean()) / a.std() < 0.05
+
+
+def test_save_load_weights_only(fitted, tmp_path):
+    sgat, _, inv = fitted
+    p = sgat.save(tmp_path / "f.pt")
+    blob = torch.load(p, weights_only=True)  # plain tensors and a JSON-able config
+    assert blob["config"]["kind"] == "forward"
+    back = ForwardModel.load(p, expect_in=5, expect_out=3)
+    x = np.random.default_rng(0).normal(size=(4, 5))
+    assert np.array_equal(back.predict(x)[0], sgat.predict(x)[0])
+    with pytest.raises(ModelFileError, match="3 outputs, this setting needs 7"):
+        ForwardModel.load(p, expect_out=7)
+    with pytest.raises(ModelFileError, match="'forward' model, expected 'inverse'"):
+        InverseModel.load(p)
+    (tmp_path / "bad.pt").write_bytes(b"\x00garbage")
+    with pytest.raises(ModelFileError, match="not a readable"):
+        ForwardModel.load(tmp_path / "bad.pt")
+    with pytest.raises(FileNotFoundError):
+        ForwardModel.load(tmp_path / "missing.pt")
+    # a state dict of the wrong shape under a matching config
+    small = ForwardModel(3, 2, hidden=(8, 8))
+    blob = {"config": sgat.config(), "state_dict": small.state_dict()}
+    torch.save(blob, tmp_path / "shape.pt")
+    with pytest.raises(ModelFileError, match="do not match"):
+        ForwardModel.load(tmp_path / "shape.pt")
+
+
+def test_fit_rejects_bad_data():
+    m = ForwardModel(3, 2)
+    with pytest.raises(ValueError, match="expected X"):
+        m.fit(np.zeros((20, 4)), np.zeros((20, 3)))
+    X = np.zeros((20, 5))
+    X[3, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        m.fit(X, np.zeros((20, 3)))
+
+
+def _spec(S=3, A=2, k=1):
+    return GroundingSpec(np.arange(S), np.arange(A), -np.ones(A), np.ones(A), k)
+
+
+def test_transformer_identity_sampling_clip_blend(fitted):
+    sgat, gat, inv = fitted
+    spec = _spec()
+    ident = ActionTransformer(spec)
+    a = np.array([0.3, -0.2])
+    assert ident.is_identity and np.array_equal(ident.transform(np.zeros(3), a), a)
+    t = ActionTransformer(spec, sgat, inv, method="sgat", seed=3)
+    t.reset(5)
+    x1 = [t.transform(np.zeros(3), a) for _ in range(3)]
+    t.reset(5)
+    x2 = [t.transform(np.zeros(3), a) for _ in range(3)]
+    assert np.array_equal(x1, x2) and not np.array_equal(x1[0], x1[1])  # seeded, stochastic
+    g = ActionTransformer(spec, gat, inv, method="gat")
+    assert np.array_equal(g.transform(np.zeros(3), a), g.transform(np.zeros(3), a))  # deterministic
+    # this map has no sim/real gap, so GAT grounding is close to the identity
+    assert np.abs(g.transform(np.zeros(3), a) - a).max() < 0.1
+    assert np.all(np.abs(g.transform(np.zeros(3), np.array([5.0, -5.0]))) <= 1.0)  # clipped
+    half = ActionTransformer(spec, gat, inv, method="gat", alpha=0.5)
+    assert np.allclose(half.transform(np.zeros(3), a), 0.5 * a + 0.5 * g.transform(np.zeros(3), a))
+    with pytest.raises(ValueError, match="unknown grounding method"):
+        ActionTransformer(spec, method="magic")
+    with pytest.raises(ValueError, match="alpha"):
+        ActionTransformer(spec, alpha=2.0)
+    with pytest.raises(ValueError, match="do not match"):
+        ActionTransformer(_spec(S=4), sgat, inv)
+
+
+def test_transformer_save_load(fitted, tmp_path):
+    sgat, _, inv = fitted
+    t = ActionTransformer(_spec(), sgat, inv, method="sgat", alpha=0.9, seed=2)
+    t.save(tmp_path / "tr")
+    back = ActionTransformer.load(tmp_path / "tr")
+    t.reset(1)
+    back.reset(1)
+    assert np.array_equal(t.transform(np.ones(3), np.zeros(2)), back.transform(np.ones(3), np.zeros(2)))
+    assert back.alpha == 0.9 and back.method == "sgat"
+
+
+def test_history_stacking():
+    spec = _spec(S=2, A=1, k=3)
+    S = np.arange(10.0).reshape(5, 2)
+    H = spec.stack_history(S)
+    assert H.shape == (5, 6)
+    assert np.array_equal(H[0], [0, 1, 0, 1, 0, 1]) and np.array_equal(H[4], [4, 5, 6, 7, 8, 9])
+    tr = trajectory_transitions(np.hstack([S, np.zeros((5, 1))]), np.ones((5, 1)), spec)
+    assert tr.H.shape == (4, 6) and np.array_equal(tr.dS, np.full((4, 2), 2.0))
