@@ -23,9 +23,13 @@ from typing import Any
 
 # Subcommand modules, in the order ``sgatwalk --help`` lists them.
 COMMANDS: list[str] = [
+    "experiments.cmd_optimize",
     "experiments.cmd_walk",
     "experiments.cmd_stand",
     "experiments.cmd_cliff",
+    "experiments.cmd_excite",
+    "experiments.cmd_diagnose",
+    "experiments.cmd_visualize",
 ]
 
 

@@ -88,37 +88,64 @@ class ProcessExecutor(SerialExecutor):
         tasks = list(tasks)
         results: list[Any] = [None] * len(tasks)
         done = [False] * len(tasks)
-        attempts = [0] * len(tasks)
-        while not all(done):
-            pool = self._ensure()
-            pending = {}
-            for i, t in enumerate(tasks):
-                if not done[i]:
-                    attempts[i] += 1
-                    pending[pool.submit(fn, t)] = i
-            broken = False
-            for fut in cf.as_completed(pending):
-                i = pending[fut]
+        errors = [0] * len(tasks)
+        pool = self._ensure()
+        pending = {pool.submit(fn, t): i for i, t in enumerate(tasks)}
+        broken = False
+        for fut in cf.as_completed(pending):
+            i = pending[fut]
+            try:
+                results[i] = fut.result()
+                done[i] = True
+                if progress:
+                    progress(1)
+            except BrokenProcessPool:
+                broken = True
+            except Exception as exc:
+                errors[i] += 1
+                warnings.warn(f"task {i} raised {type(exc).__name__}: {exc}; retrying once")
+        if broken:  # a worker died: which task killed it is unknown, so re-run the lost ones alone
+            self._discard()
+            lost = [i for i in range(len(tasks)) if not done[i] and not errors[i]]
+            print(f"executor: a worker died; rebuilt the pool and retrying {len(lost)} task(s) one by one",
+                  file=sys.stderr)
+            for i in lost:
+                results[i] = self._isolated(fn, tasks[i], i)
+                done[i] = True
+                if progress:
+                    progress(1)
+        for i in range(len(tasks)):  # tasks that raised: one more try each
+            if not done[i]:
                 try:
-                    results[i] = fut.result()
-                    done[i] = True
-                    if progress:
-                        progress(1)
+                    results[i] = self._ensure().submit(fn, tasks[i]).result()
                 except BrokenProcessPool:
-                    broken = True
+                    self._discard()
+                    results[i] = self._isolated(fn, tasks[i], i)
                 except Exception as exc:
-                    if attempts[i] >= 2:
-                        raise TaskFailed(f"task {i} failed twice: {type(exc).__name__}: {exc}") from exc
-                    warnings.warn(f"task {i} raised {type(exc).__name__}: {exc}; retrying once")
-            if broken:
-                lost = [i for i in range(len(tasks)) if not done[i]]
-                over = [i for i in lost if attempts[i] >= 2]
-                self._pool.shutdown(wait=False, cancel_futures=True)
-                self._pool = None
-                if over:
-                    raise TaskFailed(f"task(s) {over} lost their worker twice (crash or kill); giving up")
-                print(f"executor: a worker died; rebuilt the pool and retrying {len(lost)} task(s)", file=sys.stderr)
+                    raise TaskFailed(f"task {i} failed twice: {type(exc).__name__}: {exc}") from exc
+                if progress:
+                    progress(1)
         return results
+
+    def _discard(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+
+    def _isolated(self, fn, task, i):
+        """Run one task alone (its crash is then its own), twice at most."""
+        for attempt in (1, 2):
+            try:
+                return self._ensure().submit(fn, task).result()
+            except BrokenProcessPool:
+                self._discard()
+                if attempt == 2:
+                    raise TaskFailed(f"task {i} killed its worker twice (crash or kill); giving up") from None
+                print(f"executor: task {i} killed its worker; retrying it once", file=sys.stderr)
+            except Exception as exc:
+                if attempt == 2:
+                    raise TaskFailed(f"task {i} failed twice: {type(exc).__name__}: {exc}") from exc
+                warnings.warn(f"task {i} raised {type(exc).__name__}: {exc}; retrying once")
 
     def close(self) -> None:
         if self._pool is not None:

@@ -111,6 +111,10 @@ class _Model(nn.Module):
             raise ValueError(f"{self.kind}: training data contain NaN or infinite values")
         g = torch.Generator().manual_seed(int(seed))
         torch.manual_seed(int(seed))
+        for m in self.net.modules():  # initial weights from the seed, not from earlier torch use
+            if isinstance(m, nn.Linear):
+                m.reset_parameters()
+        nn.init.zeros_(self.net.skip.weight)
         perm = np.random.default_rng(seed).permutation(len(X))
         n_val = max(1, int(round(val_fraction * len(X))))
         vi, ti = perm[:n_val], perm[n_val:]

@@ -1,0 +1,139 @@
+"""How long logging a 7.5 s rollout to Rerun takes: columnar (what we ship) vs row-by-row logging.
+
+A 7.5 s rollout (750 control steps) is made once in the MuJoCo sim (walking with the initial gait
+parameters when ``walk_engine`` is available, else holding the crouch), then logged to an ``.rrd``
+file repeatedly with :func:`experiments.viz.log_rollouts_to_rrd`, which sends every time-varying
+entity with one ``send_columns`` call (25 link transforms, 36 leg-joint series, IMU, feet,
+balance series, CoM/CoP/plan markers, footsteps). Two figures per run:
+
+* ``log``: building + sending (what the optimizer waits for), without the final flush to disk;
+* ``total``: including the blueprint, the flush and the atomic rename.
+
+For comparison the same time-varying data is logged row by row (``set_time`` + ``log`` per entity
+per step, the pattern of most tutorials), and the median columnar time is put against the 7.5 s of
+robot time and against the wall time of simulating the rollout. The target is < 0.3 s.
+
+Usage: ``python benchmarks/bench_rerun.py [--repeats 7] [--row-repeats 1] [--out DIR]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import tempfile
+import time
+
+import numpy as np
+
+
+def make_rollout(seconds: float = 7.5):
+    from envs import HoldPose, make_world, rollout
+    from experiments.viz import plan_from_engine
+
+    env = make_world("sim")
+    try:
+        from walk_engine import GaitParams, WalkEngine
+
+        ctrl, what = WalkEngine(env.robot, GaitParams()), "walking with θ0"
+        meta = {"params": GaitParams().to_dict()}
+    except ImportError:
+        ctrl, what, meta = HoldPose(env.robot), "holding the crouch", {}
+    t = time.perf_counter()
+    rec = rollout(env, ctrl, seed=0, seconds=seconds, meta=meta)
+    sim_wall = time.perf_counter() - t
+    if hasattr(ctrl, "diagnostics"):
+        rec = plan_from_engine(rec, ctrl.diagnostics())
+    env.close()
+    return rec, what, sim_wall
+
+
+def log_rows(rec, path):
+    """The time-varying part of experiments.viz, logged with one ``log`` call per entity per step."""
+    import rerun as rr
+
+    from experiments.viz import _xyzw, link_poses
+
+    robot = rec.robot
+    stream = rr.RecordingStream("sgatwalk-bench", recording_id="rows")
+    stream.save(path)
+    t0 = time.perf_counter()
+    links, pos, quat, _ = link_poses(rec)
+    xyzw = _xyzw(quat)
+    legs = [robot.joint_names.index(j) for j in robot.groups["legs"]]
+    q = rec.group("q")
+    cmd = robot.expand_action(rec.group("cmd"))
+    app = robot.expand_action(rec.group("app"))
+    extra = {f"ts/{g}/{i}": rec.group(g)[:, i] for g in ("gyro", "angle", "fsr") for i in range(rec.group(g).shape[1])}
+    com = rec.group("gt.com")
+    for k, t in enumerate(rec.t):
+        stream.set_time("time", duration=float(t))
+        stream.set_time("step", sequence=k)
+        for i, link in enumerate(links):
+            stream.log(f"/sim/robot/{link}", rr.Transform3D(translation=pos[k, i], quaternion=xyzw[k, i]))
+        for j in legs:
+            name = robot.joint_names[j]
+            for kind, arr in (("cmd", cmd), ("app", app), ("q", q)):
+                stream.log(f"/sim/ts/joints/{name}/{kind}", rr.Scalars(arr[k, j]))
+        for key, arr in extra.items():
+            stream.log(f"/sim/{key}", rr.Scalars(arr[k]))
+        for ax in range(2):
+            stream.log(f"/sim/ts/balance/{'xy'[ax]}/com", rr.Scalars(com[k, ax]))
+        stream.log("/sim/com", rr.Points3D([com[k]]))
+    t_log = time.perf_counter() - t0
+    stream.flush()
+    stream.disconnect()
+    return t_log, time.perf_counter() - t0
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeats", type=int, default=7, help="columnar runs (default 7)")
+    ap.add_argument("--row-repeats", type=int, default=1, help="row-by-row runs (default 1; ~2-4 s each)")
+    ap.add_argument("--out", default=None, help="directory for the .rrd files (default: a temporary one)")
+    args = ap.parse_args(argv)
+
+    from experiments.viz import log_rollouts_to_rrd
+
+    rec, what, sim_wall = make_rollout()
+    out = args.out or tempfile.mkdtemp(prefix="bench_rerun_")
+    os.makedirs(out, exist_ok=True)
+    print(f"rollout: {len(rec)} rows = {rec.t[-1] + rec.meta['control_dt']:.2f} s of robot time ({what}); "
+          f"simulating it took {sim_wall:.2f} s")
+
+    log_rollouts_to_rrd({"sim": rec}, os.path.join(out, "warmup.rrd"))  # imports, first-call costs
+    logs, totals, size = [], [], 0
+    for _ in range(args.repeats):
+        r = log_rollouts_to_rrd({"sim": rec}, os.path.join(out, "columnar.rrd"))
+        logs.append(r["log_seconds"])
+        totals.append(r["seconds"])
+        size = r["bytes"]
+    n_ent = len(r["rows"])
+    med_log, med_tot = statistics.median(logs), statistics.median(totals)
+    print(f"columnar (send_columns, {n_ent} time-varying entities, one call each): median log {med_log * 1e3:.0f} ms, "
+          f"total {med_tot * 1e3:.0f} ms (min {min(totals) * 1e3:.0f}, max {max(totals) * 1e3:.0f}, n={len(totals)}); "
+          f"{size / 1e6:.2f} MB")
+
+    pair = []
+    for _ in range(max(1, args.repeats // 2)):
+        pair.append(log_rollouts_to_rrd({"sim": rec, "sim2": rec}, os.path.join(out, "two.rrd"))["seconds"])
+    print(f"two rollouts side by side: median total {statistics.median(pair) * 1e3:.0f} ms")
+
+    rows_log, rows_tot = [], []
+    for _ in range(args.row_repeats):
+        a, b = log_rows(rec, os.path.join(out, "rows.rrd"))
+        rows_log.append(a)
+        rows_tot.append(b)
+    if rows_tot:
+        rl, rt = statistics.median(rows_log), statistics.median(rows_tot)
+        print(f"row by row (set_time + log per entity per step, same time-varying data without the statics): "
+              f"log {rl:.2f} s, total {rt:.2f} s -> columnar is {rt / med_tot:.0f}x faster")
+    robot_time = float(rec.t[-1] + rec.meta["control_dt"])
+    print(f"columnar total = {100 * med_tot / robot_time:.1f} % of the robot time, "
+          f"{100 * med_tot / sim_wall:.0f} % of the simulation wall time; target < 0.3 s: "
+          f"{'met' if med_tot < 0.3 else 'MISSED'}")
+    print(f"files in {out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,499 @@
+"""The gait optimization with grounding: Algorithm 1 of the SGAT paper for the NAO walk.
+
+For each method and grounding step i (θ_0 = the walk engine's initial parameters):
+
+1. **Real data** -- ``real_episodes`` walks with θ_i in the PyBullet real world on fresh terrain
+   seeds (the same seeds for every method: paired comparisons).
+2. **Sim data** -- ``sim_episodes`` walks with θ_i in the MuJoCo sim with Gaussian exploration
+   noise on the leg targets, so the inverse model covers the states the forward model proposes.
+3. **Grounding** -- fit ``f_real`` (SGAT: Gaussian NLL; GAT: MSE) and ``f_sim^-1``
+   (``sgat.grounding.fit_transformer``); the transformer is saved under ``models/``.
+4. **Policy improvement** -- CMA-ES (pycma) over the 16 normalized gait parameters, started at
+   θ_i with step size ``sigma0`` and bounded to a trust region of ±``trust_region`` around θ_i
+   (the grounding models were fitted on θ_i's data and do not hold far from it: without the
+   bound, CMA-ES finds 30-50 cm/s gaits in the grounded sim that fall in every real trial), in
+   the grounded sim (``sgat.GroundedEnv``); each candidate's fitness is the paper's reward
+   (forward speed in cm/s, −15 if it fell) averaged over ``episodes_per_candidate`` episodes on
+   seeds shared by the whole generation (common random numbers). θ_{i+1} is the better of the
+   distribution mean and the best candidate, re-evaluated on fresh seeds.
+5. **Evaluation** -- ``eval_trials`` walks of θ_{i+1} in the real world on fresh seeds (shared
+   by all methods): speed mean ± std and falls, the paper's Table I.
+
+The transformed action is blended with the agent's, ã = (1 - α) a + α g(s, a), with α = 0.5 by
+default (the value in the GAT/GARAT code, ``reference/grounding.md`` §4): with α = 1 (the paper's
+formula) the model errors of a one-step inverse model on a walking robot -- it cannot tell a
+command change from the unobserved contact forces, and regresses toward the commands it saw --
+make θ0 fall in every grounded episode although it walks in the real world; with α = 0.5 the
+grounded sim reproduces θ0's real speed and fall rate (``benchmarks/grounding_fidelity.py``).
+
+Methods: ``sgat``, ``gat``, ``none`` (CMA-ES in the plain sim), ``ane`` (action-noise envelope:
+sim with Gaussian noise of ``ane_sigma`` on the leg targets; no real data), ``real`` (CMA-ES
+directly in the real world: the upper bound, and slow).
+
+Everything random comes from ``numpy.random.SeedSequence`` keyed by (seed, purpose, step,
+generation), never from worker state, so the executor does not change results, and a run killed
+at any point and resumed with ``--resume`` ends with the same parameters as an uninterrupted run:
+the checkpoint ``cma_state.pkl`` (the CMA-ES object with its own random stream, the progress of
+every method, the rows written so far) is replaced atomically after every generation.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import io
+import json
+import os
+import pickle
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+METHODS = ("sgat", "gat", "none", "ane", "real")
+STATE_FILE = "cma_state.pkl"
+
+
+@dataclass
+class OptimizeConfig:
+    """Settings of one optimization run (written to ``config.yaml``)."""
+
+    methods: tuple = ("sgat",)
+    grounding_steps: int = 2
+    real_episodes: int = 4
+    sim_episodes: int = 4
+    exploration_noise: float = 0.05
+    popsize: int = 12
+    generations: int = 30
+    sigma0: float = 0.05
+    trust_region: float = 0.15
+    episodes_per_candidate: int = 1
+    seconds: float = 7.5
+    eval_trials: int = 10
+    profile: str = "real"
+    grounding_state: str = "legs"
+    history: int = 1
+    alpha: float = 0.5
+    hidden: tuple = (64, 64)
+    ane_sigma: float = 0.05
+    model_epochs: int = 150
+    seed: int = 0
+    params: str | None = None
+
+    def validate(self) -> None:
+        """Raises ValueError naming the bad setting."""
+        bad = [m for m in self.methods if m not in METHODS]
+        if bad or not self.methods:
+            raise ValueError(f"unknown method(s) {bad or '(none given)'}; choose from {', '.join(METHODS)}")
+        for name in ("grounding_steps", "real_episodes", "sim_episodes", "popsize", "generations",
+                     "episodes_per_candidate", "eval_trials", "history", "model_epochs"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.popsize < 2:
+            raise ValueError("popsize must be >= 2")
+        if not (0 < self.sigma0 <= 1):
+            raise ValueError(f"sigma0 must be in (0, 1] (normalized parameters), got {self.sigma0}")
+        if not (0 < self.trust_region <= 1):
+            raise ValueError(f"trust_region must be in (0, 1] (normalized half-width), got {self.trust_region}")
+        if not (self.seconds > 0):
+            raise ValueError(f"seconds must be positive, got {self.seconds}")
+        if self.exploration_noise < 0 or self.ane_sigma < 0:
+            raise ValueError("noise levels must be >= 0")
+        if not (0 <= self.alpha <= 1):
+            raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["methods"], d["hidden"] = list(self.methods), list(self.hidden)
+        return d
+
+
+PRESETS = {
+    "quick": {},
+    "paper": {"popsize": 150, "generations": 20, "seconds": 7.5, "grounding_steps": 2, "eval_trials": 10,
+              "real_episodes": 10, "sim_episodes": 10, "episodes_per_candidate": 2},
+}
+
+
+# ------------------------------------------------------------------------------ helpers
+def _seeds(cfg: OptimizeConfig, purpose: int, *keys: int, n: int) -> list[int]:
+    ss = np.random.SeedSequence([cfg.seed, purpose, *keys])
+    return [int(s) for s in ss.generate_state(n, dtype=np.uint32)]
+
+
+def _atomic_write(path: str, data: bytes) -> None:
+    tmp = f"{path}.{os.getpid()}.tmp"
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def _theta_key(theta) -> str:
+    return hashlib.sha1(np.asarray(theta, dtype=np.float64).tobytes()).hexdigest()[:12]
+
+
+def summarize(results: list[dict]) -> dict:
+    """Speed mean/std [cm/s], falls, mean fitness of a list of episode results."""
+    speed = np.array([r["speed_cm_s"] for r in results])
+    fit = np.array([r["fitness"] for r in results])
+    return {"trials": len(results), "speed_mean": float(speed.mean()), "speed_std": float(speed.std(ddof=1)) if len(speed) > 1 else 0.0,
+            "falls": int(sum(bool(r["fell"]) for r in results)), "fitness_mean": float(fit.mean())}
+
+
+class CheckpointError(ValueError):
+    """The run directory's checkpoint is unreadable or from another version of cma."""
+
+
+class Optimizer:
+    """Runs (or resumes) an optimization in ``run_dir`` with ``executor`` (see module docstring).
+
+    Args:
+        cfg: the settings (ignored on resume: the run's own config is used).
+        run_dir: output directory (created).
+        executor: an ``experiments.executors`` executor.
+        progress: show tqdm bars (driver process only).
+        log: a callable for one-line messages (default ``print``).
+    """
+
+    def __init__(self, cfg: OptimizeConfig, run_dir: str, executor, *, progress: bool = True, log=print,
+                 rerun: bool = False):
+        self.cfg, self.run_dir, self.ex, self.progress, self.log, self.rerun = cfg, run_dir, executor, progress, log, rerun
+        os.makedirs(run_dir, exist_ok=True)
+        for sub in ("data", "models", "thetas"):
+            os.makedirs(os.path.join(run_dir, sub), exist_ok=True)
+        self.state: dict = {}
+
+    # ---------------------------------------------------------------- checkpoint
+    @property
+    def state_path(self) -> str:
+        return os.path.join(self.run_dir, STATE_FILE)
+
+    def _save(self) -> None:
+        _atomic_write(self.state_path, pickle.dumps(self.state))
+        self._write_tables()
+
+    @classmethod
+    def load_state(cls, run_dir: str) -> dict:
+        """Read ``cma_state.pkl`` of ``run_dir``.
+
+        Raises:
+            FileNotFoundError: no checkpoint. CheckpointError: corrupted, or cma version differs.
+        """
+        import cma
+
+        path = os.path.join(run_dir, STATE_FILE)
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no {STATE_FILE} in {run_dir!r}: nothing to resume")
+        try:
+            with open(path, "rb") as f:
+                state = pickle.load(f)
+            state["config"], state["progress"]  # noqa: B018 - shape check
+        except Exception as exc:
+            raise CheckpointError(f"{path!r} is corrupted ({type(exc).__name__}: {exc}); "
+                                  "delete the run directory to start over") from None
+        if state.get("cma_version") != cma.__version__:
+            raise CheckpointError(f"{path!r} was written with cma {state.get('cma_version')}, this is "
+                                  f"{cma.__version__}; CMA-ES states do not carry across versions")
+        return state
+
+    # ---------------------------------------------------------------- episodes
+    def _tasks(self, world: str, theta, seeds, **kw) -> list[dict]:
+        base = {"world": world, "theta": list(map(float, theta)), "seconds": self.cfg.seconds,
+                "profile": self.cfg.profile}
+        return [{**base, "seed": s, **kw} for s in seeds]
+
+    def _map(self, tasks: list[dict], desc: str) -> list[dict]:
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(tasks), desc=desc, leave=False, disable=None)
+        try:
+            from experiments.tasks import run_episode
+
+            return self.ex.map(run_episode, tasks, progress=(bar.update if bar else None))
+        finally:
+            if bar:
+                bar.close()
+
+    def _recordings(self, world: str, theta, seeds, **kw) -> list:
+        """Recordings of θ in ``world`` on ``seeds``, cached as Parquet under ``data/``."""
+        from envs import Recording
+
+        tag = f"{world}_{_theta_key(theta)}_n{kw.get('action_noise', 0):g}"
+        paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
+        todo = [s for s, p in zip(seeds, paths) if not os.path.exists(p)]
+        if todo:
+            res = self._map(self._tasks(world, theta, todo, record=True, **kw), f"{world} data")
+            for s, r in zip(todo, res):
+                cols, meta = r["recording"]
+                Recording(cols, meta).to_parquet(os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet"))
+        return [Recording.from_parquet(p) for p in paths]
+
+    # ---------------------------------------------------------------- the stages
+    def _fit(self, method: str, step: int, theta) -> str:
+        from envs import NaoSimEnv
+        from sgat.grounding import fit_transformer, recording_transitions
+        from sgat.transformer import GroundingSpec
+
+        cfg = self.cfg
+        out = os.path.join(self.run_dir, "models", f"{method}_step{step}")
+        if os.path.exists(os.path.join(out, "transformer.json")):
+            return out
+        real = self._recordings("real", theta, _seeds(cfg, 1, step, n=cfg.real_episodes))
+        sim = self._recordings("sim", theta, _seeds(cfg, 2, step, n=cfg.sim_episodes),
+                               action_noise=cfg.exploration_noise)
+        env = NaoSimEnv()
+        spec = GroundingSpec.for_nao(env, cfg.grounding_state, cfg.history)
+        t0 = time.perf_counter()
+        fit = fit_transformer(recording_transitions(real, env.layout, spec), recording_transitions(sim, env.layout, spec),
+                              spec, method=method, hidden=tuple(cfg.hidden), alpha=cfg.alpha, seed=cfg.seed + step,
+                              fit_kwargs={"max_epochs": cfg.model_epochs, "lr": 3e-3})
+        fit.transformer.save(out)
+        self.log(f"[{method} step {step}] grounded on {fit.info['n_real']} real / {fit.info['n_sim']} sim transitions "
+                 f"(forward val loss {fit.forward_report.val_loss:.3f}, inverse {fit.inverse_report.val_loss:.3f}, "
+                 f"{time.perf_counter() - t0:.0f} s)")
+        return out
+
+    def _world_kw(self, method: str, step: int) -> tuple[str, dict]:
+        if method in ("sgat", "gat"):
+            return "grounded", {"transformer": os.path.join(self.run_dir, "models", f"{method}_step{step}")}
+        if method == "ane":
+            return "sim", {"action_noise": self.cfg.ane_sigma}
+        return ("real" if method == "real" else "sim"), {}
+
+    def _cma(self, method: str, step: int, prog: dict) -> None:
+        import cma
+
+        from walk_engine import GaitParams
+        from walk_engine.params import NAMES as PARAM_NAMES
+
+        cfg = self.cfg
+        world, kw = self._world_kw(method, step)
+        if prog.get("es") is None:
+            x0 = GaitParams.from_array(prog["theta"]).to_vector()
+            r = cfg.trust_region  # the models are fitted on θ_i's data: search near θ_i
+            lo, hi = np.clip(x0 - r, 0.0, 1.0), np.clip(x0 + r, 0.0, 1.0)
+            opts = {"bounds": [lo.tolist(), hi.tolist()], "popsize": cfg.popsize, "verbose": -9, "verb_log": 0, "verb_disp": 0,
+                    "randn": np.random.RandomState(_seeds(cfg, 3, step, n=1)[0]).randn, "tolflatfitness": 100}
+            prog["es"] = cma.CMAEvolutionStrategy(x0, cfg.sigma0, opts)
+            prog["gen"] = 0
+        es = prog["es"]
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=cfg.generations, initial=prog["gen"], desc=f"{method} step {step} CMA-ES", disable=None)
+        while prog["gen"] < cfg.generations:
+            gen = prog["gen"]
+            t0 = time.perf_counter()
+            X = es.ask()
+            seeds = _seeds(cfg, 4, step, gen, n=cfg.episodes_per_candidate)
+            thetas = [GaitParams.from_vector(x, clip=True).to_array() for x in X]
+            tasks = [t for th in thetas for t in self._tasks(world, th, seeds, **kw)]
+            res = self._map(tasks, f"gen {gen}")
+            k = cfg.episodes_per_candidate
+            fit = np.array([np.mean([r["fitness"] for r in res[i * k:(i + 1) * k]]) for i in range(len(X))])
+            es.tell(X, list(-fit))
+            wall = time.perf_counter() - t0
+            for i, th in enumerate(thetas):
+                for j in range(k):
+                    r = res[i * k + j]
+                    self.state["evals"].append({"method": method, "step": step, "gen": gen, "candidate": i, "seed": r["seed"],
+                                                "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"]),
+                                                **{f"theta.{n}": float(v) for n, v in zip(PARAM_NAMES, th)}})
+            self.state["generations"].append({"method": method, "step": step, "gen": gen, "best": float(fit.max()),
+                                              "median": float(np.median(fit)), "worst": float(fit.min()),
+                                              "mean": float(fit.mean()), "sigma": float(es.sigma), "evals": len(res),
+                                              "wall_s": wall})
+            if self.rerun:
+                self._log_generation(method, step, gen, world, kw, thetas, fit, seeds[0])
+            prog["gen"] = gen + 1
+            self._save()
+            if bar:
+                bar.update(1)
+                bar.set_postfix(best=f"{fit.max():.1f}", median=f"{np.median(fit):.1f}", sigma=f"{es.sigma:.3f}")
+        if bar:
+            bar.close()
+
+    def _select(self, method: str, step: int, prog: dict) -> np.ndarray:
+        """θ_{i+1}: the better of the CMA-ES mean and the best candidate on fresh seeds."""
+        from walk_engine import GaitParams
+
+        cfg = self.cfg
+        es = prog["es"]
+        world, kw = self._world_kw(method, step)
+        cands = [GaitParams.from_vector(es.result.xfavorite, clip=True).to_array(),
+                 GaitParams.from_vector(es.result.xbest, clip=True).to_array()]
+        seeds = _seeds(cfg, 5, step, n=max(2, cfg.episodes_per_candidate))
+        res = self._map([t for th in cands for t in self._tasks(world, th, seeds, **kw)], "select")
+        n = len(seeds)
+        scores = [np.mean([r["fitness"] for r in res[i * n:(i + 1) * n]]) for i in range(2)]
+        return cands[int(np.argmax(scores))]
+
+    def _evaluate(self, theta, step: int, label: str) -> dict:
+        res = self._map(self._tasks("real", theta, _seeds(self.cfg, 6, step, n=self.cfg.eval_trials)), f"{label} real eval")
+        if self.rerun:
+            self._log_eval(label, step, theta)
+        return {**summarize(res), "episodes": [{k: r[k] for k in ("seed", "speed_cm_s", "fell", "fall_reason", "fitness")}
+                                               for r in res]}
+
+    # ---------------------------------------------------------------- rerun hooks
+    def _log_generation(self, method, step, gen, world, kw, thetas, fit, seed) -> None:
+        """Log the best, median and worst candidates of selected generations (first, every
+        5th, last) to ``rerun/``."""
+        if not (gen == 0 or gen == self.cfg.generations - 1 or gen % 5 == 0):
+            return
+        order = np.argsort(fit)
+        picks = {"best": order[-1], "median": order[len(order) // 2], "worst": order[0]}
+        tasks = [self._tasks(world, thetas[i], [seed], record=True, meta={"world": f"{name}"}, **kw)[0]
+                 for name, i in picks.items()]
+        self._to_rrd(tasks, f"{method}_step{step}_gen{gen:03d}")
+
+    def _log_eval(self, label, step, theta) -> None:
+        seeds = _seeds(self.cfg, 6, step, n=min(3, self.cfg.eval_trials))
+        tasks = [dict(t, meta={"world": f"real seed {t['seed']}"}) for t in self._tasks("real", theta, seeds, record=True)]
+        self._to_rrd(tasks, f"{label}_step{step}_real_eval")
+
+    def _to_rrd(self, tasks, name) -> None:
+        from envs import Recording
+
+        try:
+            from experiments.viz import log_rollouts_to_rrd
+        except ImportError as exc:  # pragma: no cover - visualization not available
+            self.log(f"rerun logging skipped: {exc}")
+            return
+        res = self.ex.map(__import__("experiments.tasks", fromlist=["run_episode"]).run_episode, tasks)
+        recs = {r["recording"][1]["world"]: Recording(*r["recording"]) for r in res}
+        os.makedirs(os.path.join(self.run_dir, "rerun"), exist_ok=True)
+        log_rollouts_to_rrd(recs, os.path.join(self.run_dir, "rerun", f"{name}.rrd"))
+
+    # ---------------------------------------------------------------- driver
+    def run(self, resume: bool = False) -> dict:
+        import cma
+
+        from walk_engine import GaitParams
+
+        if resume:
+            self.state = self.load_state(self.run_dir)
+            self.cfg = OptimizeConfig(**{**self.state["config"], "methods": tuple(self.state["config"]["methods"]),
+                                         "hidden": tuple(self.state["config"]["hidden"])})
+            self.log(f"resuming {self.run_dir}")
+        else:
+            if os.path.exists(self.state_path):
+                raise ValueError(f"{self.run_dir!r} already holds a run; use --resume {self.run_dir} or another --out")
+            theta0 = (GaitParams.load(self.cfg.params) if self.cfg.params else GaitParams.initial()).to_array()
+            self.state = {"config": self.cfg.to_dict(), "cma_version": cma.__version__, "theta0": theta0.tolist(),
+                          "rows": [], "evals": [], "generations": [],
+                          "progress": {m: {"step": 1, "stage": "fit", "theta": theta0.tolist(), "es": None, "gen": 0}
+                                       for m in self.cfg.methods}}
+            self._write_config()
+            self._save()
+        cfg = self.cfg
+        if not any(r["method"] == "theta0" for r in self.state["rows"]):
+            ev = self._evaluate(self.state["theta0"], 0, "theta0")
+            self.state["rows"].append({"method": "theta0", "step": 0, **ev})
+            self._save()
+        for method in cfg.methods:
+            prog = self.state["progress"][method]
+            while prog["step"] <= cfg.grounding_steps:
+                step = prog["step"]
+                if prog["stage"] == "fit":
+                    if method in ("sgat", "gat"):
+                        self._fit(method, step, prog["theta"])
+                    prog["stage"] = "cma"
+                    self._save()
+                if prog["stage"] == "cma":
+                    self._cma(method, step, prog)
+                    prog["selected"] = self._select(method, step, prog).tolist()
+                    prog["stage"] = "eval"
+                    self._save()
+                if prog["stage"] == "eval":
+                    theta = np.array(prog["selected"])
+                    ev = self._evaluate(theta, step, method)
+                    GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
+                    self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist()})
+                    self.log(f"[{method} step {step}] real: {ev['speed_mean']:.2f} ± {ev['speed_std']:.2f} cm/s, "
+                             f"falls {ev['falls']}/{ev['trials']}")
+                    prog.update(step=step + 1, stage="fit", theta=theta.tolist(), es=None, gen=0)
+                    self._save()
+        self._figure()
+        return self.result()
+
+    # ---------------------------------------------------------------- outputs
+    def result(self) -> dict:
+        rows = [{k: v for k, v in r.items() if k not in ("episodes",)} for r in self.state["rows"]]
+        best = max((r for r in rows if r["method"] != "theta0"), key=lambda r: r["fitness_mean"], default=None)
+        return {"run_dir": self.run_dir, "rows": rows, "best": best, "table": format_table(self.state["rows"])}
+
+    def _write_config(self) -> None:
+        import yaml
+
+        _atomic_write(os.path.join(self.run_dir, "config.yaml"), yaml.safe_dump(self.cfg.to_dict(), sort_keys=False).encode())
+
+    def _write_tables(self) -> None:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        gens = self.state.get("generations", [])
+        if gens:
+            buf = io.StringIO()
+            w = csv.DictWriter(buf, fieldnames=list(gens[0]))
+            w.writeheader()
+            w.writerows(gens)
+            _atomic_write(os.path.join(self.run_dir, "generations.csv"), buf.getvalue().encode())
+        if self.state.get("evals"):
+            path = os.path.join(self.run_dir, "evals.parquet")
+            tmp = f"{path}.{os.getpid()}.tmp"
+            pq.write_table(pa.Table.from_pylist(self.state["evals"]), tmp)
+            os.replace(tmp, path)
+        if self.state.get("rows"):
+            res = self.result()
+            _atomic_write(os.path.join(self.run_dir, "results.json"),
+                          json.dumps({"rows": self.state["rows"]}, indent=1).encode())
+            _atomic_write(os.path.join(self.run_dir, "table.txt"), (res["table"] + "\n").encode())
+
+    def _figure(self) -> None:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        gens = self.state["generations"]
+        if not gens:
+            return
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        keys = sorted({(g["method"], g["step"]) for g in gens}, key=lambda k: (self.cfg.methods.index(k[0]), k[1]))
+        offset = {}
+        for m, s in keys:
+            rows = [g for g in gens if g["method"] == m and g["step"] == s]
+            x0 = offset.get(m, 0)
+            x = x0 + np.array([g["gen"] for g in rows])
+            line, = ax.plot(x, [g["best"] for g in rows], "-", label=f"{m.upper()} step {s}: best")
+            ax.plot(x, [g["median"] for g in rows], "--", color=line.get_color(), alpha=0.6)
+            offset[m] = x0 + len(rows)
+        ax.set_xlabel("generation (grounding steps concatenated per method; dashed: population median)")
+        ax.set_ylabel("fitness in the training world [cm/s, -15 per fall]")
+        ax.set_title("CMA-ES progress")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = os.path.join(self.run_dir, "fitness.png")
+        tmp = path + ".tmp.png"
+        fig.savefig(tmp, dpi=120)
+        plt.close(fig)
+        os.replace(tmp, path)
+
+
+def format_table(rows: list[dict]) -> str:
+    """The paper's Table I: a row per method and grounding step (θ0 first)."""
+    lines = [f"{'method':8s} {'step':>4s} {'speed [cm/s]':>16s} {'falls':>7s}", "-" * 38]
+    for r in rows:
+        name = "θ0" if r["method"] == "theta0" else r["method"].upper()
+        step = "-" if r["method"] == "theta0" else str(r["step"])
+        lines.append(f"{name:8s} {step:>4s} {r['speed_mean']:8.2f} ± {r['speed_std']:5.2f} "
+                     f"{r['falls']:>3d}/{r['trials']:<3d}")
+    return "\n".join(lines)

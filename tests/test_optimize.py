@@ -1,0 +1,97 @@
+"""sgatwalk optimize: tiny end-to-end runs, exact resume after SIGKILL, clear errors."""
+
+import json
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from experiments.optimize import CheckpointError, Optimizer
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TINY = ["--grounding-steps", "1", "--popsize", "4", "--generations", "3", "--seconds", "0.6",
+        "--real-episodes", "1", "--sim-episodes", "1", "--eval-trials", "2", "--workers", "1", "--model-epochs", "20"]
+
+
+def test_tiny_run_writes_the_run_directory(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["optimize", *TINY, "--methods", "sgat,none", "--out", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("sgat", 1), ("none", 1)]
+    for r in res["rows"]:
+        assert r["trials"] == 2 and 0 <= r["falls"] <= 2 and np.isfinite(r["speed_mean"])
+    for f in ("config.yaml", "generations.csv", "evals.parquet", "cma_state.pkl", "fitness.png", "table.txt",
+              "results.json", "thetas/sgat_step1.json", "thetas/none_step1.json", "models/sgat_step1/forward.pt"):
+        assert (out / f).exists(), f
+    import pyarrow.parquet as pq
+
+    ev = pq.read_table(out / "evals.parquet").to_pylist()
+    assert len(ev) == 2 * 3 * 4  # methods x generations x popsize (1 episode per candidate)
+    assert "theta.step_period" in ev[0]
+    # both methods saw the same real evaluation seeds (paired)
+    rows = json.loads((out / "results.json").read_text())["rows"]
+    assert [e["seed"] for e in rows[1]["episodes"]] == [e["seed"] for e in rows[2]["episodes"]]
+
+
+def test_resume_after_sigkill_matches_uninterrupted(tmp_path):
+    ref = tmp_path / "ref"
+    assert main(["optimize", *TINY, "--out", str(ref), "--json"]) == 0
+    run = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "experiments.cli", "optimize", *TINY, "--out", str(run), "--json"]
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while not (run / "generations.csv").exists() and proc.poll() is None and time.time() - t0 < 300:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run finished before it could be killed"
+    proc.send_signal(signal.SIGKILL)  # mid-generation: generation 0 is checkpointed, 1 is running
+    proc.wait()
+    assert not (run / "thetas" / "sgat_step1.json").exists()
+    assert main(["optimize", "--resume", str(run), "--workers", "1", "--json"]) == 0
+    a = json.loads((ref / "thetas" / "sgat_step1.json").read_text())
+    b = json.loads((run / "thetas" / "sgat_step1.json").read_text())
+    assert a == b
+    ra = json.loads((ref / "results.json").read_text())["rows"]
+    rb = json.loads((run / "results.json").read_text())["rows"]
+    assert ra == rb
+
+
+def test_bad_input(tmp_path, capsys):
+    assert main(["optimize", "--methods", "sgat,magic", "--out", str(tmp_path / "x")]) == 2
+    assert "unknown method(s) ['magic']" in capsys.readouterr().err
+    assert main(["optimize", "--popsize", "1", "--out", str(tmp_path / "x")]) == 2
+    assert "popsize" in capsys.readouterr().err
+    assert main(["optimize", "--resume", str(tmp_path / "nothing")]) == 2
+    assert "no run directory" in capsys.readouterr().err
+    bad = tmp_path / "corrupt"
+    bad.mkdir()
+    (bad / "cma_state.pkl").write_bytes(b"not a pickle")
+    assert main(["optimize", "--resume", str(bad)]) == 2
+    assert "corrupted" in capsys.readouterr().err
+    old = tmp_path / "oldcma"
+    old.mkdir()
+    (old / "cma_state.pkl").write_bytes(pickle.dumps({"config": {}, "progress": {}, "cma_version": "0.0"}))
+    with pytest.raises(CheckpointError, match="cma 0.0"):
+        Optimizer.load_state(str(old))
+    assert main(["optimize", "--params", str(tmp_path / "none.json"), "--out", str(tmp_path / "y")]) == 2
+    assert "no such file" in capsys.readouterr().err
+
+
+def test_wrong_shape_weights_are_rejected(tmp_path):
+    """A transformer directory whose weights do not fit the grounding spec."""
+    from envs import NaoSimEnv
+    from sgat.models import ForwardModel, InverseModel, ModelFileError
+    from sgat.transformer import ActionTransformer, GroundingSpec
+
+    spec = GroundingSpec.for_nao(NaoSimEnv())
+    tr = ActionTransformer(spec, ForwardModel(24, 11), InverseModel(24, 11))
+    tr.save(tmp_path / "m")
+    ForwardModel(10, 11).save(tmp_path / "m" / "forward.pt")
+    with pytest.raises(ModelFileError, match="inputs"):
+        ActionTransformer.load(tmp_path / "m")

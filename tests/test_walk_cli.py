@@ -1,0 +1,73 @@
+"""``sgatwalk walk``: JSON result, recording, clear errors for bad input."""
+
+import json
+
+import pytest
+
+from envs import Recording
+from experiments import cli
+from walk_engine import GaitParams
+
+KEYS = {"speed_cm_s", "fitness", "fell", "fall_reason", "fall_time_s", "drift_m", "distance_m"}
+
+
+def _run(capsys, *argv):
+    code = cli.main(["walk", *argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_walk_json_and_record(tmp_path, capsys):
+    theta = GaitParams(step_length=0.03).save(tmp_path / "theta.json")
+    rec_path = tmp_path / "walk.parquet"
+    code, out, err = _run(capsys, "--params", str(theta), "--world", "sim", "--seconds", "2", "--seed", "3",
+                          "--record", str(rec_path), "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert KEYS <= set(res) and isinstance(res["fell"], bool)
+    assert res["fitness"] == pytest.approx(res["speed_cm_s"] - 15 * res["fell"])
+    assert res["params"]["step_length"] == 0.03
+    rec = Recording.from_parquet(rec_path)
+    assert rec.meta["params"]["step_length"] == 0.03 and rec.meta["seed"] == 3 and len(rec) == 200
+    base = rec.group("gt.base")
+    assert res["distance_m"] == pytest.approx(base[-1, 0] - base[0, 0])
+
+
+def test_walk_human_output_defaults_to_theta0(capsys):
+    code, out, _ = _run(capsys, "--seconds", "1")
+    assert code == 0 and "speed" in out and "drift" in out and "fitness" in out
+
+
+def test_walk_real_world_terrain(capsys):
+    code, out, err = _run(capsys, "--world", "real", "--profile", "none", "--terrain", "lumpy",
+                          "--amplitude", "0.01", "--seconds", "1", "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert res["profile"] == "none" and res["terrain"].startswith("lumpy")
+
+
+@pytest.mark.parametrize("content, words", [
+    ("{not json", "not valid JSON"),
+    (json.dumps({"step_period": 0.3}), "missing"),
+    (json.dumps({**GaitParams().to_dict(), "step_height": 0.5}), "step_height"),
+    (json.dumps({**GaitParams().to_dict(), "com_height": None}), "com_height"),
+    (json.dumps({**GaitParams().to_dict(), "extra_knob": 1.0}), "extra_knob"),
+])
+def test_bad_params_file_is_a_one_line_error(tmp_path, capsys, content, words):
+    p = tmp_path / "bad.json"
+    p.write_text(content)
+    code, out, err = _run(capsys, "--params", str(p), "--seconds", "1")
+    assert code == 2 and out == ""
+    assert words in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--params", "/nonexistent/theta.json"], "no gait parameter file"),
+    (["--seconds", "-1"], "--seconds"),
+    (["--profile", "real"], "real world only"),
+    (["--world", "real", "--profile", "nonsense", "--seconds", "0.1"], "unknown profile"),
+    (["--terrain", "lumpy", "--amplitude", "-0.1"], "--amplitude"),
+])
+def test_bad_arguments(capsys, argv, words):
+    code, _, err = _run(capsys, *argv)
+    assert code == 2 and words in err
