@@ -56,12 +56,21 @@ def test_make_executor():
 
 
 @pytest.mark.slow
-def test_ray_local_cluster_identical():
+def test_serial_pool_and_ray_give_identical_walk_fitness():
+    """Walk episodes (the optimizer's tasks) through all three executors, a local Ray cluster too."""
     pytest.importorskip("ray")
-    seeds = [3, 1, 4]
-    serial = SerialExecutor().map(T.short_rollout, seeds)
-    ex = make_executor(ray_address="local")
+    from experiments.tasks import run_episode
+    from walk_engine import GaitParams
+
+    theta = GaitParams.initial().to_array().tolist()
+    tasks = [{"world": w, "theta": theta, "seed": s, "seconds": 2.0} for w in ("sim", "real") for s in (1, 2)]
+    serial = SerialExecutor().map(run_episode, tasks)
+    with ProcessExecutor(2) as ex:
+        pooled = ex.map(run_episode, tasks)
+    ray_ex = make_executor(ray_address="local")
     try:
-        assert ex.map(T.short_rollout, seeds) == serial
+        on_ray = ray_ex.map(run_episode, tasks)
     finally:
-        ex.close()
+        ray_ex.close()
+    assert serial == pooled == on_ray
+    assert len({r["fitness"] for r in serial}) > 1
