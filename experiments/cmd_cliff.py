@@ -19,13 +19,13 @@ import io
 import math
 import os
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from experiments.files import atomic_write_bytes as _atomic_write_bytes
 from sgat import tabular as T
 
 #: Columns of ``cliff.csv`` (the first six are the ``--json`` row keys the issue asks for).
@@ -148,23 +148,6 @@ def sweep(noises: list[float], *, progress: bool = False, **kwargs: Any) -> list
 # --------------------------------------------------------------------------------------------
 # Output
 # --------------------------------------------------------------------------------------------
-
-
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
 
 
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:

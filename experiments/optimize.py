@@ -51,6 +51,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from experiments.files import atomic_write_bytes as _atomic_write
+
 METHODS = ("sgat", "gat", "none", "ane", "real")
 STATE_FILE = "cma_state.pkl"
 
@@ -120,15 +122,6 @@ PRESETS = {
 def _seeds(cfg: OptimizeConfig, purpose: int, *keys: int, n: int) -> list[int]:
     ss = np.random.SeedSequence([cfg.seed, purpose, *keys])
     return [int(s) for s in ss.generate_state(n, dtype=np.uint32)]
-
-
-def _atomic_write(path: str, data: bytes) -> None:
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 def _theta_key(theta) -> str:
