@@ -24,7 +24,6 @@ import statistics
 import tempfile
 import time
 
-import numpy as np
 
 
 def make_rollout(seconds: float = 7.5):

@@ -17,7 +17,6 @@ import argparse
 import csv
 import io
 import math
-import os
 import sys
 import time
 from pathlib import Path

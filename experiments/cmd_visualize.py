@@ -80,7 +80,7 @@ def _live(args) -> tuple[dict, dict, list[str]]:
         raise ValueError(f"--seconds must be positive, got {args.seconds}")
     params = None
     if args.pose is None:
-        from walk_engine import GaitParams, WalkEngine  # noqa: F401 - fail early and clearly below
+        from walk_engine import GaitParams, WalkEngine
 
         params = GaitParams.load(args.params) if args.params else GaitParams()
     elif args.params:
@@ -99,8 +99,6 @@ def _live(args) -> tuple[dict, dict, list[str]]:
             robot = env.unwrapped.robot
             meta = {"world": w}
             if params is not None:
-                from walk_engine import WalkEngine
-
                 ctrl = WalkEngine(robot, params)
                 meta["params"] = params.to_dict()
             else:

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import torch
 
-from sgat.grounding import Transitions, fit_transformer, trajectory_transitions
+from sgat.grounding import trajectory_transitions
 from sgat.models import ForwardModel, InverseModel, ModelFileError
-from sgat.transformer import ActionTransformer, GroundedEnv, GroundingSpec
+from sgat.transformer import ActionTransformer, GroundingSpec
 
 M = np.array([[0.5, -0.2], [0.1, 0.8], [-0.3, 0.4]])
 SIGMA = np.array([0.05, 0.10, 0.20])
