@@ -27,9 +27,11 @@ COMMANDS: list[str] = [
     "experiments.cmd_walk",
     "experiments.cmd_stand",
     "experiments.cmd_cliff",
+    "experiments.cmd_gym",
     "experiments.cmd_excite",
     "experiments.cmd_diagnose",
     "experiments.cmd_visualize",
+    "experiments.cmd_stress",
 ]
 
 
