@@ -1,0 +1,105 @@
+"""``sgatwalk diagnose``: locate where the sim and real recordings differ, name the missing physics,
+fit it and show the held-out fit improve.
+
+Reads recordings (Parquet files or folders of them, any that follow the schema of
+``envs/recording.py``; ground truth optional), replays their commands in the MuJoCo sim from the
+measured start state, and prints a report: a verdict (held-out RMS before -> after against the
+noise floor), each effect found in physics words with where it is and its value with a 95 %
+interval, what was considered and rejected, what this data cannot tell apart (and which
+experiment would), and the residual left. Writes ``report.json``, ``report.txt``, plots and
+``identified_model.xml`` (the sim with the effects, MJCF) into ``--out``. Input files are only read.
+
+``--calibrate`` treats the recordings as logs of a real world with no injected effects (profile
+"none") and writes ``calibration.json``: the engine gap that later diagnoses (``--calibration
+FILE``) are judged against.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("diagnose", help="find, name and fit the physics the sim misses (system identification)",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--real", required=True, nargs="+", metavar="DIR_OR_FILE",
+                   help="recordings of the real robot: Parquet files and/or folders of them")
+    p.add_argument("--sim", default="nao", choices=("nao",), help="sim model to diagnose (default nao: the NAO H25 MuJoCo sim)")
+    p.add_argument("--out", required=True, metavar="REPORT_DIR", help="folder for the report")
+    p.add_argument("--calibration", metavar="FILE", help="engine-gap calibration (from --calibrate on 'none' logs)")
+    p.add_argument("--calibrate", action="store_true", help="the recordings have no injected effects: write "
+                   "REPORT_DIR/calibration.json (engine-gap baseline) instead of a diagnosis")
+    p.add_argument("--families", help="comma list of candidate families (default: actuator families for fixed-base "
+                   "logs, contact families (foot_friction, ground_compliance) for floating-base logs)")
+    p.add_argument("--base-report", metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
+                   "(bottom-up staging: diagnose fixed-base logs first, then stepping logs with their report)")
+    p.add_argument("--rounds", type=int, default=3, help="screen/refit rounds (default 3)")
+    p.add_argument("--time-budget", type=float, default=300.0, metavar="SECONDS",
+                   help="start no new search step after this long (default 300; 0 = no limit)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    return p
+
+
+def run(args) -> dict:
+    import json
+    import os
+    import sys
+
+    from sysid.data import load_logs
+    from sysid.diagnose import calibrate, diagnose
+    from sysid.report import _atomic_write, _jsonable, format_report, write_report
+
+    logs = load_logs(args.real)
+    say = None if args.json else (lambda s: print(s, file=sys.stderr))
+    os.makedirs(args.out, exist_ok=True)
+    if args.calibrate:
+        cal = calibrate(logs)
+        p = os.path.join(args.out, "calibration.json")
+        _atomic_write(p, json.dumps(_jsonable(cal), indent=1))
+        if not args.json:
+            worst = sorted(cal["gap_rms"].items(), key=lambda kv: -kv[1])[:3]
+            print(f"engine gap from {cal['n_logs']} log(s): sensor σ {1000 * cal['sigma']['encoders']:.3f} mrad; "
+                  f"largest gap {', '.join(f'{k} {1000 * v:.3f} mrad' for k, v in worst)}; "
+                  "baseline model (engine gap in candidate terms): "
+                  f"{', '.join(f'{k} = {v:.4g}' for k, v in cal['baseline_model'].items()) or 'none'}; wrote {p}")
+        return {"calibration": p, **_jsonable(cal)}
+    cal = None
+    if args.calibration:
+        if not os.path.exists(args.calibration):
+            raise FileNotFoundError(f"no calibration file at {args.calibration!r}")
+        with open(args.calibration) as f:
+            try:
+                cal = json.load(f)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"{args.calibration}: not a JSON calibration ({exc})") from None
+        if not isinstance(cal, dict) or cal.get("kind") != "sgatwalk-sysid-calibration":
+            raise ValueError(f"{args.calibration}: not a calibration written by 'sgatwalk diagnose --calibrate'")
+        if bool(cal.get("fixed_base")) != logs[0].fixed_base:
+            raise ValueError(f"{args.calibration}: calibrated on {'fixed' if cal.get('fixed_base') else 'floating'}-base "
+                             "logs; the recordings are not")
+    if args.rounds < 1:
+        raise ValueError(f"--rounds must be >= 1, got {args.rounds}")
+    fams = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
+    base = None
+    if args.base_report:
+        from sysid.report import terms_from_labels
+
+        if not os.path.exists(args.base_report):
+            raise FileNotFoundError(f"no report at {args.base_report!r}")
+        with open(args.base_report) as f:
+            try:
+                prev = json.load(f)
+                base = terms_from_labels({**prev.get("base_model", {}), **prev["model"]})
+            except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
+                raise ValueError(f"{args.base_report}: not a report.json of sgatwalk diagnose ({exc})") from None
+    if args.time_budget < 0:
+        raise ValueError(f"--time-budget must be >= 0, got {args.time_budget}")
+    rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
+                   time_budget_s=args.time_budget or None)
+    paths = write_report(rep, logs, args.out, plots=not args.no_plots)
+    if not args.json:
+        print(format_report(rep))
+        print(f"wrote {', '.join(v if isinstance(v, str) else ', '.join(v) for v in paths.values())}")
+    out = _jsonable(rep)
+    out["files"] = paths
+    return out

@@ -1,0 +1,224 @@
+"""The library of named candidate effects, each a MuJoCo augmentation with units, bounds and scope.
+
+A *family* is one kind of missing physics; a *term* is a family at one joint or link (or global).
+Every term has a physical value; its nominal value is what the plain sim has. Families and their
+MuJoCo handles (``reference/sysid.md`` §3, §5.2):
+
+==================  =========  ========  ===========================================  ============
+family              scope      unit      MuJoCo augmentation                          probe (Δ)
+==================  =========  ========  ===========================================  ============
+latency             global     s         ``actuator_delay`` (history buffers, linear)  10, 30 ms
+backlash            joint      rad       series play hinge, range ±gap/2               0.02, 0.05
+coulomb_friction    joint      N m       ``dof_frictionloss``                          0.05, 0.2
+viscous_damping     joint      N m s/rad ``dof_damping`` (added)                       0.05
+pd_gain             joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
+torque_limit        global     x effort  ``actuator_forcerange`` (all joints)          x0.75
+link_mass           link       x mass    ``body_mass``, ``body_inertia`` + mj_setConst  x1.3
+armature            joint      kg m^2    ``dof_armature`` (added)                      0.002
+sensor_bias         joint      rad       measured angle offset (replay starts at q-b)  0.005
+foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
+ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.02 -> 0.04
+==================  =========  ========  ===========================================  ============
+
+``joint_compliance`` and ``terrain_roughness`` are named by the report vocabulary but have no
+augmentation here yet (see the README's list of what is not done).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from envs.effects import NOMINAL_FOOT_FRICTION
+from robots import RobotModel
+
+#: Every family name the report may use (issue 8).
+FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
+                "link_mass", "armature", "joint_compliance", "foot_friction", "ground_compliance",
+                "terrain_roughness", "sensor_bias")
+
+
+@dataclass(frozen=True)
+class Family:
+    """One kind of missing physics.
+
+    Attributes:
+        name: family name (one of :data:`FAMILY_NAMES`).  words: what to call it in a report.
+        scope: ``"global"``, ``"joint"`` or ``"link"``.  unit: SI unit of the value.
+        nominal: value of the plain sim.  lo, hi: bounds of the value.  probe: screening value.
+        smooth: False for families with a dead zone around nominal (grid starts in the refit).
+        log: search this family on a log scale in grid starts.
+        contact: only meaningful with ground contact (floating base).
+        probe2: a second, large probe for families whose response is far from linear in the
+            value (stick-slip, dead zones): screening tries both and keeps the better match.
+    """
+
+    name: str
+    words: str
+    scope: str
+    unit: str
+    nominal: float
+    lo: float
+    hi: float
+    probe: float
+    smooth: bool = True
+    log: bool = False
+    contact: bool = False
+    probe2: float | None = None
+
+    def fmt(self, v: float) -> str:
+        """Value in report units, e.g. '24.8 ms', 'x0.78', '0.197 N m'."""
+        if self.unit == "s" and self.name == "latency":
+            return f"{1000 * v:.1f} ms"
+        if self.unit.startswith("x"):
+            return f"x{v:.3f}"
+        if self.unit == "rad":
+            return f"{1000 * v:.2f} mrad"
+        return f"{v:.4g} {self.unit}".strip()
+
+
+FAMILIES: dict[str, Family] = {f.name: f for f in (
+    Family("latency", "actuation latency", "global", "s", 0.0, 0.0, 0.075, 0.010, smooth=False, probe2=0.03),
+    Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05),
+    Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
+           probe2=0.2),
+    Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05),
+    Family("pd_gain", "servo stiffness (kp) mismatch", "joint", "x kp", 1.0, 0.3, 2.0, 0.85),
+    Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False),
+    Family("link_mass", "link mass error", "link", "x mass", 1.0, 0.3, 3.0, 1.3),
+    Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002),
+    Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005),
+    Family("foot_friction", "foot-ground friction", "global", "", NOMINAL_FOOT_FRICTION, 0.05, 1.5, 0.4,
+           smooth=False, contact=True),
+    Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", 0.02, 0.004, 0.1,
+           0.04, smooth=False, contact=True),
+)}
+#: Families screened on fixed-base (in-air) logs; contact families need floating-base logs.
+FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact)
+#: Families screened by default on floating-base (standing/stepping) logs: bottom-up staging
+#: (sysid.md §5.6) fixes actuator effects in the air first and passes them in as a base model.
+CONTACT_FAMILIES = tuple(n for n, f in FAMILIES.items() if f.contact)
+
+
+@dataclass(frozen=True, order=True)
+class Term:
+    """A family at one target: a joint name, a link name, or ``None`` (global)."""
+
+    family: str
+    target: str | None = None
+
+    @property
+    def fam(self) -> Family:
+        return FAMILIES[self.family]
+
+    def label(self) -> str:
+        return self.family if self.target is None else f"{self.family}[{self.target}]"
+
+    def __str__(self) -> str:  # pragma: no cover - display
+        return self.label()
+
+
+def all_terms(robot: RobotModel, families=FIXED_BASE_FAMILIES, joints=None, links=None) -> list[Term]:
+    """Every term of ``families`` over ``joints`` (default all 24) and ``links`` (default all but the root)."""
+    joints = robot.joint_names if joints is None else joints
+    links = [ln for ln in robot.links if ln != robot.root] if links is None else links
+    out = []
+    for f in families:
+        sc = FAMILIES[f].scope
+        if sc == "global":
+            out.append(Term(f))
+        elif sc == "joint":
+            out.extend(Term(f, j) for j in joints)
+        else:
+            out.extend(Term(f, ln) for ln in links)
+    return out
+
+
+def links_below(robot: RobotModel, joint: str) -> list[str]:
+    """Links moved by ``joint`` (its child link and every link further down the chain)."""
+    children: dict[str, list[str]] = {}
+    for j in robot.joints:
+        children.setdefault(j.parent, []).append(j.child)
+    start = next(j.child for j in robot.joints if j.name == joint)
+    out, stack = [], [start]
+    while stack:
+        ln = stack.pop()
+        out.append(ln)
+        stack.extend(children.get(ln, []))
+    return out
+
+
+def joints_above(robot: RobotModel, link: str) -> list[str]:
+    """Joints between the root and ``link`` (a mass error there shows on these joints)."""
+    parent = {j.child: (j.parent, j.name) for j in robot.joints}
+    out = []
+    while link in parent:
+        link, jn = parent[link]
+        out.append(jn)
+    return out
+
+
+def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
+    """Write the model-side terms of ``values`` into ``m`` (a fresh copy of ``rm.model``).
+
+    Args:
+        rm: the :class:`sysid.model.ReplayModel` whose copy ``m`` is.
+        values: term -> physical value.
+
+    Returns:
+        (24,) measurement offsets [rad] (sensor bias terms; zeros otherwise).
+
+    Raises:
+        ValueError: a backlash term on a joint without a play hinge in ``rm``; unknown family.
+    """
+    robot = rm.robot
+    jidx = {n: i for i, n in enumerate(robot.joint_names)}
+    bias = np.zeros(len(robot.joint_names))
+    mass_changed = False
+    for term, v in values.items():
+        f, tg = term.family, term.target
+        v = float(v)
+        if f == "latency":
+            m.actuator_delay[:] = v
+        elif f == "coulomb_friction":
+            m.dof_frictionloss[rm.dadr[jidx[tg]]] = v
+        elif f == "viscous_damping":
+            m.dof_damping[rm.dadr[jidx[tg]]] += v
+        elif f == "armature":
+            m.dof_armature[rm.dadr[jidx[tg]]] += v
+        elif f == "pd_gain":
+            a = rm.act[jidx[tg]]
+            kp = robot.kp[jidx[tg]] * v
+            m.actuator_gainprm[a, 0] = kp
+            m.actuator_biasprm[a, 1] = -kp
+        elif f == "torque_limit":
+            m.actuator_forcerange[rm.act, 0] = -robot.effort * v
+            m.actuator_forcerange[rm.act, 1] = robot.effort * v
+        elif f == "link_mass":
+            b = rm.body[tg]
+            m.body_mass[b] *= v
+            m.body_inertia[b] *= v
+            mass_changed = True
+        elif f == "sensor_bias":
+            bias[jidx[tg]] += v
+        elif f == "backlash":
+            if tg not in rm.play_jnt:
+                raise ValueError(f"backlash term on {tg} needs a replay model with a play hinge there")
+            g = max(v, 2e-4)
+            m.jnt_range[rm.play_jnt[tg]] = [-g / 2, g / 2]
+        elif f == "foot_friction":
+            m.geom_friction[:, 0] = v
+        elif f == "ground_compliance":
+            m.geom_solref[:, 0] = v  # contacts mix both geoms' solref: set all
+        else:
+            raise ValueError(f"family {f!r} has no MuJoCo augmentation")
+    if mass_changed:
+        mujoco.mj_setConst(m, mujoco.MjData(m))
+    return bias
+
+
+def play_joints_of(values: dict[Term, float]) -> tuple[str, ...]:
+    """Joints that need a play hinge for ``values`` (sorted, so structures are cache keys)."""
+    return tuple(sorted(t.target for t in values if t.family == "backlash"))

@@ -1,0 +1,178 @@
+"""Loading recordings for diagnosis: files or folders of Parquet logs, checked for what replay needs.
+
+A diagnosis reads any recording that follows the schema of :mod:`envs.recording` (ground truth is
+optional) and never writes to it: :func:`load_logs` only opens files for reading.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from envs.recording import Recording, RecordingError
+
+#: Shortest log a replay can use [s] (a few servo time constants plus a 0.1 s window).
+MIN_SECONDS = 1.0
+
+
+@dataclass
+class Log:
+    """One recording reduced to what replay and diagnosis use.
+
+    Attributes:
+        name: file stem.  path: source file (None for in-memory).
+        t: (N,) sample times [s].  cmd: (N, 24) joint targets (``app``, or ``cmd`` when absent;
+            the mimic joint copies its leader) [rad].  q: (N, 24) measured angles [rad].
+        dq: (N, 24) measured velocities [rad/s] or None.
+        control_dt, physics_dt: [s].  fixed_base: bool.
+        imu: dict with ``angle`` (N, 2) [rad], ``gyro`` (N, 3) [rad/s] when recorded.
+        fsr: (N, 2) foot forces [N] or None.  gt: dict of ground-truth groups present.
+        meta: the recording's metadata (read-only use).
+    """
+
+    name: str
+    t: np.ndarray
+    cmd: np.ndarray
+    q: np.ndarray
+    dq: np.ndarray | None
+    control_dt: float
+    physics_dt: float
+    fixed_base: bool
+    path: str | None = None
+    imu: dict = field(default_factory=dict)
+    fsr: np.ndarray | None = None
+    gt: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @property
+    def substeps(self) -> int:
+        return int(round(self.control_dt / self.physics_dt))
+
+    @property
+    def seconds(self) -> float:
+        return len(self.t) * self.control_dt
+
+
+def from_recording(rec: Recording, name: str = "log", path: str | None = None) -> Log:
+    """Convert a validated :class:`Recording` into a :class:`Log`.
+
+    Raises:
+        RecordingError: robot is not ``nao_h25``; shorter than :data:`MIN_SECONDS`; sample times
+            not on the ``control_dt`` grid; ``control_dt`` not a multiple of ``physics_dt``.
+    """
+    robot = rec.robot  # raises RecordingError on a mismatched robot
+    dt = float(rec.meta["control_dt"])
+    pdt = float(rec.meta.get("physics_dt") or 0.001)
+    ratio = dt / pdt
+    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+        raise RecordingError(f"{name}: control_dt {dt} s is not a multiple of physics_dt {pdt} s")
+    n = len(rec)
+    if n * dt < MIN_SECONDS:
+        raise RecordingError(f"{name}: recording is too short ({n} rows, {n * dt:.2f} s; need >= {MIN_SECONDS} s)")
+    t = rec.t
+    if n > 1 and np.max(np.abs(np.diff(t) - dt)) > 1e-3 * dt + 1e-9:
+        k = int(np.argmax(np.abs(np.diff(t) - dt) > 1e-3 * dt + 1e-9))
+        raise RecordingError(f"{name}: sample times are not on the control_dt grid of {dt} s (row {k + 1}); "
+                             "resample the log first")
+    cmd = robot.expand_action(rec.group("app"))
+    q = rec.group("q")
+    dq = rec.group("dq") if rec.has("dq") else None
+    if dq is not None and not np.all(np.isfinite(dq)):
+        raise RecordingError(f"{name}: column group 'dq' has non-finite values")
+    imu = {}
+    for g in ("angle", "gyro"):
+        if rec.has(g):
+            imu[g] = rec.group(g)
+    gt = {g: rec.group(g) for g in ("gt.base", "gt.quat", "gt.vel", "gt.angvel") if rec.has(g)}
+    gt = {k: v for k, v in gt.items() if np.all(np.isfinite(v))}
+    fixed = rec.meta.get("fixed_base")
+    if fixed is None:  # infer: a hanging robot has no foot forces
+        fixed = bool(rec.has("fsr") and np.all(rec.group("fsr") < 1e-6))
+    return Log(name=name, t=t.copy(), cmd=cmd, q=q, dq=dq, control_dt=dt, physics_dt=pdt, fixed_base=bool(fixed),
+               path=path, imu=imu, fsr=rec.group("fsr") if rec.has("fsr") else None, gt=gt, meta=dict(rec.meta))
+
+
+def find_files(inputs: list[str] | str) -> list[str]:
+    """Expand folders (``*.parquet`` inside, sorted) and files into a list of paths.
+
+    Raises:
+        FileNotFoundError: a path does not exist, or a folder holds no ``.parquet`` file.
+    """
+    if isinstance(inputs, str):
+        inputs = [inputs]
+    out = []
+    for p in inputs:
+        for item in p.split(",") if "," in p and not os.path.exists(p) else [p]:
+            if os.path.isdir(item):
+                found = sorted(glob.glob(os.path.join(item, "*.parquet")))
+                if not found:
+                    raise FileNotFoundError(f"no .parquet recordings in folder {item!r}")
+                out.extend(found)
+            elif os.path.exists(item):
+                out.append(item)
+            else:
+                raise FileNotFoundError(f"no recording or folder at {item!r}")
+    return out
+
+
+def load_logs(inputs: list[str] | str) -> list[Log]:
+    """Load and check every recording of ``inputs`` (files and/or folders); read-only.
+
+    Raises:
+        FileNotFoundError: missing path or empty folder.
+        RecordingError: a malformed recording (missing column, NaN, wrong robot, too short, ...),
+            named by file; or logs that disagree on robot, ``control_dt``, ``physics_dt`` or base mode.
+    """
+    paths = find_files(inputs)
+    logs = []
+    for p in paths:
+        name = os.path.splitext(os.path.basename(p))[0]
+        try:
+            rec = Recording.from_parquet(p)
+            logs.append(from_recording(rec, name=name, path=p))
+        except RecordingError as exc:
+            msg = str(exc)
+            raise RecordingError(msg if p in msg or name in msg else f"{p}: {msg}") from None
+    check_consistent(logs)
+    return logs
+
+
+def check_consistent(logs: list[Log]) -> None:
+    """All logs share control_dt, physics_dt and base mode.
+
+    Raises:
+        RecordingError: naming the first log that differs.
+    """
+    if not logs:
+        raise RecordingError("no recordings given")
+    ref = logs[0]
+    for lg in logs[1:]:
+        for attr in ("control_dt", "physics_dt", "fixed_base"):
+            if getattr(lg, attr) != getattr(ref, attr):
+                raise RecordingError(f"{lg.name}: {attr} = {getattr(lg, attr)} differs from {ref.name}'s "
+                                     f"{getattr(ref, attr)}; diagnose logs of one setup together")
+
+
+def split_by_trajectory(logs: list[Log], heldout_fraction: float = 0.3) -> tuple[list[int], list[int], str]:
+    """Indices of training and held-out logs, split by whole trajectory (every ~3rd log held out).
+
+    With a single log, it is cut into a first 60 % (train) and last 40 % (held out) and the
+    returned note says so (held-out is then not a different trajectory).
+
+    Returns:
+        (train indices, held-out indices, note).
+    """
+    n = len(logs)
+    if n == 1:
+        return [0], [0], "single log: the last 40 % of it is held out (record >= 2 logs for a trajectory split)"
+    n_hold = max(1, int(round(heldout_fraction * n)))
+    step = n / n_hold
+    hold = sorted({min(n - 1, int((k + 1) * step) - 1) for k in range(n_hold)})
+    train = [i for i in range(n) if i not in hold]
+    return train, hold, f"{len(train)} training log(s), {len(hold)} held-out log(s), split by trajectory"

@@ -1,0 +1,471 @@
+"""The diagnosis pipeline: calibrate → localise → screen → refit → prune on held-out → intervals.
+
+:func:`diagnose` takes loaded logs and returns the report as a JSON-able dict (the keys of
+``REPORT_DIR/report.json``); :func:`calibrate` turns recordings of a real world without injected
+effects (profile "none") into the engine-gap baseline that later diagnoses are judged against.
+Selection rules (``reference/sysid.md`` §5.7), with cost C = Σ_channels mean((e/floor)²) on held-out
+windows (C = number of channels when every channel sits at its floor):
+
+* nothing to explain: no joint's residual energy exceeds 1.5 floor² (RMS 1.22 floors) on training or
+  held-out logs;
+* a screening round is kept if it lowers the held-out cost by at least
+  max(0.25, 5 % of the excess C - k) and lowers the training BIC by more than 10;
+* a term, then a whole family, is dropped if removing it (families: and refitting the rest)
+  raises the held-out cost by less than that same margin (backward elimination).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from sysid.candidates import CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above
+from sysid.data import Log, split_by_trajectory
+from sysid.identify import FLAG_ENERGY, Problem, confidence, flagged_joints, refit, screen
+from sysid.replay import Window, predict, whole_logs, windows
+from sysid.stats import integrated_autocorr, localisation, noise_sigma
+
+#: Minimum noise floor [rad] (noise-free logs would otherwise divide by ~0).
+MIN_FLOOR = 1e-5
+#: Window length of windowed replay for floating-base logs [s] (sysid.md §5.5).
+WINDOW_S = 0.5
+
+EXPERIMENTS = {
+    frozenset({"pd_gain", "link_mass"}): "posture holds in several postures plus a chirp: a mass error follows the "
+                                         "posture-dependent gravity torque, a kp error also shifts the servo resonance",
+    frozenset({"latency", "pd_gain"}): "a chirp to 4 Hz: latency gives phase lag growing with frequency at constant "
+                                       "gain, a kp change alters gain and resonance",
+    frozenset({"latency", "viscous_damping"}): "a chirp to 4 Hz: latency lags phase at constant gain, damping "
+                                               "lowers gain with frequency",
+    frozenset({"coulomb_friction", "backlash"}): "slow ramps at two speeds and load reversals: backlash gives a "
+                                                 "speed-independent hysteresis without energy loss",
+    frozenset({"coulomb_friction", "viscous_damping"}): "ramps at two different speeds: Coulomb torque does not "
+                                                        "grow with speed",
+    frozenset({"viscous_damping", "armature"}): "a chirp to 4 Hz: damping scales with frequency, armature with its "
+                                                "square (resonance shift)",
+    frozenset({"pd_gain", "armature"}): "a chirp through the servo resonance: armature lowers the resonance without "
+                                        "changing the static stiffness under gravity holds",
+    frozenset({"sensor_bias", "link_mass"}): "holds in postures with opposite gravity load on the joint",
+    frozenset({"sensor_bias", "pd_gain"}): "holds in postures with opposite gravity load on the joint",
+}
+
+
+def _experiment(a: str, b: str) -> str:
+    return EXPERIMENTS.get(frozenset({a, b}), "a longer chirp (0.3-4 Hz) and posture holds on the joints involved")
+
+
+def _channel_names(robot, with_imu: bool) -> list[str]:
+    n = list(robot.joint_names)
+    if with_imu:
+        n += ["angle.roll", "angle.pitch", "gyro.x", "gyro.y", "gyro.z"]
+    return n
+
+
+def _floor(logs: list[Log], wins: list[Window], nominal: list[np.ndarray], with_imu: bool,
+           calibration: dict | None, robot) -> tuple[np.ndarray, dict]:
+    from sysid.replay import measured
+
+    res = [measured(logs[w.log], w, with_imu) - p[0] for w, p in zip(wins, nominal)]
+    cmds = [logs[w.log].cmd[w.k0:w.k1] for w in wins]
+    sig = noise_sigma([r[:, :24] for r in res], cmds)
+    sigma = {"encoders": float(max(np.median(sig), MIN_FLOOR))}
+    k = 24 + (5 if with_imu else 0)
+    floor = np.full(k, sigma["encoders"])
+    if with_imu:
+        s_imu = noise_sigma([r[:, 24:] for r in res])
+        sigma["angle"] = float(max(np.median(s_imu[:2]), MIN_FLOOR))
+        sigma["gyro"] = float(max(np.median(s_imu[2:]), 1e-4))
+        floor[24:26] = sigma["angle"]
+        floor[26:29] = sigma["gyro"]
+    gap = np.zeros(k)
+    if calibration:
+        g = calibration.get("gap_rms", {})
+        for i, nm in enumerate(_channel_names(robot, with_imu)):
+            gap[i] = float(g.get(nm, 0.0))
+        cal_sigma = calibration.get("sigma", {}).get("encoders")
+        if cal_sigma:  # a sensor spec known from calibration is a better floor than a noisy estimate
+            floor[:24] = max(float(cal_sigma), sigma["encoders"] * 0.8)
+    floor = np.sqrt(floor ** 2 + gap ** 2)
+    return np.maximum(floor, MIN_FLOOR), {"sigma": sigma, "gap": gap}
+
+
+def _margin(cost: float, k: int) -> float:
+    return max(0.25, 0.05 * max(cost - k, 0.0))
+
+
+def _bic(problem: Problem, values: dict, n_params: int) -> float:
+    R = problem.residuals(problem.predict([values], "train"), "train")[0]
+    n = len(R)
+    n_eff = max(10.0, 0.1 * n)
+    return n_eff * math.log(max(float(R @ R) * n_eff / n, 1e-300) / n_eff) + n_params * math.log(n_eff)
+
+
+def _entry(t: Term, v: float, ci, robot) -> dict:
+    fam = t.fam
+    if fam.scope == "global":
+        joints = list(robot.joint_names) if not fam.contact else []
+        links = []
+    elif fam.scope == "joint":
+        joints, links = [t.target], []
+    else:
+        joints, links = [], [t.target]
+    where = ("all joints" if fam.scope == "global" and not fam.contact else "feet/ground" if fam.contact
+             else f"link {t.target} (shows on {', '.join(joints_above(robot, t.target)[:3])})" if fam.scope == "link"
+             else t.target)
+    return {"family": t.family, "joints": joints, "links": links, "value": float(v), "unit": fam.unit,
+            "ci95": [float(ci[0]), float(ci[1])] if ci is not None else [None, None], "nominal": fam.nominal,
+            "words": fam.words, "where": where, "display": fam.fmt(v)}
+
+
+def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int) -> tuple[dict, list]:
+    """Fit competing joint families on the same joints and keep the best on held-out data.
+
+    For each joint-scope family picked this round, the other joint families whose stage-A column
+    explained at least half as much of the residual (at most 2) are fitted in its place on the
+    same joints (grid starts + least squares); the held-out costs decide (sysid.md §5.7:
+    single-family fits ranked on held-out data).
+
+    Returns:
+        (the winning parameter set, [rejection records for the losers]).
+    """
+    new = {t: v for t, v in cand.items() if t not in model}
+    fams = sorted({t.family for t in new if t.fam.scope == "joint"})
+    if not fams:
+        return cand, []
+    best_c = float(problem.cost([cand], "heldout")[0])
+    records = []
+    for f in fams:
+        targets = [t.target for t in new if t.family == f]
+        top = sr.family_score.get(f, 0.0)
+        rivals = [g for g, sc in sorted(sr.family_score.items(), key=lambda kv: -kv[1])
+                  if g != f and g in families and FAMILIES[g].scope == "joint" and sc >= 0.5 * top][:2]
+        for g in rivals:
+            alt = {t: v for t, v in cand.items() if t.family != f or t.target not in targets}
+            for tg in targets:
+                alt[Term(g, tg)] = FAMILIES[g].probe
+            fit = refit(problem, alt, free=[Term(g, tg) for tg in targets], max_nfev=8)
+            c_alt = float(problem.cost([fit.values], "heldout")[0])
+            if c_alt < best_c - _margin(best_c, k):
+                records.append({"term": ",".join(Term(f, tg).label() for tg in targets), "family": f,
+                                "value": float(np.mean([cand[Term(f, tg)] for tg in targets])),
+                                "reason": f"{g} on the same joints fits held-out data better "
+                                          f"(cost {c_alt:.1f} vs {best_c:.1f})"})
+                cand, best_c = dict(fit.values), c_alt
+                break
+            records.append({"term": ",".join(Term(g, tg).label() for tg in targets), "family": g,
+                            "value": float(np.mean([fit.values[Term(g, tg)] for tg in targets])),
+                            "reason": f"fitted instead of {f} on the same joints: held-out cost {c_alt:.1f} "
+                                      f"vs {best_c:.1f} ({f} kept)"})
+    return cand, records
+
+
+def _trajectory_spread(problem: Problem, model: dict) -> dict:
+    """Term -> standard deviation of the estimates refitted on each log alone (train and held-out
+    logs), started at the joint fit (a jackknife-like check of trajectory dependence)."""
+    ests = {t: [] for t in model}
+    for i in sorted({w.log for w in problem.train + problem.heldout}):
+        wins = [w for w in problem.train + problem.heldout if w.log == i]
+        p1 = Problem(problem.logs, wins, wins[:1], problem.floor, problem.with_imu, problem.base)
+        fit = refit(p1, model, grid=False, max_nfev=4)
+        problem.n_rollouts += p1.n_rollouts
+        for t in model:
+            ests[t].append(fit.values[t])
+    return {t: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0 for t, v in ests.items()}
+
+
+def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
+    """Engine-gap baseline from logs of a real world with no injected effects.
+
+    Two parts: (1) the engine gap expressed in candidate terms: a diagnosis of these logs (with
+    ``baseline``); the terms it declares (e.g. a stiffer ground in PyBullet than in MuJoCo) become
+    the *baseline model* every later diagnosis replays under, so injected effects are judged
+    relative to it (sysid.md §6); (2) the residual left by the baseline model per channel, with
+    the sensor noise removed: the gap that widens every later noise floor.
+
+    Returns:
+        dict with ``sigma`` (noise levels), ``gap_rms`` (channel -> residual RMS of the baseline
+        model without noise [rad]), ``rms`` (channel -> raw residual RMS), ``baseline_model``
+        (term label -> value), ``n_logs``, ``fixed_base``; and ``screen`` (the terms a plain
+        screening picks on these logs, for the record).
+    """
+    from robots import nao_h25
+
+    robot = robot or nao_h25()
+    with_imu = not logs[0].fixed_base and all("angle" in lg.imu and "gyro" in lg.imu for lg in logs)
+    base_model = {}
+    if baseline and len(logs) > 1:
+        base_model = diagnose(logs, robot=robot)["_model_terms"]
+    wins = whole_logs(logs) if logs[0].fixed_base else windows(logs, range(len(logs)), WINDOW_S)
+    nominal = predict(logs, wins, [base_model], with_imu=with_imu)
+    floor, info = _floor(logs, wins, nominal, with_imu, None, robot)
+    from sysid.replay import measured
+
+    names = _channel_names(robot, with_imu)
+    sq = np.zeros(len(names))
+    n = 0
+    for w, p in zip(wins, nominal):
+        e = measured(logs[w.log], w, with_imu)[1:] - p[0, 1:]
+        sq += (e ** 2).sum(axis=0)
+        n += len(e)
+    rms = np.sqrt(sq / n)
+    sig = np.array([info["sigma"]["encoders"]] * 24 + ([info["sigma"].get("angle", 0)] * 2 + [info["sigma"].get("gyro", 0)] * 3 if with_imu else []))
+    gap = np.sqrt(np.maximum(rms ** 2 - sig ** 2, 0.0))
+    problem = Problem(logs, wins, wins, floor, with_imu)
+    fams = FIXED_BASE_FAMILIES if logs[0].fixed_base else CONTACT_FAMILIES
+    sr = screen(problem, robot, {}, fams, floating=not logs[0].fixed_base)
+    return {"kind": "sgatwalk-sysid-calibration", "version": 2, "n_logs": len(logs),
+            "fixed_base": logs[0].fixed_base, "sigma": info["sigma"],
+            "gap_rms": {nm: float(g) for nm, g in zip(names, gap)}, "rms": {nm: float(r) for nm, r in zip(names, rms)},
+            "baseline_model": {t.label(): float(v) for t, v in base_model.items()},
+            "screen": {t.label(): v for t, v in sr.selected.items()}}
+
+
+def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None, max_rounds: int = 3,
+             progress=None, robot=None, base_model: dict | None = None, time_budget_s: float | None = 300.0) -> dict:
+    """Diagnose the sim against ``logs``; returns the report dict (see module docstring).
+
+    Args:
+        logs: recordings of the real robot (>= 2 for a held-out split by trajectory).
+        calibration: output of :func:`calibrate` on "none" logs (engine gap: its baseline model
+            is replayed under everything, its gap widens the noise floor), or None.
+        families: family names to consider (default: the actuator families for fixed-base logs,
+            the contact families for floating-base logs).
+        base_model: terms (Term -> value) kept fixed under every replay, e.g. the effects a
+            fixed-base (in-air) diagnosis found, when stepping logs are diagnosed for contact
+            (bottom-up staging, sysid.md §5.6). "Before" then means the sim with these terms.
+        time_budget_s: no new screening round, family competition or elimination step starts
+            after this many seconds (the report says so); None: no limit.
+        max_rounds: screening/refit rounds (re-screening around the fitted model).
+        progress: callable(str) for progress lines.
+
+    Returns:
+        The report: ``verdict``, ``noise_floor``, ``heldout_rms_before``, ``heldout_rms_after``
+        [rad], ``effects`` (list of {family, joints, links, value, unit, ci95, ...}),
+        ``rejected``, ``indistinguishable``, ``residual``, ``localisation``, ``split``,
+        ``model`` (term label -> value), ``runtime_s``, ``rollouts``.
+    """
+    from robots import nao_h25
+
+    t_start = time.perf_counter()
+    say = progress or (lambda s: None)
+    budget_hit = False
+
+    def over_budget() -> bool:
+        return time_budget_s is not None and time.perf_counter() - t_start > time_budget_s
+    robot = robot or nao_h25()
+    fixed = logs[0].fixed_base
+    with_imu = (not fixed) and all("angle" in lg.imu and "gyro" in lg.imu for lg in logs)
+    if families is None:
+        families = FIXED_BASE_FAMILIES if fixed else CONTACT_FAMILIES
+    else:
+        for f in families:
+            if f not in FAMILIES:
+                raise ValueError(f"unknown or unsupported candidate family {f!r}; supported: {', '.join(FAMILIES)}")
+    tr_idx, ho_idx, split_note = split_by_trajectory(logs)
+    if len(logs) == 1:
+        n = len(logs[0])
+        cut = int(0.6 * n)
+        train, held = [Window(0, 0, cut)], [Window(0, cut, n)]
+        if not fixed:
+            train = [w for w in windows(logs, [0], WINDOW_S) if w.k1 <= cut]
+            held = [w for w in windows(logs, [0], WINDOW_S) if w.k0 >= cut]
+    elif fixed:
+        train, held = whole_logs(logs, tr_idx), whole_logs(logs, ho_idx)
+    else:
+        train, held = windows(logs, tr_idx, WINDOW_S), windows(logs, ho_idx, WINDOW_S)
+    all_w = train + held
+    say(f"{len(logs)} log(s): {split_note}; {'fixed base, single shooting' if fixed else f'floating base, {WINDOW_S} s windows'}")
+    base_model = dict(base_model or {})
+    if calibration and calibration.get("baseline_model"):
+        from sysid.report import terms_from_labels
+
+        base_model = {**terms_from_labels(calibration["baseline_model"]), **base_model}
+    nominal = predict(logs, all_w, [base_model], with_imu=with_imu)
+    floor, finfo = _floor(logs, all_w, nominal, with_imu, calibration, robot)
+    names = _channel_names(robot, with_imu)
+    from sysid.model import Structure, replay_model
+
+    rm = replay_model(Structure(fixed_base=fixed, physics_dt=logs[0].physics_dt))
+    loc = localisation(logs, all_w, [p[0] for p in nominal], floor, names, rm.model, rm.qadr, rm.dadr)
+    problem = Problem(logs, train, held, floor, with_imu, base=base_model)
+    k = problem.k
+    c0 = float(problem.cost([{}], "heldout")[0])
+    e_tr = problem.channel_energy(problem.predict([{}], "train"), "train")[0]
+    e_ho = problem.channel_energy(problem.predict([{}], "heldout"), "heldout")[0]
+    rms_before, per_before = problem.rms({}, "heldout")
+    noise_floor = float(np.sqrt(np.mean(floor[:24] ** 2)))
+    model: dict = {}
+    rejected: list[dict] = []
+    screened: dict = {}
+    confusable: list = []
+    rounds = []
+    bic0 = _bic(problem, {}, 0)
+    nothing = not flagged_joints(np.maximum(e_tr, e_ho), names)
+    cost = c0
+    if nothing:
+        say("no joint's residual energy exceeds 1.5x the noise floor's: nothing to explain")
+    else:
+        for rnd in range(max_rounds):
+            if over_budget():
+                say("time budget reached: no further screening round")
+                budget_hit = True
+                break
+            sr = screen(problem, robot, model, families, floating=not fixed)
+            say(f"round {rnd + 1}: flagged {', '.join(sr.flagged) or '-'}; screening picked "
+                f"{', '.join(t.label() for t in sr.selected) or 'nothing'}")
+            for lbl in sr.columns:
+                screened.setdefault(lbl, rnd + 1)
+            confusable.extend(sr.confusable)
+            if not sr.selected:
+                break
+            start = {**model, **sr.selected}
+            fit = refit(problem, start)
+            cand = dict(fit.values)
+            cand, swaps = _compete(problem, model, cand, sr, families, k) if not over_budget() else (cand, [])
+            for sw in swaps:
+                say(f"round {rnd + 1}: {sw['reason']}")
+                rejected.append(sw)
+            # term-level pruning on held-out data (no refit; one batched replay)
+            terms = list(cand)
+            sets = [cand] + [{u: v for u, v in cand.items() if u != t} for t in terms]
+            costs = problem.cost(sets, "heldout")
+            c_with = float(costs[0])
+            drop = [t for t, c in zip(terms, costs[1:]) if c - c_with < _margin(c_with, k) and t not in model]
+            for t in drop:
+                rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
+                                 "reason": f"removing it changes the held-out cost by {float(costs[1 + terms.index(t)] - c_with):+.2f} "
+                                           f"(< {_margin(c_with, k):.2f}): not needed"})
+                cand.pop(t)
+            if drop and cand:
+                fit = refit(problem, cand, grid=False, max_nfev=6)
+                cand = dict(fit.values)
+            c_new = float(problem.cost([cand], "heldout")[0]) if cand else cost
+            bic_new = _bic(problem, cand, len(cand))
+            bic_old = _bic(problem, model, len(model)) if model else bic0
+            kept = bool(cand) and (cost - c_new >= _margin(cost, k)) and (bic_old - bic_new > 10)
+            rounds.append({"round": rnd + 1, "flagged": sr.flagged, "picked": [t.label() for t in sr.selected],
+                           "heldout_cost_before": cost, "heldout_cost_after": c_new, "kept": kept})
+            say(f"round {rnd + 1}: held-out cost {cost:.1f} -> {c_new:.1f} (floor {k}); {'kept' if kept else 'rejected'}")
+            if not kept:
+                for t in sr.selected:
+                    if t in cand and t not in model:
+                        rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
+                                         "reason": "the round did not improve held-out trajectories enough"})
+                break
+            model, cost = cand, c_new
+            if not flagged_joints(problem.channel_energy(problem.predict([model], "train"), "train")[0], names):
+                break
+        # family-level backward elimination (refit the rest)
+        fams = sorted({t.family for t in model})
+        if len(fams) > 1:
+            for f in fams:
+                if over_budget():
+                    budget_hit = True
+                    break
+                rest = {t: v for t, v in model.items() if t.family != f}
+                fit = refit(problem, rest, grid=False, max_nfev=6)
+                c_wo = float(problem.cost([fit.values], "heldout")[0])
+                if c_wo - cost < _margin(cost, k):
+                    for t in model:
+                        if t.family == f:
+                            rejected.append({"term": t.label(), "family": f, "value": model[t],
+                                             "reason": f"backward elimination: without {f} (rest refitted) the held-out "
+                                                       f"cost changes by {c_wo - cost:+.2f}"})
+                    model, cost = dict(fit.values), c_wo
+    # final fit quality, intervals, identifiability
+    effects, indist = [], []
+    if model:
+        fit = refit(problem, model, grid=False, max_nfev=4)
+        if float(problem.cost([fit.values], "heldout")[0]) <= cost:
+            model = dict(fit.values)
+            cost = float(problem.cost([model], "heldout")[0])
+        preds = problem.predict([model], "train")
+        res = [(m - p[0]) / floor for m, p in zip(problem.meas["train"], preds)]
+        tau = integrated_autocorr(res)
+        spread = _trajectory_spread(problem, model) if len(logs) > 1 else {}
+        ci, corr = confidence(fit, problem, tau, spread=spread)
+        order = sorted(model, key=lambda u: (u.family, u.target or ""))
+        c_drop = problem.cost([model] + [{u: v for u, v in model.items() if u != t} for t in order], "heldout")
+        for t, cd in zip(order, c_drop[1:]):
+            e = _entry(t, model[t], ci.get(t), robot)
+            e["heldout_cost_without"] = float(cd - c_drop[0])  # how much worse held-out gets without it
+            effects.append(e)
+        effects.sort(key=lambda e: -e["heldout_cost_without"])
+        terms = fit.terms
+        for i in range(len(terms)):
+            for j in range(i + 1, len(terms)):
+                if abs(corr[i, j]) > 0.9:
+                    indist.append({"a": terms[i].label(), "b": terms[j].label(), "corr": float(corr[i, j]),
+                                   "experiment": _experiment(terms[i].family, terms[j].family)})
+    for a, b, c in confusable:
+        fa, fb = a.split("[")[0], b.split("[")[0]
+        if any(e["a"] == a and e["b"] == b for e in indist):
+            continue
+        if any(t.label() == a.replace("(-)", "") for t in model):
+            indist.append({"a": a.replace("(-)", ""), "b": b.replace("(-)", ""), "corr": c,
+                           "experiment": _experiment(fa, fb.split("(")[0])})
+    rms_after, per_after = problem.rms(model, "heldout")
+    e_after = problem.channel_energy(problem.predict([model], "heldout"), "heldout")[0]
+    gap_closed = None
+    fl2 = float(np.mean(floor[:24] ** 2))
+    if rms_before ** 2 > fl2 * 1.0001:
+        gap_closed = float((rms_before ** 2 - rms_after ** 2) / (rms_before ** 2 - fl2))
+    # residual after the fit: per joint, whiteness, phases
+    preds_all = predict(logs, all_w, [{**base_model, **model}], with_imu=with_imu)
+    loc_after = localisation(logs, all_w, [p[0] for p in preds_all], floor, names)
+    unexplained = [nm for nm in names[:24] if loc_after["channels"][nm]["rms_over_floor"] ** 2 > FLAG_ENERGY]
+    words = "; ".join(f"{e['words']} {e['display']} at {e['where']}" for e in effects)
+    if nothing:
+        verdict = (f"no missing physics: held-out RMS {1000 * rms_before:.2f} mrad is at the noise floor "
+                   f"({1000 * noise_floor:.2f} mrad); no joint's residual energy exceeds 1.5x its floor's")
+    elif not effects:
+        worst = flagged_joints(e_ho, names)[:3] or flagged_joints(e_tr, names)[:3]
+        verdict = (f"no candidate effect explains the residual: held-out RMS {1000 * rms_before:.2f} mrad vs noise "
+                   f"floor {1000 * noise_floor:.2f} mrad, largest at {', '.join(worst) or '-'} (an effect outside the "
+                   "library, or an engine gap larger than calibrated)")
+    else:
+        verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
+                   f"{1000 * noise_floor:.2f} mrad), {100 * (gap_closed or 0):.0f} % of the gap closed. Found: {words}")
+        if unexplained:
+            verdict += f". Still above 1.5x floor energy: {', '.join(unexplained)}"
+    considered = sorted({lbl.split("[")[0].replace("(-)", "") for lbl in screened})
+    report = {
+        "verdict": verdict,
+        "noise_floor": noise_floor,
+        "heldout_rms_before": rms_before,
+        "heldout_rms_after": rms_after,
+        "gap_closed": gap_closed,
+        "effects": effects,
+        "rejected": rejected,
+        "families_considered": list(families),
+        "families_screened": considered,
+        "indistinguishable": indist,
+        "rounds": rounds,
+        "residual": {
+            "per_joint_rms_before": {nm: float(v) for nm, v in zip(robot.joint_names, per_before)},
+            "per_joint_rms_after": {nm: float(v) for nm, v in zip(robot.joint_names, per_after)},
+            "per_joint_rms_over_floor_after": {nm: loc_after["channels"][nm]["rms_over_floor"] for nm in names},
+            "whiteness_after": {nm: loc_after["channels"][nm]["whiteness"] for nm in names[:24]},
+            "phases_after": loc_after["phases"],
+            "groups_after": loc_after["groups"],
+            "heldout_energy_after": {nm: float(v) for nm, v in zip(names, e_after)},
+            "unexplained_joints": unexplained,
+        },
+        "localisation": loc,
+        "noise": {"sigma": finfo["sigma"], "floor_per_channel": {nm: float(v) for nm, v in zip(names, floor)},
+                  "engine_gap_calibrated": calibration is not None},
+        "split": {"train": [logs[i].name for i in tr_idx], "heldout": [logs[i].name for i in ho_idx],
+                  "note": split_note, "mode": "single shooting" if fixed else f"windowed replay ({WINDOW_S} s)"},
+        "heldout_cost_before": c0, "heldout_cost_after": cost, "channels": k,
+        "model": {t.label(): float(v) for t, v in model.items()},
+        "base_model": {t.label(): float(v) for t, v in base_model.items()},
+        "runtime_s": time.perf_counter() - t_start,
+        "time_budget_reached": budget_hit,
+        "rollouts": problem.n_rollouts,
+        "fixed_base": fixed,
+    }
+    report["_base_terms"] = base_model
+    report["_model_terms"] = {**base_model, **model}  # for the MJCF export and plots; not in the JSON
+    return report

@@ -1,0 +1,505 @@
+"""Screen, refit, select: which candidate effects explain the replay residual (``sysid.md`` §5.3-5.8).
+
+* :class:`Problem` holds the logs, the training / held-out windows (split by trajectory) and the
+  per-channel noise floor; it turns parameter sets into normalised residual vectors and costs.
+* :func:`screen` builds a sensitivity dictionary around the current model (one column per term:
+  S_i = y(θ + Δ_i) - y(θ), Δ_i a typical probe size) in one batched replay and selects columns
+  by orthogonal matching pursuit with non-negative weights, stopped at the minimum of
+  BIC = n_eff ln(RSS / n_eff) + k ln(n_eff), n_eff = 0.1 N (residual samples are autocorrelated).
+  To keep the dictionary small it works in two stages: families first (one column per family
+  over the joints whose residual stands out), then one column per joint/link of the families
+  picked.
+* :func:`refit` fits the selected terms jointly by bounded least squares (``scipy.optimize.
+  least_squares``, trust-region reflective) on parameters normalised to [0, 1], with the
+  finite-difference Jacobian computed as one batched replay of n+1 models; non-smooth families
+  (latency, backlash, Coulomb friction, torque limit) start from the best point of a coarse grid.
+* :func:`confidence` gives Gauss-Newton 95 % intervals s²·τ_int·(JᵀJ)⁻¹, inflated by the
+  residual's integrated autocorrelation time τ_int; near-null directions get infinite intervals.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares, nnls
+
+from sysid.candidates import FAMILIES, Term, joints_above, links_below
+from sysid.data import Log
+from sysid.replay import Window, build_models, measured, predict
+from sysid.model import Structure
+
+
+# ------------------------------------------------------------------------------------------ problem
+class Problem:
+    """Logs, windows and noise floor of one diagnosis.
+
+    Args:
+        logs: the recordings.  train, heldout: windows of each set.
+        floor: (k,) noise floor per channel [rad or rad/s]; residuals are divided by it.
+        with_imu: compare torso roll/pitch and gyro too (floating base).
+        base: terms (Term -> value) applied under every parameter set and never fitted (e.g. the
+            actuator effects found in the air, when stepping logs are diagnosed for contact).
+    """
+
+    def __init__(self, logs: list[Log], train: list[Window], heldout: list[Window], floor: np.ndarray,
+                 with_imu: bool = False, base: dict | None = None):
+        self.logs, self.train, self.heldout = logs, train, heldout
+        self.floor = np.asarray(floor, dtype=float)
+        self.with_imu = with_imu
+        self.base = dict(base or {})
+        self.meas = {"train": [measured(logs[w.log], w, with_imu) for w in train],
+                     "heldout": [measured(logs[w.log], w, with_imu) for w in heldout]}
+        self.wins = {"train": train, "heldout": heldout}
+        self.n_rollouts = 0
+        self._cache: dict = {}
+
+    @property
+    def k(self) -> int:
+        return len(self.floor)
+
+    def predict(self, values_list: list[dict], which: str = "train") -> list[np.ndarray]:
+        """Per window (n_sets, L, k) predictions (memoised per parameter set)."""
+        keys = [(which, tuple(sorted((t.label(), float(v)) for t, v in vals.items()))) for vals in values_list]
+        todo = [i for i, key in enumerate(keys) if key not in self._cache]
+        uniq = {}
+        for i in todo:
+            uniq.setdefault(keys[i], i)
+        if uniq:
+            if len(self._cache) + len(uniq) > 160:  # bound memory: drop the oldest entries not needed now
+                need = set(keys)
+                for key in [k for k in self._cache if k not in need][:len(self._cache) + len(uniq) - 80]:
+                    del self._cache[key]
+            idx = list(uniq.values())
+            self.n_rollouts += len(idx) * len(self.wins[which])
+            out = predict(self.logs, self.wins[which], [{**self.base, **values_list[i]} for i in idx],
+                          with_imu=self.with_imu)
+            for j, i in enumerate(idx):
+                self._cache[keys[i]] = [o[j] for o in out]
+        per = [self._cache[key] for key in keys]
+        return [np.stack([p[w] for p in per]) for w in range(len(self.wins[which]))]
+
+    def residuals(self, preds: list[np.ndarray], which: str = "train") -> np.ndarray:
+        """(n_sets, n_res) normalised residuals (y_meas - y_sim) / floor, rows 1: of every window.
+        Non-finite predictions become a residual of 1e3 floors."""
+        out = []
+        for ym, yp in zip(self.meas[which], preds):
+            r = (ym[None, 1:] - yp[:, 1:]) / self.floor
+            out.append(r.reshape(len(yp), -1))
+        r = np.concatenate(out, axis=1)
+        r[~np.isfinite(r)] = 1e3
+        return r
+
+    def channel_energy(self, preds: list[np.ndarray], which: str = "train") -> np.ndarray:
+        """(n_sets, k) mean squared normalised residual per channel (1 = at the floor)."""
+        num = 0.0
+        n = 0
+        for ym, yp in zip(self.meas[which], preds):
+            r = (ym[None, 1:] - yp[:, 1:]) / self.floor
+            r[~np.isfinite(r)] = 1e3
+            num = num + (r ** 2).sum(axis=1)
+            n += r.shape[1]
+        return num / n
+
+    def cost(self, values_list: list[dict], which: str = "heldout") -> np.ndarray:
+        """(n_sets,) held-out (or training) cost: the sum over channels of the mean squared
+        normalised residual; ``k`` means every channel sits exactly at its floor."""
+        return self.channel_energy(self.predict(values_list, which), which).sum(axis=1)
+
+    def rms(self, values: dict, which: str = "heldout") -> tuple[float, np.ndarray]:
+        """Encoder RMS [rad] over all joints and per joint (24,) of one parameter set."""
+        preds = self.predict([values], which)
+        sq, n = 0.0, 0
+        for ym, yp in zip(self.meas[which], preds):
+            e = ym[1:, :24] - yp[0, 1:, :24]
+            sq = sq + (e ** 2).sum(axis=0)
+            n += len(e)
+        per = np.sqrt(sq / n)
+        return float(np.sqrt(np.mean(per ** 2))), per
+
+
+# ------------------------------------------------------------------------------------------ screening
+@dataclass
+class Column:
+    """One dictionary column: a label, the terms it perturbs (with probe values) and its sign."""
+
+    label: str
+    family: str
+    terms: dict
+    sign: float = 1.0  # -1: the mirrored column of a two-sided family
+
+
+@dataclass
+class ScreenResult:
+    """Outcome of :func:`screen`.
+
+    Attributes:
+        flagged: joints whose residual stands out (energy > :data:`FLAG_ENERGY` floor²).
+        selected: term -> start value for the refit.
+        weights: term -> OMP weight (1 = about the probe size).
+        bic: (k, BIC) path of the final OMP.  columns: labels considered.
+        confusable: list of (label a, label b, |corr|) for dictionary columns > 0.9 correlated
+            with a selected one.
+        family_score: family -> share of the residual energy its best stage-A column explains
+            on its own.
+    """
+
+    flagged: list
+    selected: dict
+    weights: dict
+    bic: list
+    columns: list
+    confusable: list = field(default_factory=list)
+    family_score: dict = field(default_factory=dict)
+
+
+def _mirror(fam) -> float:
+    """The probe on the other side of nominal, kept inside the family bounds."""
+    m = 2 * fam.nominal - fam.probe
+    if not (fam.lo < m < fam.hi):
+        m = fam.nominal + 0.5 * ((fam.lo if m <= fam.lo else fam.hi) - fam.nominal)
+    return m
+
+
+def _two_sided(fam: str) -> bool:
+    f = FAMILIES[fam]
+    return f.lo < f.nominal < f.hi and f.name not in ("torque_limit",)
+
+
+def omp_bic(D: np.ndarray, r: np.ndarray, n_eff: float, max_k: int = 6,
+            min_share: float = 0.03) -> tuple[list[int], np.ndarray, list]:
+    """Orthogonal matching pursuit with non-negative weights, stopped at the minimum BIC.
+
+    Args:
+        D: (n, m) dictionary columns.  r: (n,) residual.  n_eff: effective sample count.
+        max_k: most columns to try.
+        min_share: drop selected columns whose own contribution (RSS increase when left out) is
+            below this share of the RSS the selection explains.
+
+    Returns:
+        (selected column indices, their weights, [(k, BIC), ...] path). BIC = n_eff ln(RSS/n_eff)
+        + k ln(n_eff) with RSS rescaled to n_eff samples.
+    """
+    n = len(r)
+    norms = np.linalg.norm(D, axis=0)
+    ok = norms > 1e-9 * max(1.0, norms.max(initial=0.0))
+    scale = n_eff / n
+
+    def bic(rss, k):
+        return n_eff * math.log(max(rss * scale, 1e-300) / n_eff) + k * math.log(n_eff)
+
+    rss0 = float(r @ r)
+    path = [(0, bic(rss0, 0))]
+    best = (path[0][1], [], np.zeros(0))
+    sel: list[int] = []
+    resid = r.copy()
+    for k in range(1, max_k + 1):
+        score = np.where(ok, (D.T @ resid) / np.where(ok, norms, 1.0), -np.inf)
+        score[sel] = -np.inf
+        i = int(np.argmax(score))
+        if not np.isfinite(score[i]) or score[i] <= 0:
+            break
+        sel.append(i)
+        w, _ = nnls(D[:, sel], r, maxiter=50 * len(sel))
+        resid = r - D[:, sel] @ w
+        b = bic(float(resid @ resid), k)
+        path.append((k, b))
+        if b < best[0]:
+            best = (b, list(sel), w.copy())
+    keep = [(i, w) for i, w in zip(best[1], best[2]) if w > 1e-6]
+    if len(keep) > 1 and min_share > 0:
+        # keep columns whose removal (NNLS refit of the others) gives back >= min_share of the
+        # explained RSS: the linearised columns of one strong nonlinear effect leave a remainder
+        # that other columns would otherwise pick up
+        idx = [i for i, _ in keep]
+        rss_sel = float(np.sum((r - D[:, idx] @ np.array([w for _, w in keep])) ** 2))
+        explained = rss0 - rss_sel
+        strong = []
+        for a in idx:
+            rest = [b for b in idx if b != a]
+            w_r, _ = nnls(D[:, rest], r, maxiter=50 * len(rest))
+            if float(np.sum((r - D[:, rest] @ w_r) ** 2)) - rss_sel >= min_share * explained:
+                strong.append(a)
+        if strong and len(strong) < len(idx):
+            w_s, _ = nnls(D[:, strong], r, maxiter=50 * len(strong))
+            keep = [(i, w) for i, w in zip(strong, w_s) if w > 1e-6]
+    return [i for i, _ in keep], np.array([w for _, w in keep]), path
+
+
+def _dictionary(problem: Problem, current: dict, cols: list[Column]) -> tuple[np.ndarray, np.ndarray]:
+    """(n, m) dictionary (normalised units) and (n,) current residual."""
+    sets = [dict(current)] + [{**current, **c.terms} for c in cols]
+    R = problem.residuals(problem.predict(sets, "train"), "train")
+    base = R[0]
+    D = np.empty((len(base), len(cols)))
+    for i, c in enumerate(cols):
+        D[:, i] = c.sign * (base - R[i + 1])  # y_col - y_cur = r_cur - r_col
+    return D, base
+
+
+def _columns_stage_a(robot, families, current, J, links, floating: bool) -> list[Column]:
+    cols = []
+    for f in families:
+        fam = FAMILIES[f]
+        if fam.contact and not floating:
+            continue
+        if fam.scope == "global":
+            t = Term(f)
+            if t in current:
+                continue
+            terms = {t: fam.probe}
+        elif fam.scope == "joint":
+            terms = {Term(f, j): fam.probe for j in J if Term(f, j) not in current}
+        else:
+            terms = {Term(f, ln): fam.probe for ln in links if Term(f, ln) not in current}
+        if not terms:
+            continue
+        label = f"{f}[{'+'.join(t.target for t in terms)}]" if fam.scope != "global" else f
+        cols.append(Column(label, f, terms))
+        if fam.probe2 is not None:
+            cols.append(Column(label + "(large)", f, {t: fam.probe2 for t in terms}))
+        if _two_sided(f):
+            mirrored = {t: _mirror(fam) for t in terms}
+            cols.append(Column(label + "(-)", f, mirrored, 1.0))
+    return cols
+
+
+def _columns_terms(fam_names, current, J, links, probes: dict | None = None) -> list[Column]:
+    cols = []
+    for f in fam_names:
+        fam = FAMILIES[f]
+        pv = (probes or {}).get(f, fam.probe)
+        targets = [None] if fam.scope == "global" else J if fam.scope == "joint" else links
+        for tg in targets:
+            t = Term(f, tg)
+            if t in current:
+                continue
+            cols.append(Column(t.label(), f, {t: pv}))
+            if _two_sided(f):
+                cols.append(Column(t.label() + "(-)", f, {t: _mirror(fam)}))
+    return cols
+
+
+#: A joint stands out when its residual energy exceeds this many floor² (sysid.md §5.7: 1.5x noise
+#: energy means nothing to explain), i.e. RMS > 1.22 floors.
+FLAG_ENERGY = 1.5
+
+
+def flagged_joints(energy: np.ndarray, names, threshold: float = FLAG_ENERGY, max_joints: int = 8) -> list[str]:
+    """Joints whose residual energy exceeds ``threshold`` floors², worst first (at most ``max_joints``)."""
+    e = energy[:24]
+    order = np.argsort(-e)
+    return [names[i] for i in order if e[i] > threshold][:max_joints]
+
+
+def screen(problem: Problem, robot, current: dict, families, *, max_terms: int = 6, floating: bool = False,
+           max_links: int = 8) -> ScreenResult:
+    """Sensitivity dictionary + OMP/BIC around ``current`` on the training windows.
+
+    Args:
+        problem: the diagnosis problem.  robot: the RobotModel.
+        current: term -> value of the model screened around ({} = the plain sim).
+        families: family names to consider.  max_terms: most terms selected.
+        floating: floating-base logs (contact families allowed).
+
+    Returns:
+        :class:`ScreenResult` (empty ``selected`` when nothing stands out).
+    """
+    preds = problem.predict([current], "train")
+    energy = problem.channel_energy(preds, "train")[0]
+    J = flagged_joints(energy, robot.joint_names)
+    # a mimic joint shares its leader's motor: per-joint terms go to the leader
+    J = list(dict.fromkeys(robot.mimic.get(j, j) for j in J))
+    if not J:
+        return ScreenResult([], {}, {}, [], [])
+    links: list[str] = []
+    for j in J:  # a mass error shows on the joints above the link: links below flagged joints
+        for ln in links_below(robot, j):
+            if ln not in links:
+                links.append(ln)
+    links = sorted(links, key=lambda ln: -sum(1 for j in joints_above(robot, ln) if j in J))[:max_links]
+    n = sum((w.length - 1) * problem.k for w in problem.train)
+    n_eff = max(10.0, 0.1 * n)
+    # stage A: one column per family (globals, local families over all flagged joints)
+    cols_a = _columns_stage_a(robot, families, current, J, links, floating)
+    D, r = _dictionary(problem, current, cols_a)
+    sel, w, _ = omp_bic(D, r, n_eff, max_k=max_terms)
+    expl = np.maximum(D.T @ r, 0.0) ** 2 / np.maximum((D ** 2).sum(axis=0), 1e-300)
+    fam_score: dict = {}
+    for c, e in zip(cols_a, expl):
+        fam_score[c.family] = max(fam_score.get(c.family, 0.0), float(e) / max(float(r @ r), 1e-300))
+    fams = []
+    probes: dict = {}  # the probe size (small or large) whose column matched each family best
+    for i in sel:
+        if cols_a[i].family not in fams:
+            fams.append(cols_a[i].family)
+    for c, e in zip(cols_a, expl):
+        fam = FAMILIES[c.family]
+        if fam.probe2 is not None and c.label.endswith("(large)"):
+            small = next(x for x, ex in zip(cols_a, expl) if x.label == c.label[:-7])
+            if e > expl[cols_a.index(small)]:
+                probes[c.family] = fam.probe2
+    if not fams:
+        return ScreenResult(J, {}, {}, [], [c.label for c in cols_a], family_score=fam_score)
+    # stage B: one column per term of the picked families (+ all globals)
+    glob = [f for f in families if FAMILIES[f].scope == "global" and not (FAMILIES[f].contact and not floating)]
+    cols_b = _columns_terms(list(dict.fromkeys(fams + glob)), current, J, links, probes)
+    D, r = _dictionary(problem, current, cols_b)
+    sel, w, path = omp_bic(D, r, n_eff, max_k=max_terms)
+    selected, weights = {}, {}
+    for i, wi in zip(sel, w):
+        c = cols_b[i]
+        (t, pv), = c.terms.items()
+        fam = t.fam
+        delta = pv - fam.nominal
+        v0 = current.get(t, fam.nominal) + wi * delta
+        selected[t] = float(np.clip(v0, fam.lo, fam.hi))
+        weights[t] = float(wi)
+    # dictionary columns that look like a selected one (cannot be told apart with this data)
+    Dn = D / np.maximum(np.linalg.norm(D, axis=0), 1e-12)
+    conf = []
+    for i in sel:
+        c = np.abs(Dn.T @ Dn[:, i])
+        for j in np.flatnonzero(c > 0.9):
+            if j != i and cols_b[j].family != cols_b[i].family:
+                conf.append((cols_b[i].label, cols_b[j].label, float(c[j])))
+    return ScreenResult(J, selected, weights, path, [c.label for c in cols_b], conf, fam_score)
+
+
+# ------------------------------------------------------------------------------------------ refit
+@dataclass
+class FitResult:
+    """Outcome of :func:`refit`: fitted values, training cost, Jacobian (normalised residual per
+    physical unit, columns in ``terms`` order), residual vector, evaluations."""
+
+    values: dict
+    terms: list
+    cost: float
+    jac: np.ndarray | None
+    resid: np.ndarray
+    nfev: int
+
+
+def _grid(fam, v0: float) -> np.ndarray:
+    if fam.name == "latency":
+        return np.arange(0.0, fam.hi + 1e-9, 0.005)
+    if fam.name == "torque_limit":
+        return np.linspace(0.3, 1.0, 15)
+    if fam.name == "foot_friction":
+        return np.array([0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0, 1.2])
+    if fam.name == "ground_compliance":
+        return np.array([0.006, 0.01, 0.015, 0.02, 0.025, 0.03, 0.04, 0.05, 0.065, 0.08])
+    span = fam.hi - fam.lo
+    base = abs(v0 - fam.nominal) if abs(v0 - fam.nominal) > 1e-9 else fam.probe - fam.nominal
+    cand = fam.nominal + np.sign(base or 1.0) * abs(base) * np.array([0.25, 0.5, 0.75, 1.0, 1.4, 2.0, 3.0, 4.5])
+    return np.unique(np.clip(np.concatenate([cand, [v0]]), fam.lo, fam.lo + span))
+
+
+def refit(problem: Problem, start: dict, free: list | None = None, *, max_nfev: int = 12, grid: bool = True,
+          verbose: bool = False) -> FitResult:
+    """Bounded nonlinear least squares of the ``free`` terms (default: all of ``start``).
+
+    Args:
+        problem: the diagnosis problem (training windows are fitted).
+        start: term -> start value (terms not in ``free`` stay fixed).
+        free: terms to fit.  max_nfev: least-squares iterations (each one batched replay).
+        grid: coarse 1-D grid starts for non-smooth families (latency, backlash, Coulomb,
+            torque limit).
+
+    Returns:
+        :class:`FitResult` with physical values.
+    """
+    values = dict(start)
+    free = list(values) if free is None else list(free)
+    if not free:
+        R = problem.residuals(problem.predict([values]))[0]
+        return FitResult(values, [], float(R @ R), None, R, 1)
+    lo = np.array([t.fam.lo for t in free])
+    hi = np.array([t.fam.hi for t in free])
+    span = hi - lo
+    if grid:
+        for t in free:
+            if t.fam.smooth:
+                continue
+            g = _grid(t.fam, values[t])
+            sets = [{**values, t: float(v)} for v in g]
+            R = problem.residuals(problem.predict(sets))
+            values[t] = float(g[int(np.argmin((R ** 2).sum(axis=1)))])
+    cache: dict = {}
+    nfev = [0]
+
+    def to_vals(x):
+        return {**values, **{t: float(lo[i] + span[i] * x[i]) for i, t in enumerate(free)}}
+
+    def fun(x):
+        key = x.tobytes()
+        if key not in cache:
+            nfev[0] += 1
+            cache[key] = problem.residuals(problem.predict([to_vals(x)]))[0]
+        return cache[key]
+
+    def jac(x):
+        h = np.array([0.01 if not t.fam.smooth else 0.003 for t in free])
+        step = np.where(x + h > 1.0, -h, h)
+        sets = [to_vals(x)]
+        for i in range(len(free)):
+            xi = x.copy()
+            xi[i] += step[i]
+            sets.append(to_vals(xi))
+        R = problem.residuals(problem.predict(sets))
+        nfev[0] += 1
+        cache[x.tobytes()] = R[0]
+        return (R[1:] - R[0]).T / step
+
+    x0 = np.clip((np.array([values[t] for t in free]) - lo) / span, 0.0, 1.0)
+    res = least_squares(fun, x0, jac=jac, bounds=(0.0, 1.0), method="trf", max_nfev=max_nfev, xtol=1e-4,
+                        ftol=1e-5, gtol=1e-8, x_scale="jac", verbose=2 if verbose else 0)
+    x = res.x
+    vals = to_vals(x)
+    J = res.jac / span[None] if res.jac is not None else None
+    return FitResult(vals, free, float(res.fun @ res.fun), J, res.fun, nfev[0])
+
+
+def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.959964,
+               spread: dict | None = None) -> tuple[dict, np.ndarray]:
+    """95 % intervals from the Gauss-Newton covariance s² τ_int (JᵀJ)⁻¹ (sysid.md §5.8), widened by
+    ``spread`` (term -> standard deviation of per-trajectory estimates, which carries the model-form
+    and trajectory-dependent errors a Gauss-Newton interval ignores).
+
+    Returns:
+        (term -> (low, high) in physical units, clipped to the family bounds; infinite where
+        JᵀJ is near-singular in that direction), correlation matrix of the estimates.
+    """
+    terms = fit.terms
+    p = len(terms)
+    if fit.jac is None or p == 0:
+        return {}, np.zeros((0, 0))
+    # residuals are in floor units: the Jacobian is per physical unit of each term
+    J = fit.jac
+    n = len(fit.resid)
+    s2 = float(fit.resid @ fit.resid) / max(1, n - p)
+    A = J.T @ J
+    w, V = np.linalg.eigh(A)
+    wmax = max(float(w.max()), 1e-300)
+    inv_w = np.where(w > 1e-10 * wmax, 1.0 / np.maximum(w, 1e-300), np.inf)
+    cov = np.zeros((p, p))
+    for k in range(p):
+        if np.isfinite(inv_w[k]):
+            cov += inv_w[k] * np.outer(V[:, k], V[:, k])
+    null = [k for k in range(p) if not np.isfinite(inv_w[k])]
+    cov *= s2 * max(1.0, tau_int)
+    sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    if spread:
+        sd = np.sqrt(sd ** 2 + np.array([spread.get(t, 0.0) ** 2 for t in terms]))
+    for k in null:
+        sd[np.abs(V[:, k]) > 0.1] = np.inf
+    out = {}
+    for i, t in enumerate(terms):
+        v = fit.values[t]
+        a, b = v - z * sd[i], v + z * sd[i]
+        out[t] = (max(t.fam.lo, a) if np.isfinite(a) else -np.inf, min(t.fam.hi, b) if np.isfinite(b) else np.inf)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(sd, sd)
+    corr[~np.isfinite(corr)] = 0.0
+    return out, corr

@@ -1,0 +1,237 @@
+"""Replay models: the MuJoCo sim of ``envs.mujoco_world`` plus the structure the candidate effects need.
+
+:func:`base_spec` rebuilds exactly the model of :func:`envs.mujoco_world.build_model` as an
+``MjSpec`` (a test checks the compiled fields agree), so that candidates can change structure and
+the identified model can be exported as MJCF (``MjSpec.to_xml``). On top of the sim it adds:
+
+* actuator history buffers (``nsample``, ``interp="linear"``) on every actuator, so actuation
+  latency is a run-time field (``MjModel.actuator_delay``) and every candidate model has the same
+  sizes (``reference/sysid.md`` §5.2 "Homogeneous models for batched rollout");
+* a stiff dry-friction constraint (``solref_friction``, 2 physics steps) on every joint, used
+  only when a Coulomb candidate sets ``dof_frictionloss``;
+* ``jointpos`` sensors for the 24 robot hinges (and the series play hinges), plus a torso
+  ``framequat`` and ``gyro`` for floating-base replays, so :func:`mujoco.rollout.rollout` returns
+  only what is compared with the recording;
+* optionally, for gear backlash, a second "play" hinge in series with a robot joint on the same
+  body (same axis and anchor) with range ``+-gap/2`` and a stiff limit; the motor hinge gets a
+  small armature (else the two-hinge inertia matrix is singular) and 10 % of its PD damping as
+  ``dof_damping`` (implicit under Euler, so the light motor side stays stable at 1 ms). The
+  measured angle is the sum of both hinges (MuJoCo docs, Modeling -> Backlash). 90 % of the
+  servo damping acts on the output angle through a fixed tendon (motor + play), like a dead-band
+  servo whose damping sees the output velocity.
+
+A :class:`Structure` names one such layout; a :class:`ReplayModel` is its compiled model with the
+index maps replays and candidates use.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from envs.effects import NOMINAL_FOOT_FRICTION
+from robots import RobotModel, nao_h25
+
+#: Longest actuation latency a candidate can take [s] (history buffer length).
+DELAY_MAX = 0.08
+#: Armature of the motor side of a backlash pair [kg m^2]: small against the link inertias
+#: (AnkleRoll ~1.8e-4) but >= kp dt^2 so the explicit PD stays stable at 1 ms.
+PLAY_MOTOR_ARMATURE = 5e-5
+_PLAY_SUFFIX = "__play"
+#: Time constant of the dry-friction constraint in physics steps: MuJoCo's default (20 ms) lets a
+#: joint creep under a load below the friction torque; geared servos (and PyBullet's velocity-motor
+#: friction) stick hard, which 2 steps reproduces (measured: PyBullet knee friction 0.2 N m is
+#: matched to 0.8 mrad RMS instead of 2.5).
+FRICTION_TIMECONST_STEPS = 2
+
+
+@dataclass(frozen=True)
+class Structure:
+    """A replay model layout.
+
+    Attributes:
+        fixed_base: torso welded at ``hang_height`` (True) or on a free joint.
+        physics_dt: physics step [s] (the recording's ``physics_dt``; default 1 ms).
+        play_joints: robot joints that get a series backlash hinge.
+        friction: sliding friction of all contacts (foot friction candidate edits the field).
+        hang_height: torso height of a fixed-base model [m].
+    """
+
+    fixed_base: bool = True
+    physics_dt: float = 0.001
+    play_joints: tuple[str, ...] = ()
+    friction: float = NOMINAL_FOOT_FRICTION
+    hang_height: float = 0.6
+
+
+def base_spec(robot: RobotModel, *, fixed_base: bool, physics_dt: float, hang_height: float = 0.6,
+              friction: float = NOMINAL_FOOT_FRICTION) -> mujoco.MjSpec:
+    """The ``MjSpec`` of :func:`envs.mujoco_world.build_model` on flat ground (same steps, same order).
+
+    Returns:
+        An uncompiled spec: 24 hinges (+ free joint ``root`` unless ``fixed_base``), 24 PD
+        actuators named like the joints, sites for ``robot.frames``, a ground plane ``ground``.
+    """
+    spec = mujoco.MjSpec.from_file(robot.write_urdf())
+    spec.compiler.fusestatic = False
+    spec.option.timestep = physics_dt
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
+    torso = spec.body(robot.root)
+    if fixed_base:
+        torso.pos = [0.0, 0.0, hang_height]
+    else:
+        torso.add_freejoint(name="root")
+    for g in spec.geoms:
+        g.contype, g.conaffinity = 1, 0
+        g.friction = [friction, 0.005, 0.0001]
+    for eq in spec.equalities:
+        eq.solref = [2 * physics_dt, 1.0]
+        eq.solimp = [0.99, 0.999, 0.001, 0.5, 2.0]
+    for name, fr in robot.frames.items():
+        spec.body(fr.link).add_site(name=name, pos=list(fr.offset))
+    for j in robot.joints:
+        a = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+        a.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+        a.gainprm[0] = j.kp
+        a.biasprm[0:3] = [0.0, -j.kp, -j.kd]
+        a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        a.forcerange = [-j.effort, j.effort]
+    ground = spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    ground.contype, ground.conaffinity = 1, 1
+    ground.friction = [friction, 0.005, 0.0001]
+    return spec
+
+
+def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:
+    """:func:`base_spec` plus history buffers, sensors and the structure's play hinges."""
+    s = structure
+    spec = base_spec(robot, fixed_base=s.fixed_base, physics_dt=s.physics_dt, hang_height=s.hang_height,
+                     friction=s.friction)
+    nsample = int(np.ceil(DELAY_MAX / s.physics_dt)) + 2
+    for j in spec.joints:  # hard stiction for the Coulomb candidate (inactive while frictionloss = 0)
+        j.solref_friction = [FRICTION_TIMECONST_STEPS * s.physics_dt, 1.0]
+    for a in spec.actuators:
+        a.nsample = nsample
+        a.interp = 1  # linear
+        a.delay = 0.0
+    kd = dict(zip(robot.joint_names, robot.kd))
+    for name in s.play_joints:
+        if name not in kd:
+            raise KeyError(f"unknown joint {name!r} for a backlash hinge")
+        motor = spec.joint(name)
+        body = motor.parent
+        play = body.add_joint(name=name + _PLAY_SUFFIX, type=mujoco.mjtJoint.mjJNT_HINGE,
+                              axis=list(motor.axis), pos=list(motor.pos))
+        play.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        play.range = [-1e-4, 1e-4]
+        play.solref_limit = [2 * s.physics_dt, 1.0]
+        play.solimp_limit = [0.99, 0.999, 0.001, 0.5, 2.0]
+        # servo damping: 10 % on the light motor side (implicit dof damping, keeps the motor from
+        # ringing inside the gap), 90 % on the output angle (motor + play) through a fixed tendon,
+        # so the engaged joint has the nominal damping and a free-floating output is still damped
+        # (the dead-band servo form: tau = kp dz(q* - q) - kd qdot acts on the output)
+        motor.armature = PLAY_MOTOR_ARMATURE
+        motor.damping = [0.1 * float(kd[name]), 0.0, 0.0]
+        spec.actuator(name).biasprm[2] = 0.0
+        ten = spec.add_tendon(name=name + "__out")
+        ten.wrap_joint(name, 1.0)
+        ten.wrap_joint(name + _PLAY_SUFFIX, 1.0)
+        ten.damping = [0.9 * float(kd[name]), 0.0, 0.0]
+    for name in robot.joint_names:
+        spec.add_sensor(name=f"q:{name}", type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT,
+                        objname=name)
+    for name in s.play_joints:
+        spec.add_sensor(name=f"play:{name}", type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+                        objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=name + _PLAY_SUFFIX)
+    if not s.fixed_base:
+        spec.add_sensor(name="torso_quat", type=mujoco.mjtSensor.mjSENS_FRAMEQUAT, objtype=mujoco.mjtObj.mjOBJ_XBODY,
+                        objname=robot.root)
+        spec.add_sensor(name="gyro", type=mujoco.mjtSensor.mjSENS_GYRO, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                        objname="gyro")
+    return spec
+
+
+class ReplayModel:
+    """A compiled replay model and its index maps.
+
+    Attributes:
+        robot, structure, spec, model (template ``MjModel``; copy before editing).
+        qadr, dadr: (24,) qpos / dof address of each robot joint's (motor) hinge.
+        play_qadr, play_dadr, play_jnt: dict joint name -> address / joint id of its play hinge.
+        act: (24,) actuator id per robot joint.  body: dict link name -> body id.
+        meas: (24, nsensordata) matrix mapping sensor data to the 24 measured joint angles.
+        quat_adr, gyro_adr: sensordata addresses of the torso quaternion (4) and gyro (3), or None.
+        nsample: history samples per actuator.
+    """
+
+    def __init__(self, robot: RobotModel, structure: Structure):
+        self.robot, self.structure = robot, structure
+        self.spec = replay_spec(robot, structure)
+        self.model = self.spec.compile()
+        m = self.model
+        jid = [m.joint(n).id for n in robot.joint_names]
+        self.qadr = np.array([m.jnt_qposadr[j] for j in jid])
+        self.dadr = np.array([m.jnt_dofadr[j] for j in jid])
+        self.play_jnt = {n: m.joint(n + _PLAY_SUFFIX).id for n in structure.play_joints}
+        self.play_qadr = {n: int(m.jnt_qposadr[j]) for n, j in self.play_jnt.items()}
+        self.play_dadr = {n: int(m.jnt_dofadr[j]) for n, j in self.play_jnt.items()}
+        self.act = np.array([m.actuator(n).id for n in robot.joint_names])
+        self.body = {name: m.body(name).id for name in robot.links}
+        self.meas = np.zeros((len(robot.joint_names), m.nsensordata))
+        for i, n in enumerate(robot.joint_names):
+            self.meas[i, m.sensor_adr[m.sensor(f"q:{n}").id]] = 1.0
+            if n in structure.play_joints:
+                self.meas[i, m.sensor_adr[m.sensor(f"play:{n}").id]] = 1.0
+        self.quat_adr = self.gyro_adr = None
+        if not structure.fixed_base:
+            self.quat_adr = int(m.sensor_adr[m.sensor("torso_quat").id])
+            self.gyro_adr = int(m.sensor_adr[m.sensor("gyro").id])
+        self.nsample = int(m.actuator_history[0, 0])
+        self.nstate = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        self._data = mujoco.MjData(m)
+
+    def initial_state(self, m: mujoco.MjModel, q: np.ndarray, dq: np.ndarray | None, cmd_hist: np.ndarray,
+                      base: dict | None = None) -> np.ndarray:
+        """Full physics state (``mjSTATE_FULLPHYSICS``) for a replay start.
+
+        Args:
+            m: the (edited) model the state is for.
+            q: (24,) physical joint angles [rad]; dq: (24,) [rad/s] or None (zero).
+            cmd_hist: (nsample, 24) joint targets at the history buffer's time stamps
+                (oldest first; the last row is the command active just before the start).
+            base: floating base ``pos`` (3), ``quat`` (4, wxyz), ``linvel`` (3, world),
+                ``angvel`` (3, world); ignored for a fixed base.
+        """
+        d = self._data
+        mujoco.mj_resetData(m, d)
+        d.qpos[self.qadr] = q
+        if dq is not None:
+            d.qvel[self.dadr] = dq
+        if not self.structure.fixed_base and base is not None:
+            d.qpos[0:3] = base["pos"]
+            d.qpos[3:7] = base["quat"]
+            w, x, y, z = base["quat"]
+            R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                          [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                          [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+            d.qvel[0:3] = base.get("linvel", np.zeros(3))
+            d.qvel[3:6] = R.T @ np.asarray(base.get("angvel", np.zeros(3)))
+        d.ctrl[self.act] = cmd_hist[-1]
+        for i, a in enumerate(self.act):
+            mujoco.mj_initCtrlHistory(m, d, int(a), None, np.ascontiguousarray(cmd_hist[:, i:i + 1]))
+        st = np.empty(self.nstate)
+        mujoco.mj_getState(m, d, st, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        return st
+
+
+@functools.lru_cache(maxsize=64)
+def replay_model(structure: Structure, robot_name: str = "nao_h25") -> ReplayModel:
+    """Cached :class:`ReplayModel` of ``structure`` (treat as read-only)."""
+    if robot_name != "nao_h25":
+        raise ValueError(f"no replay model for robot {robot_name!r}; this package models 'nao_h25'")
+    return ReplayModel(nao_h25(), structure)

@@ -1,0 +1,316 @@
+"""The diagnosis report: printed text, ``report.json``, plots and the identified model as MJCF.
+
+:func:`write_report` writes into ``REPORT_DIR``:
+
+* ``report.json``: the dict of :func:`sysid.diagnose.diagnose` (keys ``verdict``, ``noise_floor``,
+  ``heldout_rms_before``, ``heldout_rms_after`` [rad], ``effects`` [{family, joints, links, value,
+  unit, ci95, ...}], ``rejected``, ``indistinguishable``, ``residual``, ``localisation``, ...);
+* ``report.txt``: the printed report;
+* ``overlay.png`` (per-joint measured vs sim before/after on a held-out log), ``residual_by_joint.png``,
+  ``residual_by_phase.png``, ``hysteresis.png`` (command vs output where backlash or Coulomb
+  friction was found);
+* ``identified_model.xml``: the MuJoCo sim with the effects found (``MjSpec.to_xml``).
+
+Every file is written atomically (temporary file, then rename).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from sysid.candidates import Term
+
+
+def _atomic_write(path: str, text: str) -> None:
+    tmp = f"{path}.{os.getpid()}.tmp"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items() if not str(k).startswith("_")}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _jsonable(o.tolist())
+    if isinstance(o, np.generic):
+        return _jsonable(o.item())
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o
+
+
+def _ci_text(e: dict) -> str:
+    lo, hi = e["ci95"]
+    if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+        return "95 % CI: not identifiable with this data"
+    if e["family"] == "latency":
+        return f"95 % CI [{1000 * lo:.2f}, {1000 * hi:.2f}] ms"
+    if e["unit"] == "rad":
+        return f"95 % CI [{1000 * lo:.2f}, {1000 * hi:.2f}] mrad"
+    return f"95 % CI [{lo:.4g}, {hi:.4g}] {e['unit']}".rstrip()
+
+
+def _nominal_text(e: dict) -> str:
+    from sysid.candidates import FAMILIES
+
+    return FAMILIES[e["family"]].fmt(e["nominal"])
+
+
+def format_report(rep: dict) -> str:
+    """The human-readable report (what ``sgatwalk diagnose`` prints)."""
+    mm = 1000.0
+    lines = ["=" * 100, "VERDICT: " + rep["verdict"], "=" * 100]
+    lines.append(f"noise floor {mm * rep['noise_floor']:.3f} mrad (sensor σ {mm * rep['noise']['sigma']['encoders']:.3f} mrad"
+                 + (", engine gap calibrated" if rep["noise"]["engine_gap_calibrated"] else ", engine gap not calibrated")
+                 + f"); held-out RMS before {mm * rep['heldout_rms_before']:.3f} mrad, after {mm * rep['heldout_rms_after']:.3f} mrad"
+                 + (f", gap closed {100 * rep['gap_closed']:.0f} %" if rep.get("gap_closed") is not None else ""))
+    lines.append(f"data: {rep['split']['note']}; {rep['split']['mode']}; train {', '.join(rep['split']['train'])}; "
+                 f"held out {', '.join(rep['split']['heldout'])}")
+    lines.append("")
+    lines.append("EFFECTS FOUND" + ("" if rep["effects"] else ": none"))
+    for e in rep["effects"]:
+        lines.append(f"  - {e['words']} at {e['where']}: {e['display']}  ({_ci_text(e)}; the sim had {_nominal_text(e)})")
+    lines.append("")
+    lines.append("CONSIDERED AND REJECTED")
+    if rep["rejected"]:
+        for r in rep["rejected"]:
+            lines.append(f"  - {r['term']} ({r['value']:.4g}): {r['reason']}")
+    fam_found = {e["family"] for e in rep["effects"]} | {r["family"] for r in rep["rejected"]}
+    not_picked = [f for f in rep["families_considered"] if f not in fam_found]
+    if not_picked:
+        lines.append(f"  - not selected by screening (sensitivity dictionary + OMP/BIC): {', '.join(not_picked)}")
+    lines.append("")
+    lines.append("CANNOT BE TOLD APART WITH THIS DATA" + ("" if rep["indistinguishable"] else ": nothing flagged"))
+    for p in rep["indistinguishable"]:
+        lines.append(f"  - {p['a']} vs {p['b']} (|corr| {abs(p['corr']):.2f}); to separate them: {p['experiment']}")
+    lines.append("")
+    lines.append("LOCALISATION (nominal replay, all logs): worst channels")
+    ch = rep["localisation"]["channels"]
+    worst = sorted(ch.items(), key=lambda kv: -kv[1]["rms_over_floor"])
+    hdr = f"  {'channel':16s} {'RMS/floor':>9s} {'lag ms':>7s} {'bias mrad':>9s} {'c(sgn v)':>8s} {'c(v)':>6s} {'c(acc)':>6s} {'c(trk)':>6s} {'c(grav)':>7s} {'acf1':>5s}"
+    lines.append(hdr)
+    shown = 0
+    for nm, s in worst:
+        if s["rms_over_floor"] ** 2 <= 1.5 and shown >= 3:
+            break
+        lines.append(f"  {nm:16s} {s['rms_over_floor']:9.2f} {s['lag_ms']:7.1f} {1000 * s['bias']:9.3f} {s['corr_sign_v']:8.2f} "
+                     f"{s['corr_v']:6.2f} {s['corr_acc']:6.2f} {s.get('corr_tracking', float('nan')):6.2f} "
+                     f"{s.get('corr_gravity', float('nan')):7.2f} {s['whiteness'][0]:5.2f}")
+        shown += 1
+        if shown >= 10:
+            break
+    g = rep["localisation"]["groups"]
+    lines.append("  signal groups (RMS/floor): " + ", ".join(f"{k} {v:.2f}" for k, v in g.items()))
+    ph = rep["localisation"]["phases"]
+    lines.append("  residual energy by phase (/floor²): " + ", ".join(
+        f"{k} {v['energy']:.2f} ({v['samples']} samples)" if isinstance(v, dict) else f"{k} {v:.2f}" for k, v in ph.items()))
+    lines.append("")
+    res = rep["residual"]
+    after = res["per_joint_rms_over_floor_after"]
+    top = sorted(after.items(), key=lambda kv: -kv[1])[:5]
+    lines.append("RESIDUAL LEFT (identified model, all logs): worst channels " +
+                 ", ".join(f"{k} {v:.2f}x" for k, v in top) + " of the floor")
+    wh = res["whiteness_after"]
+    acf1 = float(np.median([v[0] for v in wh.values()]))
+    lines.append(f"  median lag-1 autocorrelation {acf1:.2f} (0 = white); "
+                 + ("unexplained joints: " + ", ".join(res["unexplained_joints"]) if res["unexplained_joints"]
+                    else "every joint within 1.5x its floor energy"))
+    lines.append("  by phase (/floor²): " + ", ".join(
+        f"{k} {v['energy']:.2f}" if isinstance(v, dict) else f"{k} {v:.2f}" for k, v in res["phases_after"].items()))
+    lines.append("")
+    lines.append(f"runtime {rep['runtime_s']:.1f} s, {rep['rollouts']} replays"
+                 + ("; the time budget stopped the search early (--time-budget)" if rep.get("time_budget_reached") else ""))
+    return "\n".join(lines)
+
+
+def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float) -> str:
+    """MJCF text of the sim with ``model_terms`` (Term -> value) applied.
+
+    Sensor biases are not physics: they are stored as ``<numeric name="sensor_bias:JOINT">``.
+    """
+    from robots import nao_h25
+    from sysid.candidates import play_joints_of
+    from sysid.model import Structure, replay_spec
+
+    robot = nao_h25()
+    st = Structure(fixed_base=fixed_base, physics_dt=physics_dt, play_joints=play_joints_of(model_terms))
+    spec = replay_spec(robot, st)
+    kp = dict(zip(robot.joint_names, robot.kp))
+    eff = dict(zip(robot.joint_names, robot.effort))
+    for t, v in model_terms.items():
+        v = float(v)
+        f = t.family
+        if f == "latency":
+            for a in spec.actuators:
+                a.delay = v
+        elif f == "coulomb_friction":
+            spec.joint(t.target).frictionloss = v
+        elif f == "viscous_damping":
+            j = spec.joint(t.target)
+            d = list(j.damping)
+            d[0] += v
+            j.damping = d
+        elif f == "armature":
+            spec.joint(t.target).armature = spec.joint(t.target).armature + v
+        elif f == "pd_gain":
+            a = spec.actuator(t.target)
+            a.gainprm[0] = kp[t.target] * v
+            a.biasprm[1] = -kp[t.target] * v
+        elif f == "torque_limit":
+            for n in robot.joint_names:
+                spec.actuator(n).forcerange = [-eff[n] * v, eff[n] * v]
+        elif f == "link_mass":
+            b = spec.body(t.target)
+            b.mass = b.mass * v
+            b.fullinertia = [x * v for x in b.fullinertia]
+        elif f == "backlash":
+            spec.joint(t.target + "__play").range = [-v / 2, v / 2]
+        elif f == "sensor_bias":
+            spec.add_numeric(name=f"sensor_bias:{t.target}", data=[v])
+        elif f == "foot_friction":
+            for g in spec.geoms:
+                g.friction = [v, g.friction[1], g.friction[2]]
+        elif f == "ground_compliance":
+            for g in spec.geoms:
+                g.solref = [v, g.solref[1]]
+    spec.compile()
+    return spec.to_xml()
+
+
+def _plots(rep: dict, logs, out_dir: str) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sysid.replay import Window, predict
+
+    written = []
+    model = rep.get("_model_terms", {})
+    names = list(rep["residual"]["per_joint_rms_before"])
+    held = [lg for lg in logs if lg.name in rep["split"]["heldout"]] or logs[-1:]
+    lg = held[0]
+    w = Window(logs.index(lg), 0, len(lg))
+    if lg.fixed_base:
+        y = predict(logs, [w], [rep.get("_base_terms", {}), model])[0]
+    else:
+        y = None
+    # per-joint RMS before/after
+    fig, ax = plt.subplots(figsize=(12, 4))
+    x = np.arange(len(names))
+    ax.bar(x - 0.2, [1000 * rep["residual"]["per_joint_rms_before"][n] for n in names], 0.4, label="sim before")
+    ax.bar(x + 0.2, [1000 * rep["residual"]["per_joint_rms_after"][n] for n in names], 0.4, label="identified model")
+    ax.axhline(1000 * rep["noise_floor"], color="k", ls="--", lw=1, label="noise floor")
+    ax.set_xticks(x, names, rotation=70, fontsize=7)
+    ax.set_ylabel("held-out RMS [mrad]")
+    ax.set_yscale("log")
+    ax.legend()
+    fig.tight_layout()
+    p = os.path.join(out_dir, "residual_by_joint.png")
+    fig.savefig(p, dpi=110)
+    plt.close(fig)
+    written.append(p)
+    if y is not None:
+        before = rep["residual"]["per_joint_rms_before"]
+        top = sorted(range(24), key=lambda j: -before[names[j]])[:4]
+        fig, axes = plt.subplots(len(top), 2, figsize=(13, 2.4 * len(top)), squeeze=False)
+        for r, j in enumerate(top):
+            a, b = axes[r]
+            a.plot(lg.t, lg.q[:, j], "k", lw=0.8, label="measured")
+            a.plot(lg.t, y[0, :, j], "C0", lw=0.8, label="sim before")
+            a.plot(lg.t, y[1, :, j], "C1--", lw=0.8, label="identified")
+            a.set_ylabel(f"{names[j]} [rad]", fontsize=8)
+            b.plot(lg.t, 1000 * (lg.q[:, j] - y[0, :, j]), "C0", lw=0.6, label="residual before")
+            b.plot(lg.t, 1000 * (lg.q[:, j] - y[1, :, j]), "C1", lw=0.6, label="residual after")
+            b.set_ylabel("mrad", fontsize=8)
+            if r == 0:
+                a.legend(fontsize=7)
+                b.legend(fontsize=7)
+        axes[-1, 0].set_xlabel(f"t [s] (held-out log {lg.name})")
+        axes[-1, 1].set_xlabel("t [s]")
+        fig.tight_layout()
+        p = os.path.join(out_dir, "overlay.png")
+        fig.savefig(p, dpi=100)
+        plt.close(fig)
+        written.append(p)
+        hyst = [t.target for t in model if t.family in ("backlash", "coulomb_friction")]
+        if hyst:
+            fig, axes = plt.subplots(1, len(hyst[:4]), figsize=(4.2 * len(hyst[:4]), 3.8), squeeze=False)
+            for a, jn in zip(axes[0], hyst[:4]):
+                j = names.index(jn)
+                a.plot(lg.cmd[:, j], lg.q[:, j] - lg.cmd[:, j], "k.", ms=1.5, label="measured")
+                a.plot(lg.cmd[:, j], y[0, :, j] - lg.cmd[:, j], "C0.", ms=1.0, label="sim before")
+                a.plot(lg.cmd[:, j], y[1, :, j] - lg.cmd[:, j], "C1.", ms=1.0, label="identified")
+                a.set_xlabel(f"command {jn} [rad]")
+                a.set_ylabel("output - command [rad]")
+                a.legend(fontsize=7)
+            fig.tight_layout()
+            p = os.path.join(out_dir, "hysteresis.png")
+            fig.savefig(p, dpi=100)
+            plt.close(fig)
+            written.append(p)
+    ph_b = {k: v for k, v in rep["localisation"]["phases"].items() if isinstance(v, dict)}
+    ph_a = {k: v for k, v in rep["residual"]["phases_after"].items() if isinstance(v, dict)}
+    if ph_b:
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        keys = list(ph_b)
+        x = np.arange(len(keys))
+        ax.bar(x - 0.2, [ph_b[k]["energy"] for k in keys], 0.4, label="sim before")
+        ax.bar(x + 0.2, [ph_a.get(k, {"energy": np.nan})["energy"] for k in keys], 0.4, label="identified model")
+        ax.axhline(1.0, color="k", ls="--", lw=1, label="noise floor")
+        ax.set_xticks(x, keys, fontsize=8)
+        ax.set_ylabel("residual energy / floor²")
+        ax.set_yscale("log")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        p = os.path.join(out_dir, "residual_by_phase.png")
+        fig.savefig(p, dpi=100)
+        plt.close(fig)
+        written.append(p)
+    return written
+
+
+def write_report(rep: dict, logs, out_dir: str, plots: bool = True) -> dict:
+    """Write report.json, report.txt, plots and identified_model.xml into ``out_dir``.
+
+    Returns:
+        dict name -> path of what was written.
+    """
+    os.makedirs(out_dir, exist_ok=True)
+    paths = {}
+    text = format_report(rep)
+    p = os.path.join(out_dir, "report.txt")
+    _atomic_write(p, text + "\n")
+    paths["text"] = p
+    xml = export_mjcf(rep.get("_model_terms", {}), rep["fixed_base"], logs[0].physics_dt)
+    p = os.path.join(out_dir, "identified_model.xml")
+    _atomic_write(p, xml)
+    paths["mjcf"] = p
+    if plots:
+        paths["plots"] = _plots(rep, logs, out_dir)
+    rep = dict(rep)
+    rep["files"] = paths
+    p = os.path.join(out_dir, "report.json")
+    _atomic_write(p, json.dumps(_jsonable(rep), indent=1, allow_nan=False))
+    paths["json"] = p
+    return paths
+
+
+def terms_from_labels(model: dict) -> dict:
+    """Inverse of ``report["model"]``: {"family[target]": value} -> {Term: value}."""
+    from sysid.candidates import FAMILIES
+
+    out = {}
+    for lbl, v in model.items():
+        f, tg = (lbl[:-1].split("[", 1)) if "[" in lbl else (lbl, None)
+        if f not in FAMILIES:
+            raise ValueError(f"unknown effect family {f!r} in a report model")
+        out[Term(f, tg)] = float(v)
+    return out

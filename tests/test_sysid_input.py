@@ -1,0 +1,111 @@
+"""Bad input to the diagnosis and the excitation tools: clear errors, exit status 2."""
+
+import json
+import os
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from envs.recording import Recording, RecordingError
+from experiments.cli import main
+from robots import nao_h25
+from sysid.data import load_logs
+from sysid.excitation import SEGMENTS, protocol
+
+
+def _rec(n=300, robot="nao_h25", control_dt=0.01) -> Recording:
+    r = nao_h25()
+    q = np.tile(r.pose("crouch"), (n, 1))
+    return Recording.from_arrays({"robot": "nao_h25", "control_dt": control_dt, "fixed_base": True},
+                                 np.arange(n) * control_dt, cmd=q[:, r.actuated_index], q=q)
+
+
+def _write_raw(rec: Recording, path, meta=None):
+    """Write without validation (to make malformed files)."""
+    if meta is not None:
+        rec.meta = meta
+    pq.write_table(rec.to_table(), str(path))
+    return str(path)
+
+
+def _diagnose_error(capsys, *args) -> str:
+    rc = main(["diagnose", "--real", *args, "--out", "/tmp/sgatwalk_sysid_never_written"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("sgatwalk diagnose: error:")
+    return err
+
+
+def test_missing_column(tmp_path, capsys):
+    rec = _rec()
+    del rec.columns["q.LKneePitch"]
+    p = _write_raw(rec, tmp_path / "a.parquet")
+    assert "q.LKneePitch" in _diagnose_error(capsys, p)
+
+
+def test_mismatched_robot(tmp_path, capsys):
+    rec = _rec()
+    p = _write_raw(rec, tmp_path / "a.parquet", {"robot": "pepper", "control_dt": 0.01})
+    assert "pepper" in _diagnose_error(capsys, p)
+
+
+def test_too_short(tmp_path, capsys):
+    p = _rec(n=50).to_parquet(tmp_path / "a.parquet")
+    assert "too short" in _diagnose_error(capsys, p)
+
+
+def test_nan_holed(tmp_path, capsys):
+    rec = _rec()
+    rec.columns["q.RAnkleRoll"][120] = np.nan
+    p = _write_raw(rec, tmp_path / "a.parquet")
+    err = _diagnose_error(capsys, p)
+    assert "q.RAnkleRoll" in err and "row 120" in err
+
+
+def test_inconsistent_logs_and_missing_paths(tmp_path, capsys):
+    a = _rec().to_parquet(tmp_path / "a.parquet")
+    b = _rec(n=150, control_dt=0.02).to_parquet(tmp_path / "b.parquet")
+    assert "control_dt" in _diagnose_error(capsys, a, b)
+    assert "no recording" in _diagnose_error(capsys, str(tmp_path / "nope.parquet"))
+    os.makedirs(tmp_path / "empty")
+    assert "no .parquet" in _diagnose_error(capsys, str(tmp_path / "empty"))
+    with pytest.raises(RecordingError):
+        load_logs([a, b])
+
+
+def test_bad_calibration_and_family(tmp_path, capsys):
+    a = _rec().to_parquet(tmp_path / "a.parquet")
+    (tmp_path / "cal.json").write_text(json.dumps({"hello": 1}))
+    assert "calibration" in _diagnose_error(capsys, a, "--calibration", str(tmp_path / "cal.json"))
+    assert "warp_drive" in _diagnose_error(capsys, a, "--families", "latency,warp_drive")
+
+
+def test_protocol_shapes_limits_and_seeds():
+    r = nao_h25()
+    a = protocol(r, 6.0, seed=0)
+    b = protocol(r, 6.0, seed=1)
+    assert a.shape == (600, 23) and not np.allclose(a, b)
+    lo, hi = r.lower[r.actuated_index], r.upper[r.actuated_index]
+    assert np.all(a >= lo) and np.all(a <= hi)
+    np.testing.assert_allclose(a[0], r.pose("crouch", actuated=True))
+    assert np.ptp(a, axis=0).min() > 0.05  # every joint moves
+    f = protocol(r, 6.0, seed=0, fixed_base=False)
+    assert f.shape == (600, 23)
+    for bad in ({"seconds": 2.0}, {"segments": ("nope",)}, {"scale": 0.0}):
+        kw = {"seconds": 6.0, **bad}
+        with pytest.raises(ValueError):
+            protocol(r, **kw)
+    assert "chirp" in SEGMENTS and "holds" in SEGMENTS
+
+
+def test_excite_cli_records_logs(tmp_path, capsys):
+    rc = main(["excite", "--world", "sim", "--fixed-base", "--out", str(tmp_path), "--logs", "2", "--seconds", "3",
+               "--json"])
+    assert rc == 0
+    out = json.loads(capsys.readouterr().out)
+    assert len(out["recordings"]) == 2
+    logs = load_logs(str(tmp_path))
+    assert logs[0].fixed_base and len(logs[0]) == 300 and not np.allclose(logs[0].cmd, logs[1].cmd)
+    assert main(["excite", "--world", "real", "--effect", "nonsense", "--out", str(tmp_path)]) == 2
+    assert main(["excite", "--world", "real", "--effect", "warp=1", "--out", str(tmp_path)]) == 2

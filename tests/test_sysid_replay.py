@@ -1,0 +1,111 @@
+"""Replay models and batched replay: exactness, timing convention, engine gap, windows."""
+
+import numpy as np
+import pytest
+
+from envs import CommandLog, NaoRealEnv, NaoSimEnv, rollout
+from envs.effects import get_profile
+from envs.mujoco_world import build_model
+from robots import nao_h25
+from sysid.candidates import Term
+from sysid.data import from_recording
+from sysid.excitation import protocol
+from sysid.model import Structure, base_spec, replay_model
+from sysid.replay import predict, whole_logs, windows
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return nao_h25()
+
+
+@pytest.fixture(scope="module")
+def cmd(robot):
+    return protocol(robot, 3.0, seed=7)
+
+
+def test_base_spec_matches_build_model(robot):
+    a = build_model(robot, fixed_base=True, physics_dt=0.001)
+    b = base_spec(robot, fixed_base=True, physics_dt=0.001).compile()
+    for f in ("body_mass", "body_inertia", "body_ipos", "jnt_range", "dof_armature", "dof_damping",
+              "actuator_gainprm", "actuator_biasprm", "actuator_forcerange", "eq_solref", "geom_friction"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert a.opt.timestep == b.opt.timestep and a.opt.integrator == b.opt.integrator
+
+
+def test_replay_of_sim_recording_is_exact(robot, cmd):
+    rec = rollout(NaoSimEnv(fixed_base=True), CommandLog(cmd), seed=0, seconds=3.0)
+    lg = from_recording(rec, "sim")
+    y = predict([lg], whole_logs([lg]), [{}])[0][0]
+    assert np.abs(y - lg.q).max() < 1e-9  # history buffers, sensors, timing: bit-for-bit the sim
+
+
+def test_latency_timing_convention_against_pybullet_fifo(robot, cmd):
+    """PyBullet's 20 ms command FIFO is MuJoCo's 20 ms actuator delay: the convention is right."""
+    prof = get_profile("none").with_effect("latency_s", 0.02)
+    env = NaoRealEnv(fixed_base=True, profile=prof, terrain="flat")
+    lg = from_recording(rollout(env, CommandLog(cmd), seed=0, seconds=3.0), "lat")
+    env.close()
+    out = predict([lg], whole_logs([lg]), [{}, {Term("latency"): 0.02}, {Term("latency"): 0.019}])[0]
+    rms = [np.sqrt(np.mean((lg.q - o) ** 2)) for o in out]
+    assert rms[1] < 1e-4
+    assert rms[2] > 20 * rms[1] and rms[0] > rms[2]
+
+
+def test_pybullet_none_engine_gap_is_tiny(robot, cmd):
+    env = NaoRealEnv(fixed_base=True, profile="none", terrain="flat")
+    lg = from_recording(rollout(env, CommandLog(cmd), seed=0, seconds=3.0), "none")
+    env.close()
+    y = predict([lg], whole_logs([lg]), [{}])[0][0]
+    assert np.sqrt(np.mean((y - lg.q) ** 2, axis=0)).max() < 3e-4  # < 0.3 mrad on every joint
+
+
+def test_backlash_structure_reduces_to_nominal_and_models_are_batched(robot, cmd):
+    rec = rollout(NaoSimEnv(fixed_base=True), CommandLog(cmd), seed=0, seconds=3.0)
+    lg = from_recording(rec, "sim")
+    sets = [{}, {Term("backlash", "LKneePitch"): 0.0}, {Term("backlash", "RAnkleRoll"): 0.0},
+            {Term("backlash", "LKneePitch"): 0.03}]
+    out = predict([lg], whole_logs([lg]), sets)[0]
+    j = robot.joint_names.index("LKneePitch")
+    # at zero gap the series hinge is nearly the nominal joint (the servo damping then acts outside
+    # the torque clip, which shows only while the torque saturates)
+    rms = np.sqrt(np.mean((out[1] - out[0]) ** 2, axis=0))
+    assert rms[j] < 3e-3 and np.delete(rms, j).max() < 1e-3
+    assert np.sqrt(np.mean((out[2] - out[0]) ** 2, axis=0)).max() < 2e-3
+    assert np.sqrt(np.mean((out[3][:, j] - out[0][:, j]) ** 2)) > 5e-3
+    rm = replay_model(Structure(play_joints=("LKneePitch",)))
+    assert rm.model.nv == 25 and rm.meas.sum() == 25
+
+
+def test_windowed_replay_of_floating_sim_log_is_exact(robot):
+    env = NaoSimEnv(fixed_base=False)
+    c = np.tile(robot.pose("crouch", actuated=True), (150, 1))
+    c[:, robot.actuated_joint_names.index("LShoulderPitch")] += 0.3 * np.sin(np.linspace(0, 6, 150))
+    lg = from_recording(rollout(env, CommandLog(c), seed=0, seconds=1.5), "float")
+    assert not lg.fixed_base
+    wins = windows([lg], [0], 0.5)
+    assert [w.length for w in wins] == [50, 50, 50]
+    out = predict([lg], wins, [{}], with_imu=True)
+    for w, o in zip(wins, out):
+        assert np.abs(o[0, :, :24] - lg.q[w.k0:w.k1]).max() < 1e-3
+        # contact warm-start is not part of a recording: windows agree to ~1 mrad, not bit for bit
+        assert np.abs(o[0, :, 24:26] - lg.imu["angle"][w.k0:w.k1]).max() < 3e-3
+        assert np.abs(o[0, :, 26:29] - lg.imu["gyro"][w.k0:w.k1]).max() < 0.05
+
+
+def test_floating_base_state_estimate_without_ground_truth(robot):
+    """Logs without gt.* columns: the torso state comes from IMU angles, gyro and leg kinematics."""
+    from sysid.estimate import base_state
+
+    env = NaoSimEnv(fixed_base=False)
+    c = np.tile(robot.pose("crouch", actuated=True), (100, 1))
+    lg = from_recording(rollout(env, CommandLog(c), seed=0, seconds=1.0), "float")
+    for k in (0, 50, 99):
+        est = base_state(lg, k)
+        assert abs(est["pos"][2] - lg.gt["gt.base"][k, 2]) < 3e-3
+        assert abs(abs(float(est["quat"] @ lg.gt["gt.quat"][k])) - 1.0) < 1e-4  # same tilt (yaw 0 here)
+        assert np.abs(est["linvel"] - lg.gt["gt.vel"][k]).max() < 0.02
+    lg.gt = {}
+    wins = windows([lg], [0], 0.5)
+    out = predict([lg], wins, [{}], with_imu=True)
+    assert np.abs(out[0][0, :, :24] - lg.q[:50]).max() < 5e-3
