@@ -38,6 +38,18 @@ def build_model(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_
         ``mujoco.MjModel`` with 24 hinge joints (+ free joint unless ``fixed_base``), 24 PD
         actuators in ``robot.joint_names`` order, sites ``l_sole``, ``r_sole``, ``gyro``, ``accel``.
     """
+    return build_spec(robot, terrain, fixed_base=fixed_base, hang_height=hang_height, physics_dt=physics_dt,
+                      friction=friction).compile()
+
+
+def build_spec(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_base: bool = False,
+               hang_height: float = 0.6, physics_dt: float = 0.002,
+               friction: float = NOMINAL_FOOT_FRICTION) -> mujoco.MjSpec:
+    """The uncompiled ``mujoco.MjSpec`` of :func:`build_model` (same arguments), for callers that
+    add to the model before compiling it (``sysid.model`` adds delay buffers, sensors, play hinges).
+
+    The ground geom is named ``ground``: a plane, or the heightfield ``terrain``.
+    """
     spec = mujoco.MjSpec.from_file(robot.write_urdf())
     spec.compiler.fusestatic = False
     spec.option.timestep = physics_dt
@@ -78,7 +90,7 @@ def build_model(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_
                                          pos=[0.0, 0.0, lo])
     ground.contype, ground.conaffinity = 1, 1
     ground.friction = [friction, 0.005, 0.0001]
-    return spec.compile()
+    return spec
 
 
 class NaoSimEnv(NaoEnv):

@@ -38,12 +38,17 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--real-episodes", type=int, help=f"real walks per grounding step (default {d.real_episodes})")
     p.add_argument("--sim-episodes", type=int, help=f"sim walks with exploration noise per step (default {d.sim_episodes})")
     p.add_argument("--exploration-noise", type=float, help=f"sim data action noise [rad] (default {d.exploration_noise})")
+    p.add_argument("--select-episodes", type=int, help=f"episodes on which the CMA-ES mean, best candidate and θ_i "
+                   f"are compared to pick θ_i+1 (default {d.select_episodes})")
     p.add_argument("--eval-trials", type=int, help=f"real trials per evaluation (default {d.eval_trials})")
     p.add_argument("--profile", help=f"real-world effect profile (default {d.profile})")
     p.add_argument("--grounding-state", choices=["legs", "legs+imu"], help="grounding state (default legs)")
     p.add_argument("--history", type=int, help="frames of state history in the models (default 1)")
     p.add_argument("--alpha", type=float, help="blend ã = (1-α) a + α g(s,a) of raw and grounded action (default 0.5; 1 = the paper's formula)")
     p.add_argument("--model-epochs", type=int, help=f"max training epochs of each model (default {d.model_epochs})")
+    p.add_argument("--no-aggregate", dest="aggregate", action="store_false", default=None,
+                   help="fit each grounding step's models on θ_i's walks only (default: on the walks of "
+                        "every θ_j so far, as the GARAT code accumulates data)")
     p.add_argument("--ane-sigma", type=float, help=f"ANE action noise [rad] (default {d.ane_sigma})")
     p.add_argument("--params", help="initial gait parameters θ0 (JSON; default: the walk engine's θ0)")
     p.add_argument("--seed", type=int, help="run seed (default 0)")

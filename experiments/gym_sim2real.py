@@ -44,7 +44,6 @@ import json
 import math
 import os
 import sys
-import tempfile
 import time
 import uuid
 from pathlib import Path
@@ -52,6 +51,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from experiments.files import atomic_write_bytes as _atomic_write_bytes
+from experiments.files import atomic_write_text
 from experiments.gym_config import METHODS, NO_REAL_DATA, GymConfig
 from experiments.gym_envs import make_env, set_state_from_obs
 
@@ -529,23 +530,6 @@ def run_task(task: dict) -> dict:
 # Results table
 # --------------------------------------------------------------------------------------------
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-
-
 def _normalize_row(r: dict) -> dict:
     out = {k: r.get(k, math.nan) for k in ROW_KEYS}
     for k in ("run", "episodes", "n_real", "train_steps"):
@@ -835,7 +819,7 @@ def _write_json(path: Path, obj) -> None:
 
 
 def _write_text(path: Path, text: str) -> None:
-    _atomic_write_bytes(path, text.encode())
+    atomic_write_text(path, text)
 
 
 # --------------------------------------------------------------------------------------------

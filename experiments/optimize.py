@@ -7,15 +7,18 @@ For each method and grounding step i (θ_0 = the walk engine's initial parameter
 2. **Sim data** -- ``sim_episodes`` walks with θ_i in the MuJoCo sim with Gaussian exploration
    noise on the leg targets, so the inverse model covers the states the forward model proposes.
 3. **Grounding** -- fit ``f_real`` (SGAT: Gaussian NLL; GAT: MSE) and ``f_sim^-1``
-   (``sgat.grounding.fit_transformer``); the transformer is saved under ``models/``.
+   (``sgat.grounding.fit_transformer``) on the walks of θ_i and, with ``aggregate`` (default),
+   of every earlier θ_j, as the GARAT/GAT code accumulates data across grounding steps; the
+   transformer is saved under ``models/``.
 4. **Policy improvement** -- CMA-ES (pycma) over the 16 normalized gait parameters, started at
    θ_i with step size ``sigma0`` and bounded to a trust region of ±``trust_region`` around θ_i
    (the grounding models were fitted on θ_i's data and do not hold far from it: without the
    bound, CMA-ES finds 30-50 cm/s gaits in the grounded sim that fall in every real trial), in
    the grounded sim (``sgat.GroundedEnv``); each candidate's fitness is the paper's reward
    (forward speed in cm/s, −15 if it fell) averaged over ``episodes_per_candidate`` episodes on
-   seeds shared by the whole generation (common random numbers). θ_{i+1} is the better of the
-   distribution mean and the best candidate, re-evaluated on fresh seeds.
+   seeds shared by the whole generation (common random numbers). θ_{i+1} is the best of the
+   distribution mean, the best candidate and θ_i itself, re-evaluated on ``select_episodes``
+   fresh seeds shared by the three.
 5. **Evaluation** -- ``eval_trials`` walks of θ_{i+1} in the real world on fresh seeds (shared
    by all methods): speed mean ± std and falls, the paper's Table I.
 
@@ -71,6 +74,7 @@ class OptimizeConfig:
     sigma0: float = 0.05
     trust_region: float = 0.15
     episodes_per_candidate: int = 1
+    select_episodes: int = 8
     seconds: float = 7.5
     eval_trials: int = 10
     profile: str = "real"
@@ -80,6 +84,7 @@ class OptimizeConfig:
     hidden: tuple = (64, 64)
     ane_sigma: float = 0.05
     model_epochs: int = 150
+    aggregate: bool = True
     seed: int = 0
     params: str | None = None
 
@@ -89,7 +94,7 @@ class OptimizeConfig:
         if bad or not self.methods:
             raise ValueError(f"unknown method(s) {bad or '(none given)'}; choose from {', '.join(METHODS)}")
         for name in ("grounding_steps", "real_episodes", "sim_episodes", "popsize", "generations",
-                     "episodes_per_candidate", "eval_trials", "history", "model_epochs"):
+                     "episodes_per_candidate", "select_episodes", "eval_trials", "history", "model_epochs"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.popsize < 2:
@@ -236,9 +241,10 @@ class Optimizer:
         out = os.path.join(self.run_dir, "models", f"{method}_step{step}")
         if os.path.exists(os.path.join(out, "transformer.json")):
             return out
-        real = self._recordings("real", theta, _seeds(cfg, 1, step, n=cfg.real_episodes))
-        sim = self._recordings("sim", theta, _seeds(cfg, 2, step, n=cfg.sim_episodes),
-                               action_noise=cfg.exploration_noise)
+        real, sim = [], []
+        for j, th in self._data_thetas(method, step, theta):
+            real += self._recordings("real", th, _seeds(cfg, 1, j, n=cfg.real_episodes))
+            sim += self._recordings("sim", th, _seeds(cfg, 2, j, n=cfg.sim_episodes), action_noise=cfg.exploration_noise)
         env = NaoSimEnv()
         spec = GroundingSpec.for_nao(env, cfg.grounding_state, cfg.history)
         t0 = time.perf_counter()
@@ -250,6 +256,19 @@ class Optimizer:
                  f"(forward val loss {fit.forward_report.val_loss:.3f}, inverse {fit.inverse_report.val_loss:.3f}, "
                  f"{time.perf_counter() - t0:.0f} s)")
         return out
+
+    def _data_thetas(self, method: str, step: int, theta) -> list[tuple[int, np.ndarray]]:
+        """(grounding step j, θ_{j-1}) pairs whose walks ground step ``step``: only θ_i's own with
+        ``aggregate=False``; with ``aggregate=True`` (default) every earlier step's too, as the
+        GARAT/GAT code accumulates its data across grounding steps (``reference/grounding.md`` §3).
+        Earlier steps' recordings are cached under ``data/``, so aggregation costs no new walks."""
+        if not self.cfg.aggregate:
+            return [(step, np.asarray(theta))]
+        thetas = {0: np.asarray(self.state["theta0"])}
+        for r in self.state["rows"]:
+            if r["method"] == method and r["step"] >= 1:
+                thetas[r["step"]] = np.asarray(r["theta"])
+        return [(j, thetas[j - 1]) for j in range(1, step)] + [(step, np.asarray(theta))]
 
     def _world_kw(self, method: str, step: int) -> tuple[str, dict]:
         if method in ("sgat", "gat"):
@@ -313,19 +332,27 @@ class Optimizer:
             bar.close()
 
     def _select(self, method: str, step: int, prog: dict) -> np.ndarray:
-        """θ_{i+1}: the better of the CMA-ES mean and the best candidate on fresh seeds."""
+        """θ_{i+1}: the best of the CMA-ES mean, the best candidate and the incumbent θ_i in the
+        training world, on ``select_episodes`` fresh seeds shared by the three (common random
+        numbers). Keeping θ_i when neither beats it means a step the grounded sim cannot confirm
+        changes nothing; re-evaluating on fresh seeds removes the best candidate's winner's curse."""
         from walk_engine import GaitParams
 
         cfg = self.cfg
         es = prog["es"]
         world, kw = self._world_kw(method, step)
+        names = ["CMA-ES mean", "best candidate", "incumbent θ_i"]
         cands = [GaitParams.from_vector(es.result.xfavorite, clip=True).to_array(),
-                 GaitParams.from_vector(es.result.xbest, clip=True).to_array()]
-        seeds = _seeds(cfg, 5, step, n=max(2, cfg.episodes_per_candidate))
+                 GaitParams.from_vector(es.result.xbest, clip=True).to_array(), np.asarray(prog["theta"], dtype=float)]
+        seeds = _seeds(cfg, 5, step, n=cfg.select_episodes)
         res = self._map([t for th in cands for t in self._tasks(world, th, seeds, **kw)], "select")
         n = len(seeds)
-        scores = [np.mean([r["fitness"] for r in res[i * n:(i + 1) * n]]) for i in range(2)]
-        return cands[int(np.argmax(scores))]
+        scores = [float(np.mean([r["fitness"] for r in res[i * n:(i + 1) * n]])) for i in range(len(cands))]
+        k = int(np.argmax(scores))
+        self.log(f"[{method} step {step}] selected the {names[k]} (fitness in the training world over {n} episodes: "
+                 + ", ".join(f"{nm} {sc:.1f}" for nm, sc in zip(names, scores)) + ")")
+        prog["select_scores"] = dict(zip(("mean", "best", "incumbent"), scores))
+        return cands[k]
 
     def _evaluate(self, theta, step: int, label: str) -> dict:
         res = self._map(self._tasks("real", theta, _seeds(self.cfg, 6, step, n=self.cfg.eval_trials)), f"{label} real eval")
@@ -408,7 +435,8 @@ class Optimizer:
                     theta = np.array(prog["selected"])
                     ev = self._evaluate(theta, step, method)
                     GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
-                    self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist()})
+                    self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist(),
+                                               "select_scores": prog.get("select_scores")})
                     self.log(f"[{method} step {step}] real: {ev['speed_mean']:.2f} ± {ev['speed_std']:.2f} cm/s, "
                              f"falls {ev['falls']}/{ev['trials']}")
                     prog.update(step=step + 1, stage="fit", theta=theta.tolist(), es=None, gen=0)

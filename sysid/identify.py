@@ -27,8 +27,7 @@ from scipy.optimize import least_squares, nnls
 
 from sysid.candidates import FAMILIES, Term, joints_above, links_below
 from sysid.data import Log
-from sysid.replay import Window, build_models, measured, predict
-from sysid.model import Structure
+from sysid.replay import Window, measured, predict
 
 
 # ------------------------------------------------------------------------------------------ problem

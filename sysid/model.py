@@ -33,6 +33,7 @@ import mujoco
 import numpy as np
 
 from envs.effects import NOMINAL_FOOT_FRICTION
+from envs.mujoco_world import build_spec
 from robots import RobotModel, nao_h25
 
 #: Longest actuation latency a candidate can take [s] (history buffer length).
@@ -75,36 +76,8 @@ def base_spec(robot: RobotModel, *, fixed_base: bool, physics_dt: float, hang_he
         An uncompiled spec: 24 hinges (+ free joint ``root`` unless ``fixed_base``), 24 PD
         actuators named like the joints, sites for ``robot.frames``, a ground plane ``ground``.
     """
-    spec = mujoco.MjSpec.from_file(robot.write_urdf())
-    spec.compiler.fusestatic = False
-    spec.option.timestep = physics_dt
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER
-    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL
-    torso = spec.body(robot.root)
-    if fixed_base:
-        torso.pos = [0.0, 0.0, hang_height]
-    else:
-        torso.add_freejoint(name="root")
-    for g in spec.geoms:
-        g.contype, g.conaffinity = 1, 0
-        g.friction = [friction, 0.005, 0.0001]
-    for eq in spec.equalities:
-        eq.solref = [2 * physics_dt, 1.0]
-        eq.solimp = [0.99, 0.999, 0.001, 0.5, 2.0]
-    for name, fr in robot.frames.items():
-        spec.body(fr.link).add_site(name=name, pos=list(fr.offset))
-    for j in robot.joints:
-        a = spec.add_actuator(name=j.name, target=j.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        a.gaintype = mujoco.mjtGain.mjGAIN_FIXED
-        a.biastype = mujoco.mjtBias.mjBIAS_AFFINE
-        a.gainprm[0] = j.kp
-        a.biasprm[0:3] = [0.0, -j.kp, -j.kd]
-        a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
-        a.forcerange = [-j.effort, j.effort]
-    ground = spec.worldbody.add_geom(name="ground", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
-    ground.contype, ground.conaffinity = 1, 1
-    ground.friction = [friction, 0.005, 0.0001]
-    return spec
+    return build_spec(robot, None, fixed_base=fixed_base, hang_height=hang_height, physics_dt=physics_dt,
+                      friction=friction)
 
 
 def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:

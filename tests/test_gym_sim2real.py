@@ -1,7 +1,6 @@
 """The gym sim-to-real pipeline: policies in NumPy, grounding InvertedPendulum, results table,
 summary/figure, CLI. The end-to-end sweep is a slow test."""
 
-import io
 import json
 import math
 import os

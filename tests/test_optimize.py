@@ -16,7 +16,7 @@ from experiments.optimize import CheckpointError, Optimizer
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--grounding-steps", "1", "--popsize", "4", "--generations", "3", "--seconds", "0.6",
-        "--real-episodes", "1", "--sim-episodes", "1", "--eval-trials", "2", "--workers", "1", "--model-epochs", "20"]
+        "--real-episodes", "1", "--sim-episodes", "1", "--eval-trials", "2", "--select-episodes", "2", "--workers", "1", "--model-epochs", "20"]
 
 
 def test_tiny_run_writes_the_run_directory(tmp_path, capsys):
@@ -95,3 +95,25 @@ def test_wrong_shape_weights_are_rejected(tmp_path):
     ForwardModel(10, 11).save(tmp_path / "m" / "forward.pt")
     with pytest.raises(ModelFileError, match="inputs"):
         ActionTransformer.load(tmp_path / "m")
+
+
+def test_grounding_data_accumulates_across_steps(tmp_path):
+    """Step i is grounded on the walks of θ_0 .. θ_{i-1} of its own method (GARAT's data
+    accumulation); ``aggregate=False`` keeps only θ_{i-1}'s."""
+    from experiments.optimize import OptimizeConfig
+    from walk_engine import GaitParams
+
+    th0 = GaitParams.initial().to_array()
+    th1, th1_gat = th0 * 1.01, th0 * 0.99
+    rows = [{"method": "theta0", "step": 0}, {"method": "sgat", "step": 1, "theta": th1.tolist()},
+            {"method": "gat", "step": 1, "theta": th1_gat.tolist()}]
+    opt = Optimizer(OptimizeConfig(), str(tmp_path / "a"), None, progress=False)
+    opt.state = {"theta0": th0.tolist(), "rows": rows}
+    pairs = opt._data_thetas("sgat", 2, th1)
+    assert [j for j, _ in pairs] == [1, 2]
+    np.testing.assert_array_equal(pairs[0][1], th0)
+    np.testing.assert_array_equal(pairs[1][1], th1)
+    assert [j for j, _ in opt._data_thetas("sgat", 1, th0)] == [1]
+    opt.cfg = OptimizeConfig(aggregate=False)
+    (j, th), = opt._data_thetas("gat", 2, th1_gat)
+    assert j == 2 and np.array_equal(th, th1_gat)
