@@ -20,8 +20,13 @@ foot_friction       global     --        ``geom_friction[:, 0]`` of every geom  
 ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.02 -> 0.04
 ==================  =========  ========  ===========================================  ============
 
-``joint_compliance`` and ``terrain_roughness`` are named by the report vocabulary but have no
-augmentation here yet (see the README's list of what is not done).
+``joint_compliance`` has no augmentation of its own: with the encoder on the output and a light
+motor side, a series spring k in a position loop kp is statically the gain kp k / (kp + k), and its
+motor-side resonance lies far above what 100 Hz encoder logs resolve, so in this data it is the
+``pd_gain`` column. The report gives every softer-servo finding its equivalent series compliance
+(1 - x) / (x kp) [rad/(N m)] under "cannot be told apart", with the experiment that separates them
+(torque or motor current against deflection). ``terrain_roughness`` (a distribution of random
+heightfields, fitted DROPO-style) is named by the vocabulary but not modelled here.
 """
 
 from __future__ import annotations

@@ -52,6 +52,14 @@ EXPERIMENTS = {
 }
 
 
+#: What separates a servo gain error from a series joint compliance. With the encoder on the output
+#: and a light motor side, a spring k in series with a position loop kp is statically the gain
+#: kp k / (kp + k) and its motor-side resonance lies far above what 100 Hz encoder logs resolve, so
+#: the two are one column in this data; ``joint_compliance`` has no separate augmentation.
+COMPLIANCE_EXPERIMENT = ("a torque or motor-current measurement against the output deflection, or a motor-side "
+                         "encoder: a series compliance deflects between motor and output, a gain error does not")
+
+
 def _experiment(a: str, b: str) -> str:
     return EXPERIMENTS.get(frozenset({a, b}), "a longer chirp (0.3-4 Hz) and posture holds on the joints involved")
 
@@ -406,6 +414,13 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         if any(t.label() == a.replace("(-)", "") for t in model):
             indist.append({"a": a.replace("(-)", ""), "b": b.replace("(-)", ""), "corr": c,
                            "experiment": _experiment(fa, fb.split("(")[0])})
+    kp_of = dict(zip(robot.joint_names, robot.kp))
+    for e in effects:  # a softer servo is, in encoder data, also a series joint compliance (sysid.md §3)
+        if e["family"] == "pd_gain" and e["value"] < 1.0:
+            j = e["joints"][0]
+            c = (1.0 - e["value"]) / (e["value"] * kp_of[j])
+            indist.append({"a": f"pd_gain[{j}]", "b": f"joint_compliance[{j}] ({c:.3g} rad/(N m) in series)",
+                           "corr": 1.0, "experiment": COMPLIANCE_EXPERIMENT})
     rms_after, per_after = problem.rms(model, "heldout")
     e_after = problem.channel_energy(problem.predict([model], "heldout"), "heldout")[0]
     gap_closed = None

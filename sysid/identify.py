@@ -193,7 +193,7 @@ def omp_bic(D: np.ndarray, r: np.ndarray, n_eff: float, max_k: int = 6,
     best = (path[0][1], [], np.zeros(0))
     sel: list[int] = []
     resid = r.copy()
-    for k in range(1, max_k + 1):
+    for k in range(1, min(max_k, D.shape[1]) + 1):  # no columns (every candidate already in the model): none
         score = np.where(ok, (D.T @ resid) / np.where(ok, norms, 1.0), -np.inf)
         score[sel] = -np.inf
         i = int(np.argmax(score))

@@ -56,3 +56,6 @@ def test_omp_bic_picks_the_generating_columns():
     np.testing.assert_allclose(sorted(w), [0.7, 2.0], atol=0.1)
     sel0, _, _ = omp_bic(D, rng.normal(size=2000), n_eff=200)
     assert sel0 == []  # pure noise: nothing selected
+    # every candidate already in the model (an empty dictionary) or fewer columns than max_k
+    assert omp_bic(np.zeros((2000, 0)), r, n_eff=200)[0] == []
+    assert sorted(omp_bic(D[:, [3, 8]], r, n_eff=200, max_k=6)[0]) == [0, 1]
