@@ -58,6 +58,9 @@ class Family:
         contact: only meaningful with ground contact (floating base).
         probe2: a second, large probe for families whose response is far from linear in the
             value (stick-slip, dead zones): screening tries both and keeps the better match.
+        min_effect: smallest departure from nominal the report names (in ``unit``): a fitted term
+            closer to nominal is rejected as "below the smallest reported effect" (it is within
+            what the noise and the other terms' errors move a fit, not physics worth acting on).
     """
 
     name: str
@@ -72,6 +75,7 @@ class Family:
     log: bool = False
     contact: bool = False
     probe2: float | None = None
+    min_effect: float = 0.0
 
     def fmt(self, v: float) -> str:
         """Value in report units, e.g. '24.8 ms', 'x0.78', '0.197 N m'."""
@@ -85,20 +89,20 @@ class Family:
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (
-    Family("latency", "actuation latency", "global", "s", 0.0, 0.0, 0.075, 0.010, smooth=False, probe2=0.03),
-    Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05),
+    Family("latency", "actuation latency", "global", "s", 0.0, 0.0, 0.075, 0.010, smooth=False, probe2=0.03, min_effect=0.001),
+    Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05, min_effect=0.002),
     Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
-           probe2=0.2),
-    Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05),
-    Family("pd_gain", "servo stiffness (kp) mismatch", "joint", "x kp", 1.0, 0.3, 2.0, 0.85),
-    Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False),
-    Family("link_mass", "link mass error", "link", "x mass", 1.0, 0.3, 3.0, 1.3),
-    Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002),
-    Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005),
+           probe2=0.2, min_effect=0.01),
+    Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05, min_effect=0.005),
+    Family("pd_gain", "servo stiffness (kp) mismatch", "joint", "x kp", 1.0, 0.3, 2.0, 0.85, min_effect=0.03),
+    Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False, min_effect=0.03),
+    Family("link_mass", "link mass error", "link", "x mass", 1.0, 0.3, 3.0, 1.3, min_effect=0.03),
+    Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002, min_effect=2e-4),
+    Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005, min_effect=5e-4),
     Family("foot_friction", "foot-ground friction", "global", "", NOMINAL_FOOT_FRICTION, 0.05, 1.5, 0.4,
-           smooth=False, contact=True),
+           smooth=False, contact=True, min_effect=0.02),
     Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", 0.02, 0.004, 0.1,
-           0.04, smooth=False, contact=True),
+           0.04, smooth=False, contact=True, min_effect=0.002),
 )}
 #: Families screened on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact)

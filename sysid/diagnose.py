@@ -110,6 +110,17 @@ def _bic(problem: Problem, values: dict, n_params: int) -> float:
     return n_eff * math.log(max(float(R @ R) * n_eff / n, 1e-300) / n_eff) + n_params * math.log(n_eff)
 
 
+def _below_min_effect(values: dict) -> list[Term]:
+    """Terms whose value is within their family's ``min_effect`` of nominal."""
+    return [t for t, v in values.items() if abs(float(v) - t.fam.nominal) < t.fam.min_effect]
+
+
+def _small_entry(t: Term, v: float) -> dict:
+    return {"term": t.label(), "family": t.family, "value": float(v),
+            "reason": f"{t.fam.fmt(v)} is within the smallest reported effect ({t.fam.min_effect:g} {t.fam.unit}) "
+                      "of the sim's value"}
+
+
 def _entry(t: Term, v: float, ci, robot) -> dict:
     fam = t.fam
     if fam.scope == "global":
@@ -346,6 +357,10 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                                  "reason": f"removing it changes the held-out cost by {float(costs[1 + terms.index(t)] - c_with):+.2f} "
                                            f"(< {_margin(c_with, k):.2f}): not needed"})
                 cand.pop(t)
+            small = _below_min_effect(cand)
+            for t in small:
+                rejected.append(_small_entry(t, cand.pop(t)))
+            drop += small
             if drop and cand:
                 fit = refit(problem, cand, grid=False, max_nfev=6)
                 cand = dict(fit.values)
@@ -382,6 +397,13 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                                              "reason": f"backward elimination: without {f} (rest refitted) the held-out "
                                                        f"cost changes by {c_wo - cost:+.2f}"})
                     model, cost = dict(fit.values), c_wo
+    small = _below_min_effect(model)
+    if small:  # a refit can move an earlier term to within the smallest reported effect of nominal
+        for t in small:
+            rejected.append(_small_entry(t, model.pop(t)))
+        if model:
+            model = dict(refit(problem, model, grid=False, max_nfev=6).values)
+        cost = float(problem.cost([model], "heldout")[0]) if model else c0
     # final fit quality, intervals, identifiability
     effects, indist = [], []
     if model:
