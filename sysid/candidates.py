@@ -89,13 +89,16 @@ class Family:
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in (
-    Family("latency", "actuation latency", "global", "s", 0.0, 0.0, 0.075, 0.010, smooth=False, probe2=0.03, min_effect=0.001),
-    Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05, min_effect=0.002),
+    Family("latency", "actuation latency", "global", "s", 0.0, 0.0, 0.075, 0.010, smooth=False, probe2=0.03,
+           min_effect=0.001),
+    Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05,
+           min_effect=0.002),
     Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
            probe2=0.2, min_effect=0.01),
     Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05, min_effect=0.005),
     Family("pd_gain", "servo stiffness (kp) mismatch", "joint", "x kp", 1.0, 0.3, 2.0, 0.85, min_effect=0.03),
-    Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False, min_effect=0.03),
+    Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False,
+           min_effect=0.03),
     Family("link_mass", "link mass error", "link", "x mass", 1.0, 0.3, 3.0, 1.3, min_effect=0.03),
     Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002, min_effect=2e-4),
     Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005, min_effect=5e-4),

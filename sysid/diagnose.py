@@ -52,10 +52,8 @@ EXPERIMENTS = {
 }
 
 
-#: What separates a servo gain error from a series joint compliance. With the encoder on the output
-#: and a light motor side, a spring k in series with a position loop kp is statically the gain
-#: kp k / (kp + k) and its motor-side resonance lies far above what 100 Hz encoder logs resolve, so
-#: the two are one column in this data; ``joint_compliance`` has no separate augmentation.
+#: What separates a servo gain error from a series joint compliance (why they are one column in
+#: encoder data: see the :mod:`sysid.candidates` docstring).
 COMPLIANCE_EXPERIMENT = ("a torque or motor-current measurement against the output deflection, or a motor-side "
                          "encoder: a series compliance deflects between motor and output, a gain error does not")
 

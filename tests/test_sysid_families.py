@@ -59,3 +59,11 @@ def test_omp_bic_picks_the_generating_columns():
     # every candidate already in the model (an empty dictionary) or fewer columns than max_k
     assert omp_bic(np.zeros((2000, 0)), r, n_eff=200)[0] == []
     assert sorted(omp_bic(D[:, [3, 8]], r, n_eff=200, max_k=6)[0]) == [0, 1]
+
+
+def test_terms_within_the_smallest_reported_effect_are_flagged():
+    from sysid.diagnose import _below_min_effect
+
+    vals = {Term("sensor_bias", "LHipPitch"): 1e-4, Term("pd_gain", "RKneePitch"): 1.013,
+            Term("pd_gain", "LKneePitch"): 0.9, Term("latency"): 0.02, Term("armature", "LHipRoll"): 5e-4}
+    assert sorted(t.label() for t in _below_min_effect(vals)) == ["pd_gain[RKneePitch]", "sensor_bias[LHipPitch]"]
