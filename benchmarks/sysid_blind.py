@@ -60,10 +60,13 @@ FAMILIES = ["latency", "backlash", "coulomb_friction", "viscous_damping", "pd_ga
 CLASSES = {"sim": ["none"] + FAMILIES, "real": ["none"] + [f for f in FAMILIES if f != "armature"]}
 #: Floating-base (standing/stepping) classes; PyBullet ground compliance is a stiffness/damping pair
 #: with no one-to-one map to MuJoCo's solref time constant, so it is run in the sim world only.
-CLASSES_FLOATING = {"sim": ["none", "foot_friction", "ground_compliance"], "real": ["none", "foot_friction"]}
+#: Terrain roughness: every log on a fresh sparse-bump field (``terrain.lumpy`` via
+#: ``sysid.worlds.rough_ground``; the tool's model is a dense Gaussian random field).
+CLASSES_FLOATING = {"sim": ["none", "foot_friction", "ground_compliance", "terrain_roughness"],
+                    "real": ["none", "foot_friction", "terrain_roughness"]}
 NOMINAL = {"latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
            "torque_limit": 1.0, "link_mass": 1.0, "armature": 0.0, "sensor_bias": 0.0, "foot_friction": 0.8,
-           "ground_compliance": 0.02}
+           "ground_compliance": 0.02, "terrain_roughness": 0.0}
 ANGLE_NOISE, GYRO_NOISE = 2e-3, 1e-2  # floating base: torso roll/pitch [rad], gyro [rad/s]
 NOISE = 1e-3  # encoder noise [rad]
 MIN_LINK_MASS = 0.1  # links lighter than this are not drawn for mass errors [kg]
@@ -116,7 +119,7 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
     x0.6-0.75 on one link >= 0.1 kg; armature 0.003-0.012 kg m^2; sensor bias ±5-20 mrad;
     1-3 joints (any actuated joint; for damping only those of
     :func:`explicit_damping_stable_joints`) for local effects; foot friction 0.2-0.4 (nominal 0.8); ground
-    contact time constant 35-60 ms (nominal 20 ms).
+    contact time constant 35-60 ms (nominal 20 ms); terrain roughness: peak bump height 5-15 mm.
     """
     joints = list(robot.actuated_joint_names)
     eff = dict(zip(robot.joint_names, robot.effort))
@@ -129,6 +132,8 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
         return {"family": family, "targets": [None], "values": [float(rng.uniform(0.5, 0.75))]}
     if family == "foot_friction":
         return {"family": family, "targets": [None], "values": [float(rng.uniform(0.2, 0.4))]}
+    if family == "terrain_roughness":  # peak height of the sparse-bump field [m]
+        return {"family": family, "targets": [None], "values": [float(rng.uniform(0.005, 0.015))]}
     if family == "ground_compliance":  # MuJoCo contact time constant [s] (nominal 0.02)
         return {"family": family, "targets": [None], "values": [float(rng.uniform(0.035, 0.06))]}
     if family == "link_mass":
@@ -176,6 +181,8 @@ def _arrays(effects: list[dict], robot) -> dict:
                 a["foot_friction"] = v
             elif f == "ground_compliance":
                 a["ground_timeconst"] = v
+            elif f == "terrain_roughness":
+                pass  # the ground itself: see record()
             elif f == "torque_limit":
                 a["torque_scale"] = v
             elif f == "link_mass":
@@ -331,12 +338,14 @@ def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: f
            fixed_base: bool = True) -> float:
     """Record ``n_logs`` excitation logs with ``hidden`` effects into ``out_dir`` (metadata stripped)."""
     from envs.recording import Recording
-    from sysid.worlds import record_excitation
+    from sysid.worlds import record_excitation, rough_ground
 
     t0 = time.perf_counter()
     env = make_world(world, hidden, fixed_base)
     tmp = out_dir + ".tmp"
-    paths = record_excitation(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed, prefix="log")
+    amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e["values"])
+    paths = record_excitation(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed, prefix="log",
+                              terrain=rough_ground(amp, seed) if amp > 0 else None)
     env.close()
     os.makedirs(out_dir, exist_ok=True)
     for p in paths:

@@ -21,7 +21,9 @@ def register(sub) -> argparse.ArgumentParser:
                    help="override one profile effect with a fixed value, e.g. latency_s=0.02 (repeatable)")
     p.add_argument("--fixed-base", action="store_true", help="hang the robot in the air (actuator tests; recommended first)")
     p.add_argument("--terrain", default="flat", choices=("flat", "lumpy"),
-                   help="real-world ground for floating-base logs (default flat)")
+                   help="real-world ground for floating-base logs (default flat); lumpy: a fresh field of random "
+                        "bumps per log under the feet (no flat start pad), peak height from the profile's "
+                        "terrain_amplitude (e.g. --effect terrain_amplitude=0.01)")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for the recordings")
     p.add_argument("--logs", type=int, default=4, help="number of trajectories (default 4; >= 2 for a held-out split)")
     p.add_argument("--seconds", type=float, default=8.0, help="duration of each log [s] (default 8)")
@@ -36,7 +38,7 @@ def run(args) -> dict:
     from envs import make_world
     from envs.effects import get_profile
     from robots import nao_h25
-    from sysid.worlds import freeze, record_excitation
+    from sysid.worlds import freeze, record_excitation, rough_ground
 
     if args.logs < 1:
         raise ValueError(f"--logs must be >= 1, got {args.logs}")
@@ -44,6 +46,7 @@ def run(args) -> dict:
         raise ValueError(f"--seconds must be >= 3, got {args.seconds}")
     robot = nao_h25()
     kw = {"fixed_base": args.fixed_base}
+    ground = None
     if args.world == "real":
         prof = get_profile(args.profile)
         for item in args.effect:
@@ -54,14 +57,19 @@ def run(args) -> dict:
                 prof = prof.with_effect(name.strip(), float(val))
             except ValueError as exc:
                 raise ValueError(f"--effect {item}: {exc}") from None
-        kw.update(profile=freeze(prof, args.seed, robot), terrain=args.terrain)
-    elif args.effect:
-        raise ValueError("--effect applies to the real world only")
+        frozen = freeze(prof, args.seed, robot)
+        kw.update(profile=frozen, terrain="flat")
+        if args.terrain == "lumpy":
+            if args.fixed_base:
+                raise ValueError("--terrain lumpy needs a floating base (omit --fixed-base)")
+            ground = rough_ground(float(frozen.frozen.terrain_amplitude), seed=args.seed)
+    elif args.effect or args.terrain != "flat":
+        raise ValueError("--effect and --terrain apply to the real world only")
     env = make_world(args.world, **kw)
     t0 = time.perf_counter()
     say = None if args.json else print
     paths = record_excitation(env, args.out, n_logs=args.logs, seconds=args.seconds, seed=args.seed,
-                              scale=args.scale, progress=say)
+                              scale=args.scale, progress=say, terrain=ground)
     env.close()
     wall = time.perf_counter() - t0
     if not args.json:

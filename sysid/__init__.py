@@ -4,11 +4,13 @@ Pipeline (``shared/reference/sysid.md``): calibrate the engine gap (:func:`calib
 real commands in MuJoCo from the measured state (:mod:`sysid.replay`, batched through
 ``mujoco.rollout``; windowed for floating-base logs) → localisation statistics
 (:mod:`sysid.stats`) → screening with a sensitivity dictionary and OMP/BIC, bounded nonlinear
-refit, held-out selection and intervals (:mod:`sysid.identify`, :func:`diagnose`) → report,
+refit, held-out selection and intervals (:mod:`sysid.identify`, :func:`diagnose`) → for
+floating-base logs, terrain roughness as a fitted distribution of random surfaces
+(:mod:`sysid.roughness`) → report,
 plots and MJCF (:mod:`sysid.report`).
 
 Modules: ``data`` (loading/validating logs), ``model`` (replay models), ``candidates`` (the
-effect library), ``excitation`` (the protocol a user runs on a robot), ``worlds`` (recording it
+effect library), ``roughness`` (uneven ground, fitted by simulation), ``excitation`` (the protocol a user runs on a robot), ``worlds`` (recording it
 with one robot's frozen effects), ``estimate`` (floating-base state without ground truth),
 ``synthetic`` (self-consistent logs for tests).
 

@@ -18,6 +18,8 @@ armature            joint      kg m^2    ``dof_armature`` (added)               
 sensor_bias         joint      rad       measured angle offset (replay starts at q-b)  0.005
 foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
 ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.02 -> 0.04
+terrain_roughness   global     m         random heightfields (a distribution, fitted   (stochastic:
+                                         by :mod:`sysid.roughness`)                    no column)
 ==================  =========  ========  ===========================================  ============
 
 ``joint_compliance`` has no augmentation of its own: with the encoder on the output and a light
@@ -25,8 +27,12 @@ motor side, a series spring k in a position loop kp is statically the gain kp k 
 motor-side resonance lies far above what 100 Hz encoder logs resolve, so in this data it is the
 ``pd_gain`` column. The report gives every softer-servo finding its equivalent series compliance
 (1 - x) / (x kp) [rad/(N m)] under "cannot be told apart", with the experiment that separates them
-(torque or motor current against deflection). ``terrain_roughness`` (a distribution of random
-heightfields, fitted DROPO-style) is named by the vocabulary but not modelled here.
+(torque or motor current against deflection).
+
+``terrain_roughness`` is *stochastic*: uneven ground is a random surface nobody measured, so it has
+no deterministic replay and no screening column. :mod:`sysid.roughness` fits the peak height of a
+distribution of random heightfields by matching the residual statistics of simulated logs on
+sampled surfaces (floating-base logs only).
 """
 
 from __future__ import annotations
@@ -58,6 +64,8 @@ class Family:
         contact: only meaningful with ground contact (floating base).
         probe2: a second, large probe for families whose response is far from linear in the
             value (stick-slip, dead zones): screening tries both and keeps the better match.
+        stochastic: a distribution, not a value: no screening column or replay term (fitted by
+            :mod:`sysid.roughness`).
         min_effect: smallest departure from nominal the report names (in ``unit``): a fitted term
             closer to nominal is rejected as "below the smallest reported effect" (it is within
             what the noise and the other terms' errors move a fit, not physics worth acting on).
@@ -76,6 +84,7 @@ class Family:
     contact: bool = False
     probe2: float | None = None
     min_effect: float = 0.0
+    stochastic: bool = False
 
     def fmt(self, v: float) -> str:
         """Value in report units, e.g. '24.8 ms', 'x0.78', '0.197 N m'."""
@@ -85,6 +94,8 @@ class Family:
             return f"x{v:.3f}"
         if self.unit == "rad":
             return f"{1000 * v:.2f} mrad"
+        if self.unit == "m":
+            return f"{1000 * v:.1f} mm"
         return f"{v:.4g} {self.unit}".strip()
 
 
@@ -106,7 +117,11 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            smooth=False, contact=True, min_effect=0.02),
     Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", 0.02, 0.004, 0.1,
            0.04, smooth=False, contact=True, min_effect=0.002),
+    Family("terrain_roughness", "uneven ground (random surface, peak height)", "global", "m", 0.0, 0.0, 0.03, 0.01,
+           contact=True, min_effect=0.002, stochastic=True),
 )}
+#: Families with a deterministic MuJoCo augmentation (screening columns, replay terms).
+DETERMINISTIC_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.stochastic)
 #: Families screened on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact)
 #: Families screened by default on floating-base (standing/stepping) logs: bottom-up staging

@@ -305,6 +305,7 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
     Returns:
         :class:`ScreenResult` (empty ``selected`` when nothing stands out).
     """
+    families = [f for f in families if not FAMILIES[f].stochastic]  # distributions have no column
     preds = problem.predict([current], "train")
     energy = problem.channel_energy(preds, "train")[0]
     J = flagged_joints(energy, robot.joint_names)

@@ -59,6 +59,9 @@ class Structure:
         play_joints: robot joints that get a series backlash hinge.
         friction: sliding friction of all contacts (foot friction candidate edits the field).
         hang_height: torso height of a fixed-base model [m].
+        terrain: the ground is a :data:`TERRAIN_SIZE` heightfield (``ground_hfield``) whose
+            heights a caller writes with :func:`set_terrain` (uneven-ground simulations of
+            :mod:`sysid.roughness`) instead of a plane.
     """
 
     fixed_base: bool = True
@@ -66,6 +69,14 @@ class Structure:
     play_joints: tuple[str, ...] = ()
     friction: float = NOMINAL_FOOT_FRICTION
     hang_height: float = 0.6
+    terrain: bool = False
+
+
+#: Heightfield of a ``terrain`` structure: (half x, half y) [m], cell [m], elevation range [m]
+#: (heights within +-range/2 of z = 0 are representable; the field is flat at z = 0 until set).
+TERRAIN_SIZE = (1.0, 1.0)
+TERRAIN_CELL = 0.04
+TERRAIN_RANGE = 0.1
 
 
 def base_spec(robot: RobotModel, *, fixed_base: bool, physics_dt: float, hang_height: float = 0.6,
@@ -85,6 +96,16 @@ def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:
     s = structure
     spec = base_spec(robot, fixed_base=s.fixed_base, physics_dt=s.physics_dt, hang_height=s.hang_height,
                      friction=s.friction)
+    if s.terrain:  # swap the plane for a heightfield with a fixed elevation range (data set at run time)
+        ground = spec.geom("ground")
+        nx = int(round(2 * TERRAIN_SIZE[0] / TERRAIN_CELL)) + 1
+        ny = int(round(2 * TERRAIN_SIZE[1] / TERRAIN_CELL)) + 1
+        hf = spec.add_hfield(name="ground_hfield", nrow=ny, ncol=nx)
+        hf.size = [TERRAIN_SIZE[0], TERRAIN_SIZE[1], TERRAIN_RANGE, 0.05]
+        hf.userdata = [0.0] * (nx * ny)  # heights written after compiling (set_terrain)
+        ground.type = mujoco.mjtGeom.mjGEOM_HFIELD
+        ground.hfieldname = "ground_hfield"
+        ground.pos = [0.0, 0.0, -TERRAIN_RANGE / 2]
     nsample = int(np.ceil(DELAY_MAX / s.physics_dt)) + 2
     for j in spec.joints:  # hard stiction for the Coulomb candidate (inactive while frictionloss = 0)
         j.solref_friction = [FRICTION_TIMECONST_STEPS * s.physics_dt, 1.0]
@@ -147,6 +168,8 @@ class ReplayModel:
         self.spec = replay_spec(robot, structure)
         self.model = self.spec.compile()
         m = self.model
+        if structure.terrain:  # MuJoCo normalises a constant userdata to 0: set the flat field at z = 0
+            set_terrain(m, np.zeros((int(m.hfield_nrow[0]), int(m.hfield_ncol[0]))))
         jid = [m.joint(n).id for n in robot.joint_names]
         self.qadr = np.array([m.jnt_qposadr[j] for j in jid])
         self.dadr = np.array([m.jnt_dofadr[j] for j in jid])
@@ -200,6 +223,24 @@ class ReplayModel:
         st = np.empty(self.nstate)
         mujoco.mj_getState(m, d, st, mujoco.mjtState.mjSTATE_FULLPHYSICS)
         return st
+
+
+def set_terrain(m: mujoco.MjModel, heights: np.ndarray) -> None:
+    """Write ground heights [m], shape (ny, nx) of a ``terrain`` structure's grid (row = y, from
+    -half y), into ``m`` (a copy of a ``terrain`` replay model).
+
+    Raises:
+        ValueError: wrong shape, or a height outside +-TERRAIN_RANGE/2.
+    """
+    hid = m.hfield("ground_hfield").id
+    ny, nx = int(m.hfield_nrow[hid]), int(m.hfield_ncol[hid])
+    h = np.asarray(heights, dtype=float)
+    if h.shape != (ny, nx):
+        raise ValueError(f"terrain heights must have shape {(ny, nx)}, got {h.shape}")
+    if np.any(np.abs(h) > TERRAIN_RANGE / 2):
+        raise ValueError(f"terrain heights must lie within +-{TERRAIN_RANGE / 2} m")
+    adr = int(m.hfield_adr[hid])
+    m.hfield_data[adr:adr + nx * ny] = (h.ravel() + TERRAIN_RANGE / 2) / TERRAIN_RANGE
 
 
 @functools.lru_cache(maxsize=64)

@@ -129,7 +129,7 @@ def build_models(values_list: list[dict[Term, float]], structure: Structure) -> 
     out = []
     for vals in values_list:
         st = Structure(structure.fixed_base, structure.physics_dt, play_joints_of(vals), structure.friction,
-                       structure.hang_height)
+                       structure.hang_height, structure.terrain)
         rm = replay_model(st)
         m = copy.copy(rm.model)
         bias = apply_terms(rm, m, vals)

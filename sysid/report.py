@@ -89,7 +89,9 @@ def format_report(rep: dict) -> str:
     lines.append("")
     lines.append("CANNOT BE TOLD APART WITH THIS DATA" + ("" if rep["indistinguishable"] else ": nothing flagged"))
     for p in rep["indistinguishable"]:
-        lines.append(f"  - {p['a']} vs {p['b']} (|corr| {abs(p['corr']):.2f}); to separate them: {p['experiment']}")
+        c = p.get("corr")
+        cor = f" (|corr| {abs(c):.2f})" if c is not None and math.isfinite(c) else ""
+        lines.append(f"  - {p['a']} vs {p['b']}{cor}; to separate them: {p['experiment']}")
     lines.append("")
     lines.append("LOCALISATION (nominal replay, all logs): worst channels")
     ch = rep["localisation"]["channels"]

@@ -50,8 +50,12 @@ def identity_draw(robot, profile_name: str = "custom", **values) -> EffectDraw:
 
 
 def record_excitation(env, out_dir: str, *, n_logs: int = 4, seconds: float = 8.0, seed: int = 0,
-                      scale: float = 1.0, pose: str = "crouch", prefix: str = "excite", progress=None) -> list[str]:
+                      scale: float = 1.0, pose: str = "crouch", prefix: str = "excite", progress=None,
+                      terrain=None) -> list[str]:
     """Record ``n_logs`` protocol logs (trajectory seeds ``seed + i``) in ``env``; returns the paths.
+
+    ``terrain``: None (the world's own ground) or a callable ``i -> Heightfield | None`` giving the
+    ground of log ``i`` (e.g. :func:`rough_ground`).
 
     Raises:
         ValueError: non-positive ``n_logs``; what :func:`sysid.excitation.protocol` raises.
@@ -67,10 +71,36 @@ def record_excitation(env, out_dir: str, *, n_logs: int = 4, seconds: float = 8.
     for i in range(n_logs):
         cmd = protocol(base.robot, seconds, seed=seed + i, control_dt=base.control_dt, pose=pose,
                        fixed_base=base.fixed_base, scale=scale)
-        rec = rollout(env, CommandLog(cmd), seed=seed + i, seconds=seconds, options={"pose": pose},
+        opts = {"pose": pose}
+        if terrain is not None:
+            opts["terrain"] = terrain(i)
+        rec = rollout(env, CommandLog(cmd), seed=seed + i, seconds=seconds, options=opts,
                       meta={"source": "sgatwalk excite (sysid.excitation.protocol)", "excitation_seed": seed + i})
         p = rec.to_parquet(os.path.join(out_dir, f"{prefix}_{i:03d}.parquet"))
         paths.append(p)
         if progress:
             progress(f"{p}: {len(rec)} rows" + (f", fell at {rec.meta['fall_time']:.2f} s" if rec.fell else ""))
     return paths
+
+
+def rough_ground(amplitude: float, seed: int = 0):
+    """Ground for excitation logs on uneven terrain: log ``i`` gets a fresh lumpy heightfield of
+    ``amplitude`` [m] (bumps of 8 cm radius) **without** the flat start pad of the walking
+    terrains, so the feet stand and step on bumps (a 2 x 2 m patch: the robot steps in place).
+
+    Returns:
+        A callable ``i -> terrain.Heightfield`` (None when ``amplitude`` is 0).
+
+    Raises:
+        ValueError: negative amplitude.
+    """
+    from terrain import lumpy
+
+    if amplitude < 0:
+        raise ValueError(f"terrain amplitude must be >= 0, got {amplitude}")
+
+    def make(i: int):
+        if amplitude == 0:
+            return None
+        return lumpy(np.random.default_rng([seed, i, 7]), amplitude=amplitude, size=(2.0, 2.0), start_radius=0.0)
+    return make

@@ -1,0 +1,384 @@
+"""Terrain roughness as a fitted *distribution* of ground surfaces (issue 8; ``sysid.md`` §3, §5.2).
+
+Uneven ground is not a value the sim lacks but a random surface under the feet that nobody
+measured: replaying a log on flat ground leaves a residual that no deterministic term removes
+(the surface differs from log to log), concentrated in the torso angles, the ankles and the
+stance phases. The sim cannot replay the true surface, only surfaces drawn from a distribution;
+so the family is fitted by matching statistics, the way BayesSim/ABC fit stochastic effects,
+with DROPO's short windows restarted from the measured state:
+
+1. **Simulated real logs.** For each amplitude ``A`` of a grid and ``S`` random surfaces per
+   amplitude, each log's commands are run open-loop in MuJoCo on the surface, from the log's
+   initial posture with the feet set on the surface (:func:`simulate_on_surfaces`). These logs are
+   consistent with their ground (the robot stands on what is simulated), as a real log is.
+2. **Same statistic as the real logs.** They are replayed exactly like the real ones (windowed,
+   on flat ground, under the current model); the excess cost ε(A) = Σ_channels mean(e²/floor²)
+   is the statistic the diagnosis already uses, with its per-channel profile v_c(A).
+3. **Fit.** Â solves ε(Â) = ε_obs (the windows' cost above the channel count, all logs: a robot
+   stepping in place samples only the few spots its feet stand on, so one log is one draw of the
+   surface and the amplitude needs every draw there is), by interpolation of the monotone curve in
+   log-log coordinates; its 95 % interval comes from a bootstrap over logs (observed) and surfaces
+   (simulated).
+4. **Held-out check.** A random surface cannot lower the held-out RMS (it is not the surface that
+   was there); what the distribution must do is account for the held-out residual. Flat ground
+   predicts a held-out excess of 0: the held-out logs must show one above the selection margin,
+   with the residual where uneven ground puts it (cosine of the per-channel excess profiles,
+   observed vs simulated at Â, >= 0.5). The rank of each held-out log's excess among the simulated
+   logs' (every log and surface, rescaled from the nearest grid amplitude by ε(Â)/ε(A)) is reported
+   as a plausibility measure, not a gate: a robot stepping in place samples only the few spots its
+   feet stand on, and the model's dense random field varies less from spot to spot than sparse
+   bumps do (measured: PyBullet logs on sparse bumps fall below the simulated 5th percentile).
+
+Surface model (different code and form from the blind referee's sparse Gaussian bumps of
+``terrain.lumpy``): a Gaussian random field, white noise filtered with a Gaussian kernel of
+:data:`CORRELATION_RADIUS` (``scipy.ndimage.gaussian_filter``), scaled so that its largest
+excursion over the 2 x 2 m patch under the robot is ``A``; this peak height [m] is the family's
+value. The correlation radius is an assumption of the model (8 cm: foam, turf, gravel-sized
+lumps), stated in the report.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from scipy.ndimage import gaussian_filter
+
+from sysid.candidates import apply_terms, play_joints_of
+from sysid.data import Log
+from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
+from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch, _start_velocity, build_models,
+                          measured, predict)
+
+#: Correlation radius of the surface model [m] (standard deviation of the smoothing kernel).
+CORRELATION_RADIUS = 0.08
+#: Amplitude grid [m] (peak height over the patch); 0 is the flat reference.
+AMPLITUDES = (0.0, 0.003, 0.006, 0.01, 0.015, 0.022, 0.03)
+#: Smallest amplitude the report names [m].
+MIN_AMPLITUDE = 0.002
+#: Smallest held-out excess [floor², summed over channels] and per-channel profile agreement.
+MIN_HELDOUT_EXCESS = 0.25
+MIN_PROFILE_COSINE = 0.5
+
+
+def surface(amplitude: float, seed) -> np.ndarray:
+    """A random ground surface of the candidate model: heights [m], shape (51, 51) on the 4 cm
+    grid of the 2 x 2 m patch of :data:`sysid.model.TERRAIN_SIZE` (row = y, from -1 m).
+
+    Args:
+        amplitude: largest |height| over the patch [m] (>= 0, <= 0.05).
+        seed: anything :func:`numpy.random.default_rng` accepts.
+
+    Raises:
+        ValueError: amplitude outside [0, 0.05] m.
+    """
+    if not 0.0 <= amplitude <= 0.05:
+        raise ValueError(f"terrain amplitude must be within [0, 0.05] m, got {amplitude}")
+    nx = int(round(2 * TERRAIN_SIZE[0] / TERRAIN_CELL)) + 1
+    ny = int(round(2 * TERRAIN_SIZE[1] / TERRAIN_CELL)) + 1
+    if amplitude == 0:
+        return np.zeros((ny, nx))
+    rng = np.random.default_rng(seed)
+    h = gaussian_filter(rng.standard_normal((ny, nx)), CORRELATION_RADIUS / TERRAIN_CELL, mode="wrap")
+    return h * (amplitude / np.abs(h).max())
+
+
+def _height_at(h: np.ndarray, x: float, y: float) -> float:
+    from terrain import Heightfield
+
+    hx, hy = TERRAIN_SIZE
+    return float(Heightfield(h, TERRAIN_CELL).height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy)))
+
+
+def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarray]) -> list[list[Log]]:
+    """Each log's commands run open-loop on each surface, from the log's first row.
+
+    The start state is the log's measured joint angles and base pose at row 0, lifted so the
+    lower sole is 0.5 mm above the surface under both soles (like a world reset), with the
+    log's start velocities. All (surface, log) pairs go through one threaded
+    :func:`mujoco.rollout.rollout` call per log length.
+
+    Args:
+        logs: floating-base logs (with base state: ground truth or the estimator's).
+        values: the model's terms (term -> value) the simulation runs under.
+        surfaces: heights of each surface, shape (51, 51) [m] (see :func:`surface`).
+
+    Returns:
+        ``out[s][i]``: log ``i`` simulated on surface ``s``, a noise-free :class:`Log` with the same
+        times and commands, measured angles, velocities, IMU roll/pitch/gyro and base ground truth.
+
+    Raises:
+        ValueError: a fixed-base log.
+    """
+    if any(lg.fixed_base for lg in logs):
+        raise ValueError("terrain roughness needs floating-base (standing/stepping) logs")
+    lg0 = logs[0]
+    st = Structure(fixed_base=False, physics_dt=lg0.physics_dt, play_joints=play_joints_of(values), terrain=True)
+    rm = replay_model(st)
+    nq, nv = rm.model.nq, rm.model.nv
+    sole = [rm.model.site(s).id for s in ("l_sole", "r_sole")]
+    names = list(rm.robot.joint_names)
+    out = [[None] * len(logs) for _ in surfaces]
+    pool, nt = _pool()
+    for L in sorted({len(lg) for lg in logs}):
+        idx = [i for i, lg in enumerate(logs) if len(lg) == L]
+        sub = logs[idx[0]].substeps
+        nstep = (L - 1) * sub + 1
+        pairs = [(s, i) for s in range(len(surfaces)) for i in idx]
+        for c0 in range(0, len(pairs), 8):  # bounded memory: 8 full-rate state trajectories at a time
+            chunk = pairs[c0:c0 + 8]
+            mlist, states, ctrls, biases = [], [], [], []
+            for s, i in chunk:
+                lg = logs[i]
+                m = copy.copy(rm.model)
+                bias = apply_terms(rm, m, values)
+                set_terrain(m, surfaces[s])
+                x0 = rm.initial_state(m, lg.q[0] - bias, _start_velocity(lg, 0), _cmd_history(lg, 0, rm.nsample),
+                                      _base_state(lg, 0))
+                d = mujoco.MjData(m)
+                mujoco.mj_setState(m, d, x0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+                mujoco.mj_kinematics(m, d)
+                feet = [d.site_xpos[k] for k in sole]
+                ground = max(_height_at(surfaces[s], p[0], p[1]) for p in feet)
+                d.qpos[2] += ground - min(p[2] for p in feet) + 0.0005
+                mujoco.mj_getState(m, d, x0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+                rows = np.arange(nstep) // sub
+                c = np.zeros((nstep, m.nu))
+                c[:, rm.act] = lg.cmd[rows]
+                mlist.append(m)
+                states.append(x0)
+                ctrls.append(c)
+                biases.append(bias)
+            datas = [mujoco.MjData(mlist[0]) for _ in range(nt)]
+            state = np.empty((len(chunk), nstep, rm.nstate))
+            sens = np.empty((len(chunk), nstep, mlist[0].nsensordata))
+            pool.rollout(mlist, datas, np.asarray(states), np.asarray(ctrls), nstep=nstep, skip_checks=True,
+                         state=state, sensordata=sens, control_spec=mujoco.mjtState.mjSTATE_CTRL.value,
+                         initial_warmstart=None, chunk_size=1)
+            # rollout reports the state after each step and the sensors at its start: row k of the
+            # log is the state after k*sub steps, i.e. the initial state then state[k*sub - 1]
+            for j, (s, i) in enumerate(chunk):
+                lg = logs[i]
+                xs = np.concatenate([np.asarray(states[j])[None], state[j, sub - 1::sub]])[:L]
+                ys = sens[j, ::sub][:L]
+                qpos, qvel = xs[:, 1:1 + nq], xs[:, 1 + nq:1 + nq + nv]
+                q = ys @ rm.meas.T + biases[j]
+                dq = qvel[:, rm.dadr].copy()  # measured velocity: motor + play hinge
+                for n, a in rm.play_dadr.items():
+                    dq[:, names.index(n)] += qvel[:, a]
+                quat = qpos[:, 3:7]
+                R = _quat_mats(quat)
+                angvel_w = np.einsum("nij,nj->ni", R, qvel[:, 3:6])
+                qa, ga = rm.quat_adr, rm.gyro_adr
+                imu = {"angle": _roll_pitch(ys[:, qa:qa + 4]), "gyro": ys[:, ga:ga + 3].copy()}
+                gt = {"gt.base": qpos[:, 0:3].copy(), "gt.quat": quat.copy(), "gt.vel": qvel[:, 0:3].copy(),
+                      "gt.angvel": angvel_w}
+                out[s][i] = Log(name=f"{lg.name}@surface{s}", t=lg.t, cmd=lg.cmd, q=q, dq=dq,
+                                control_dt=lg.control_dt, physics_dt=lg.physics_dt, fixed_base=False, imu=imu, gt=gt)
+    return out
+
+
+def _quat_mats(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = (q[:, i] for i in range(4))
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+@dataclass
+class RoughnessFit:
+    """Result of :func:`fit_roughness`.
+
+    Attributes:
+        amplitude: fitted peak height Â [m] (0 when nothing is left to explain).
+        ci95: (lo, hi) [m] bootstrap interval.  rms_height: RMS height of the model's surfaces at Â [m].
+        grid: amplitudes simulated [m].  excess: (n_grid,) simulated excess cost ε(A) per window
+            (mean over surfaces and windows of all logs).  excess_obs: observed excess cost per window.
+        excess_heldout_obs, excess_heldout_pred: held-out excess cost, observed and predicted at Â.
+        heldout_p: smallest two-sided rank p-value of a held-out log's excess among the simulated
+            logs' at Â (flat ground: 0 unless the excess is 0).  sim_log_excess: (5, 50, 95)
+            percentiles of the simulated per-log excess at Â.  profile_cosine: agreement of the
+            per-channel profiles.
+        declared: whether the report names the effect; reason: why (not).
+        profile_obs, profile_pred: (k,) per-channel held-out excess, observed / predicted at Â.
+        n_rollouts: simulated windows.  n_fallen: simulated windows left out because the
+            open-loop simulation had tipped over.
+    """
+
+    amplitude: float
+    ci95: tuple[float, float]
+    rms_height: float
+    grid: list[float]
+    excess: list[float]
+    excess_obs: float
+    excess_heldout_obs: float
+    excess_heldout_pred: float
+    heldout_p: float
+    sim_log_excess: tuple[float, float, float]
+    profile_cosine: float
+    declared: bool
+    reason: str
+    profile_obs: list[float] = field(default_factory=list)
+    profile_pred: list[float] = field(default_factory=list)
+    n_rollouts: int = 0
+    n_fallen: int = 0
+
+
+def _invert(grid: np.ndarray, curve: np.ndarray, target: float) -> float:
+    """Amplitude where the (made monotone) excess curve reaches ``target`` (log-log interpolation)."""
+    c = np.maximum.accumulate(np.maximum(curve, 1e-9))
+    if target <= c[1]:  # below the first non-zero amplitude: ε grows ~A² near 0
+        return float(grid[1] * math.sqrt(max(target, 0.0) / c[1]))
+    if target >= c[-1]:
+        return float(grid[-1])
+    j = int(np.searchsorted(c, target))
+    a0, a1, e0, e1 = grid[j - 1], grid[j], c[j - 1], c[j]
+    if e1 <= e0:
+        return float(a1)
+    f = (math.log(target) - math.log(e0)) / (math.log(e1) - math.log(e0))
+    return float(math.exp(math.log(a0) + f * (math.log(a1) - math.log(a0))))
+
+
+def _upright(log: Log, w: Window, min_height: float = 0.2, max_tilt: float = 0.6) -> bool:
+    """Whether a simulated log's torso stays above ``min_height`` [m] and within ``max_tilt`` [rad]
+    of upright over the window."""
+    z = log.gt["gt.base"][w.k0:w.k1, 2]
+    ang = log.imu["angle"][w.k0:w.k1]
+    return bool(np.all(z > min_height) and np.all(np.abs(ang) < max_tilt))
+
+
+def _excess_per_window(meas: list[np.ndarray], pred: list[np.ndarray], floor: np.ndarray) -> np.ndarray:
+    """(n_windows, k) mean squared normalised residual per window and channel (row 0 skipped)."""
+    return np.stack([np.mean(((m[1:] - p[1:]) / floor) ** 2, axis=0) for m, p in zip(meas, pred)])
+
+
+def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, grid=AMPLITUDES,
+                  n_boot: int = 200) -> RoughnessFit:
+    """Fit the terrain-roughness distribution to the residual the deterministic model leaves.
+
+    Args:
+        problem: the diagnosis' :class:`sysid.identify.Problem` (floating base, IMU channels).
+        model: the fitted deterministic terms (the problem's base terms are added).
+        n_surfaces: random surfaces per amplitude.  seed: seed of the surfaces.
+        grid: amplitudes [m], starting with 0.  n_boot: bootstrap resamples for the interval.
+
+    Returns:
+        A :class:`RoughnessFit` (see the module docstring for the method and decision rule).
+
+    Raises:
+        ValueError: fixed-base problem, or a grid not starting at 0.
+    """
+    if not problem.with_imu:
+        raise ValueError("terrain roughness needs floating-base logs with IMU channels")
+    grid = np.asarray(grid, dtype=float)
+    if grid[0] != 0.0 or len(grid) < 3:
+        raise ValueError("the amplitude grid must start at 0 and have >= 3 points")
+    values = {**problem.base, **model}
+    floor = problem.floor
+    # observed: per-window excess of the current model
+    ex_tr = _excess_per_window(problem.meas["train"], [p[0] for p in problem.predict([model], "train")], floor) - 1.0
+    ex_ho = _excess_per_window(problem.meas["heldout"], [p[0] for p in problem.predict([model], "heldout")], floor) - 1.0
+    obs_ho = float(ex_ho.sum(axis=1).mean())
+    # simulated: per amplitude and surface, train and held-out windows of the simulated logs
+    rng_seeds = [[seed, s] for s in range(n_surfaces)]
+    surfs = [(a, surface(a, rs)) for a in grid[1:] for rs in rng_seeds]
+    used = sorted({w.log for w in problem.train + problem.heldout})
+    logs = [problem.logs[i] for i in used]
+    remap = {i: j for j, i in enumerate(used)}
+    sims = simulate_on_surfaces(logs, values, [h for _, h in surfs])
+    n_roll = len(surfs) * len(logs)
+    # the simulated logs are replayed on a *flat heightfield*: MuJoCo's box-heightfield contacts differ
+    # from box-plane ones (measured: 6-25 mrad torso angle over 6 s open-loop), so the reference must
+    # be the same contact model and the statistic measures the surface's unevenness alone
+    flat = build_models([values], Structure(fixed_base=False, physics_dt=logs[0].physics_dt, terrain=True))
+    sim_tr = np.full((len(grid), n_surfaces, len(problem.train), problem.k), np.nan)
+    sim_ho = np.full((len(grid), n_surfaces, len(problem.heldout), problem.k), np.nan)
+    sim_tr[0] = sim_ho[0] = 0.0
+    for g in range(1, len(grid)):
+        for s in range(n_surfaces):
+            slogs = sims[(g - 1) * n_surfaces + s]
+            for which, arr in (("train", sim_tr), ("heldout", sim_ho)):
+                wins = [Window(remap[w.log], w.k0, w.k1) for w in problem.wins[which]]
+                pred = predict(slogs, wins, [values], with_imu=True, models=flat)
+                meas = [measured(slogs[w.log], w, True) for w in wins]
+                ex = _excess_per_window(meas, [p[0] for p in pred], floor)
+                # an open-loop simulation that tips over is not a sample of walking on that ground
+                ok = np.array([_upright(slogs[w.log], w) for w in wins])
+                ex[~ok] = np.nan
+                arr[g, s] = ex
+                n_roll += len(wins)
+    n_fallen = int(np.isnan(sim_tr[1:, :, :, 0]).sum() + np.isnan(sim_ho[1:, :, :, 0]).sum())
+    # Â from every log (each log of a robot stepping in place samples only the few spots its feet
+    # stand on: its excess varies from log to log far more than from window to window, so the
+    # amplitude takes all the surface samples there are); the held-out logs still decide whether
+    # anything is there (below). Interval: bootstrap over logs (observed) and surfaces (simulated).
+    ex_all = np.concatenate([ex_tr, ex_ho]).sum(axis=1)
+    sim_all = np.concatenate([sim_tr, sim_ho], axis=2).sum(axis=3)  # (n_grid, S, n_windows)
+    win_log = np.array([w.log for w in problem.train + problem.heldout])
+    obs_all = float(ex_all.mean())
+    curve = np.nanmean(sim_all, axis=(1, 2))
+    a_hat = _invert(grid, curve, obs_all) if obs_all > 0 else 0.0
+    rng = np.random.default_rng([seed, 99])
+    boots = []
+    ulog = np.unique(win_log)
+    for _ in range(n_boot):
+        pick = rng.choice(ulog, len(ulog))
+        idx = np.concatenate([np.flatnonzero(win_log == lg) for lg in pick])
+        o = float(ex_all[idx].mean())
+        ss = rng.integers(0, n_surfaces, n_surfaces)
+        c = np.nanmean(sim_all[:, ss][:, :, idx], axis=(1, 2))
+        boots.append(_invert(grid, c, o) if o > 0 else 0.0)
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    # predicted per-channel held-out excess at Â (interpolated between grid profiles, ε ~ A² locally)
+    prof_grid = np.nanmean(sim_ho, axis=(1, 2))  # (n_grid, k)
+    j = int(np.clip(np.searchsorted(grid, a_hat), 1, len(grid) - 1))
+    w = (a_hat ** 2 - grid[j - 1] ** 2) / (grid[j] ** 2 - grid[j - 1] ** 2)
+    pred_prof = np.maximum((1 - w) * prof_grid[j - 1] + w * prof_grid[j], 0.0)
+    obs_prof = ex_ho.mean(axis=0)
+    cos = float(np.dot(np.maximum(obs_prof, 0), pred_prof)
+                / max(np.linalg.norm(np.maximum(obs_prof, 0)) * np.linalg.norm(pred_prof), 1e-12))
+    # held-out plausibility: per-log excess of each held-out log, ranked among the simulated logs'
+    # (all logs, all surfaces) at the nearest grid amplitude, rescaled to Â
+    per_log_sim = []
+    g = int(np.argmin(np.abs(grid[1:] - a_hat))) + 1
+    scale = float(np.interp(a_hat, grid, curve)) / max(curve[g], 1e-12)
+    for arr, wins in ((sim_tr, problem.train), (sim_ho, problem.heldout)):
+        for lg in sorted({w.log for w in wins}):
+            idx = [i for i, w in enumerate(wins) if w.log == lg]
+            for s_ in range(n_surfaces):
+                v = arr[g, s_, idx].sum(axis=1)
+                if np.isfinite(v).any():
+                    per_log_sim.append(float(np.nanmean(v)) * scale)
+    per_log_sim = np.array(per_log_sim) if per_log_sim else np.zeros(1)
+    pcts = tuple(float(v) for v in np.percentile(per_log_sim, [5, 50, 95]))
+    ps = []
+    for lg in sorted({w.log for w in problem.heldout}):
+        idx = [i for i, w in enumerate(problem.heldout) if w.log == lg]
+        o = float(ex_ho[idx].sum(axis=1).mean())
+        f = (np.sum(per_log_sim < o) + 0.5 * np.sum(per_log_sim == o)) / len(per_log_sim)
+        ps.append(float(min(1.0, 2 * min(f, 1 - f) + 1.0 / len(per_log_sim))))
+    p_ho = min(ps) if ps else 0.0
+    rms_h = float(np.mean([np.sqrt(np.mean(surface(a_hat, rs) ** 2)) for rs in rng_seeds])) if a_hat > 0 else 0.0
+    if a_hat < MIN_AMPLITUDE:
+        declared, reason = False, (f"fitted peak height {1000 * a_hat:.1f} mm is below the smallest reported "
+                                   f"({1000 * MIN_AMPLITUDE:.0f} mm)")
+    elif obs_ho < MIN_HELDOUT_EXCESS:
+        declared, reason = False, (f"the held-out logs show no excess over flat ground ({obs_ho:.2f} floor² "
+                                   f"< {MIN_HELDOUT_EXCESS:g})")
+    elif cos < MIN_PROFILE_COSINE:
+        declared, reason = False, (f"the residual does not sit where uneven ground puts it (profile agreement "
+                                   f"{cos:.2f} < {MIN_PROFILE_COSINE:g})")
+    else:
+        declared, reason = True, (f"held-out excess {obs_ho:.1f} floor² over flat ground (which predicts 0); "
+                                  f"simulated logs on such ground give {pcts[0]:.1f}-{pcts[2]:.1f} (5-95 %, median {pcts[1]:.1f}), "
+                                  f"rank p = {p_ho:.2f}; profile agreement {cos:.2f}")
+    return RoughnessFit(amplitude=a_hat, ci95=(float(lo), float(hi)), rms_height=rms_h, grid=[float(g) for g in grid],
+                        excess=[float(c) for c in curve], excess_obs=obs_all, excess_heldout_obs=obs_ho,
+                        excess_heldout_pred=float(pred_prof.sum()), heldout_p=p_ho, sim_log_excess=pcts,
+                        profile_cosine=cos,
+                        declared=declared, reason=reason, profile_obs=[float(v) for v in obs_prof],
+                        profile_pred=[float(v) for v in pred_prof], n_rollouts=n_roll, n_fallen=n_fallen)
