@@ -120,8 +120,6 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("terrain_roughness", "uneven ground (random surface, peak height)", "global", "m", 0.0, 0.0, 0.03, 0.01,
            contact=True, min_effect=0.002, stochastic=True),
 )}
-#: Families with a deterministic MuJoCo augmentation (screening columns, replay terms).
-DETERMINISTIC_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.stochastic)
 #: Families screened on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact)
 #: Families screened by default on floating-base (standing/stepping) logs: bottom-up staging

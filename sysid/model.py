@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from envs.base import quat_to_mat
 from envs.effects import NOMINAL_FOOT_FRICTION
 from envs.mujoco_world import build_spec
 from robots import RobotModel, nao_h25
@@ -77,6 +78,8 @@ class Structure:
 TERRAIN_SIZE = (1.0, 1.0)
 TERRAIN_CELL = 0.04
 TERRAIN_RANGE = 0.1
+#: (ny, nx) grid nodes of that heightfield.
+TERRAIN_SHAPE = (int(round(2 * TERRAIN_SIZE[1] / TERRAIN_CELL)) + 1, int(round(2 * TERRAIN_SIZE[0] / TERRAIN_CELL)) + 1)
 
 
 def base_spec(robot: RobotModel, *, fixed_base: bool, physics_dt: float, hang_height: float = 0.6,
@@ -98,8 +101,7 @@ def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:
                      friction=s.friction)
     if s.terrain:  # swap the plane for a heightfield with a fixed elevation range (data set at run time)
         ground = spec.geom("ground")
-        nx = int(round(2 * TERRAIN_SIZE[0] / TERRAIN_CELL)) + 1
-        ny = int(round(2 * TERRAIN_SIZE[1] / TERRAIN_CELL)) + 1
+        ny, nx = TERRAIN_SHAPE
         hf = spec.add_hfield(name="ground_hfield", nrow=ny, ncol=nx)
         hf.size = [TERRAIN_SIZE[0], TERRAIN_SIZE[1], TERRAIN_RANGE, 0.05]
         hf.userdata = [0.0] * (nx * ny)  # heights written after compiling (set_terrain)
@@ -169,7 +171,7 @@ class ReplayModel:
         self.model = self.spec.compile()
         m = self.model
         if structure.terrain:  # MuJoCo normalises a constant userdata to 0: set the flat field at z = 0
-            set_terrain(m, np.zeros((int(m.hfield_nrow[0]), int(m.hfield_ncol[0]))))
+            set_terrain(m, np.zeros(TERRAIN_SHAPE))
         jid = [m.joint(n).id for n in robot.joint_names]
         self.qadr = np.array([m.jnt_qposadr[j] for j in jid])
         self.dadr = np.array([m.jnt_dofadr[j] for j in jid])
@@ -211,10 +213,7 @@ class ReplayModel:
         if not self.structure.fixed_base and base is not None:
             d.qpos[0:3] = base["pos"]
             d.qpos[3:7] = base["quat"]
-            w, x, y, z = base["quat"]
-            R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                          [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                          [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+            R = quat_to_mat(np.asarray(base["quat"], dtype=float))
             d.qvel[0:3] = base.get("linvel", np.zeros(3))
             d.qvel[3:6] = R.T @ np.asarray(base.get("angvel", np.zeros(3)))
         d.ctrl[self.act] = cmd_hist[-1]

@@ -54,6 +54,8 @@ def _ci_text(e: dict) -> str:
         return f"95 % CI [{1000 * lo:.2f}, {1000 * hi:.2f}] ms"
     if e["unit"] == "rad":
         return f"95 % CI [{1000 * lo:.2f}, {1000 * hi:.2f}] mrad"
+    if e["unit"] == "m":
+        return f"95 % CI [{1000 * lo:.1f}, {1000 * hi:.1f}] mm"
     return f"95 % CI [{lo:.4g}, {hi:.4g}] {e['unit']}".rstrip()
 
 
@@ -195,6 +197,13 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
     from sysid.replay import Window, predict
 
     written = []
+
+    def save(fig, name: str, dpi: int) -> None:
+        fig.tight_layout()
+        path = os.path.join(out_dir, name)
+        fig.savefig(path, dpi=dpi)
+        plt.close(fig)
+        written.append(path)
     model = rep.get("_model_terms", {})
     names = list(rep["residual"]["per_joint_rms_before"])
     held = [lg for lg in logs if lg.name in rep["split"]["heldout"]] or logs[-1:]
@@ -214,11 +223,7 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
     ax.set_ylabel("held-out RMS [mrad]")
     ax.set_yscale("log")
     ax.legend()
-    fig.tight_layout()
-    p = os.path.join(out_dir, "residual_by_joint.png")
-    fig.savefig(p, dpi=110)
-    plt.close(fig)
-    written.append(p)
+    save(fig, "residual_by_joint.png", 110)
     if y is not None:
         before = rep["residual"]["per_joint_rms_before"]
         top = sorted(range(24), key=lambda j: -before[names[j]])[:4]
@@ -237,11 +242,7 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
                 b.legend(fontsize=7)
         axes[-1, 0].set_xlabel(f"t [s] (held-out log {lg.name})")
         axes[-1, 1].set_xlabel("t [s]")
-        fig.tight_layout()
-        p = os.path.join(out_dir, "overlay.png")
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
-        written.append(p)
+        save(fig, "overlay.png", 100)
         hyst = [t.target for t in model if t.family in ("backlash", "coulomb_friction")]
         if hyst:
             fig, axes = plt.subplots(1, len(hyst[:4]), figsize=(4.2 * len(hyst[:4]), 3.8), squeeze=False)
@@ -253,11 +254,7 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
                 a.set_xlabel(f"command {jn} [rad]")
                 a.set_ylabel("output - command [rad]")
                 a.legend(fontsize=7)
-            fig.tight_layout()
-            p = os.path.join(out_dir, "hysteresis.png")
-            fig.savefig(p, dpi=100)
-            plt.close(fig)
-            written.append(p)
+            save(fig, "hysteresis.png", 100)
     ph_b = {k: v for k, v in rep["localisation"]["phases"].items() if isinstance(v, dict)}
     ph_a = {k: v for k, v in rep["residual"]["phases_after"].items() if isinstance(v, dict)}
     if ph_b:
@@ -271,11 +268,20 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
         ax.set_ylabel("residual energy / floor²")
         ax.set_yscale("log")
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        p = os.path.join(out_dir, "residual_by_phase.png")
-        fig.savefig(p, dpi=100)
-        plt.close(fig)
-        written.append(p)
+        save(fig, "residual_by_phase.png", 100)
+    rough = rep.get("terrain_roughness")
+    if rough:  # the distribution fit: simulated excess vs peak height, and what the logs show
+        fig, ax = plt.subplots(figsize=(6, 3.8))
+        g = 1000 * np.asarray(rough["grid"])
+        ax.plot(g, rough["excess"], "C0o-", label="logs simulated on random surfaces")
+        ax.axhline(rough["excess_obs"], color="k", ls="--", lw=1, label="recordings (all logs)")
+        ax.axvline(1000 * rough["amplitude"], color="C1", lw=1.2, label=f"fitted {1000 * rough['amplitude']:.1f} mm")
+        ax.axvspan(1000 * rough["ci95"][0], 1000 * rough["ci95"][1], color="C1", alpha=0.15, label="95 % CI")
+        ax.set_xlabel("peak height of the ground surface [mm]")
+        ax.set_ylabel("excess residual per window [floor²]")
+        ax.set_title("uneven ground: " + ("declared" if rough["declared"] else "rejected"), fontsize=9)
+        ax.legend(fontsize=7)
+        save(fig, "terrain_roughness.png", 100)
     return written
 
 

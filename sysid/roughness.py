@@ -47,9 +47,10 @@ import mujoco
 import numpy as np
 from scipy.ndimage import gaussian_filter
 
+from envs.base import FALL_TORSO_HEIGHT, quat_to_mat
 from sysid.candidates import apply_terms, play_joints_of
 from sysid.data import Log
-from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
+from sysid.model import TERRAIN_CELL, TERRAIN_SHAPE, TERRAIN_SIZE, Structure, replay_model, set_terrain
 from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch, _start_velocity, build_models,
                           measured, predict)
 
@@ -77,12 +78,10 @@ def surface(amplitude: float, seed) -> np.ndarray:
     """
     if not 0.0 <= amplitude <= 0.05:
         raise ValueError(f"terrain amplitude must be within [0, 0.05] m, got {amplitude}")
-    nx = int(round(2 * TERRAIN_SIZE[0] / TERRAIN_CELL)) + 1
-    ny = int(round(2 * TERRAIN_SIZE[1] / TERRAIN_CELL)) + 1
     if amplitude == 0:
-        return np.zeros((ny, nx))
+        return np.zeros(TERRAIN_SHAPE)
     rng = np.random.default_rng(seed)
-    h = gaussian_filter(rng.standard_normal((ny, nx)), CORRELATION_RADIUS / TERRAIN_CELL, mode="wrap")
+    h = gaussian_filter(rng.standard_normal(TERRAIN_SHAPE), CORRELATION_RADIUS / TERRAIN_CELL, mode="wrap")
     return h * (amplitude / np.abs(h).max())
 
 
@@ -170,8 +169,7 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 for n, a in rm.play_dadr.items():
                     dq[:, names.index(n)] += qvel[:, a]
                 quat = qpos[:, 3:7]
-                R = _quat_mats(quat)
-                angvel_w = np.einsum("nij,nj->ni", R, qvel[:, 3:6])
+                angvel_w = np.einsum("ijn,nj->ni", quat_to_mat(quat.T), qvel[:, 3:6])  # body -> world
                 qa, ga = rm.quat_adr, rm.gyro_adr
                 imu = {"angle": _roll_pitch(ys[:, qa:qa + 4]), "gyro": ys[:, ga:ga + 3].copy()}
                 gt = {"gt.base": qpos[:, 0:3].copy(), "gt.quat": quat.copy(), "gt.vel": qvel[:, 0:3].copy(),
@@ -179,14 +177,6 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 out[s][i] = Log(name=f"{lg.name}@surface{s}", t=lg.t, cmd=lg.cmd, q=q, dq=dq,
                                 control_dt=lg.control_dt, physics_dt=lg.physics_dt, fixed_base=False, imu=imu, gt=gt)
     return out
-
-
-def _quat_mats(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = (q[:, i] for i in range(4))
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], 1)
 
 
 @dataclass
@@ -243,7 +233,7 @@ def _invert(grid: np.ndarray, curve: np.ndarray, target: float) -> float:
     return float(math.exp(math.log(a0) + f * (math.log(a1) - math.log(a0))))
 
 
-def _upright(log: Log, w: Window, min_height: float = 0.2, max_tilt: float = 0.6) -> bool:
+def _upright(log: Log, w: Window, min_height: float = FALL_TORSO_HEIGHT, max_tilt: float = 0.6) -> bool:
     """Whether a simulated log's torso stays above ``min_height`` [m] and within ``max_tilt`` [rad]
     of upright over the window."""
     z = log.gt["gt.base"][w.k0:w.k1, 2]
