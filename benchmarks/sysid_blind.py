@@ -14,10 +14,12 @@ Worlds (the referee's injection is its own code, independent of the candidate mo
   candidate is a series play hinge), viscous damping inside the clipped PD torque (the candidate
   is ``dof_damping``), kp and torque limit in the Python PD, Coulomb friction as MuJoCo
   ``frictionloss`` with hard stiction (2 ms constraint time constant), link mass / armature as model edits, sensor bias as an offset on the logged
-  angle.
+  angle, joint compliance as a massless motor behind a spring (:class:`_SeriesSpring`, backward
+  Euler; the candidate is a MuJoCo series hinge with joint stiffness and a light motor body).
 * ``real``: the PyBullet world of ``envs/bullet_world.py`` (its own effect code: explicit PD,
   velocity-motor Coulomb friction, dead-band backlash, mass scaling), plus a referee FIFO with
-  jitter for latency and a logged-angle offset for sensor bias. PyBullet has no armature, so the
+  jitter for latency, a logged-angle offset for sensor bias and the same massless-motor spring
+  for joint compliance. PyBullet has no armature, so the
   ``armature`` class is run in the sim world only.
 
 Metrics: family top-1 with a confusion matrix (top-1 = the effect whose removal hurts the
@@ -44,6 +46,7 @@ import hashlib
 import io
 import json
 import os
+import shutil
 import sys
 import time
 
@@ -56,7 +59,7 @@ from envs.mujoco_world import NaoSimEnv  # noqa: E402
 from robots import nao_h25  # noqa: E402
 
 FAMILIES = ["latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit", "link_mass",
-            "armature", "sensor_bias"]
+            "armature", "sensor_bias", "joint_compliance"]
 CLASSES = {"sim": ["none"] + FAMILIES, "real": ["none"] + [f for f in FAMILIES if f != "armature"]}
 #: Floating-base (standing/stepping) classes; PyBullet ground compliance is a stiffness/damping pair
 #: with no one-to-one map to MuJoCo's solref time constant, so it is run in the sim world only.
@@ -64,7 +67,11 @@ CLASSES = {"sim": ["none"] + FAMILIES, "real": ["none"] + [f for f in FAMILIES i
 #: ``sysid.worlds.rough_ground``; the tool's model is a dense Gaussian random field).
 CLASSES_FLOATING = {"sim": ["none", "foot_friction", "ground_compliance", "terrain_roughness"],
                     "real": ["none", "foot_friction", "terrain_roughness"]}
-NOMINAL = {"latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
+#: Class order behind each trial's seed (appending keeps earlier trials' draws unchanged).
+SEED_ORDER = ("none", "latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
+              "link_mass", "armature", "sensor_bias", "none", "foot_friction", "ground_compliance",
+              "terrain_roughness", "joint_compliance")
+NOMINAL = {"joint_compliance": 0.0, "latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
            "torque_limit": 1.0, "link_mass": 1.0, "armature": 0.0, "sensor_bias": 0.0, "foot_friction": 0.8,
            "ground_compliance": 0.02, "terrain_roughness": 0.0}
 ANGLE_NOISE, GYRO_NOISE = 2e-3, 1e-2  # floating base: torso roll/pitch [rad], gyro [rad/s]
@@ -74,6 +81,26 @@ MIN_LINK_MASS = 0.1  # links lighter than this are not drawn for mass errors [kg
 
 # ------------------------------------------------------------------------------------------ drawing
 _STABLE: dict = {}
+
+
+def _effective_inertia(robot, physics_dt: float = 0.001) -> dict:
+    """Joint name -> effective inertia 1 / (M^-1)_ii [kg m^2] with the base fixed, from MuJoCo's
+    mass matrix at the initial pose (cached)."""
+    key = (robot.name, physics_dt)
+    if key not in _STABLE:
+        import mujoco
+
+        from envs.mujoco_world import build_model
+
+        m = build_model(robot, fixed_base=True, physics_dt=physics_dt)
+        d = mujoco.MjData(m)
+        mujoco.mj_forward(m, d)
+        M = np.zeros((m.nv, m.nv))
+        mujoco.mj_fullM(m, d, M)
+        Minv = np.linalg.inv(M)
+        _STABLE[key] = {j.name: 1.0 / Minv[m.joint(j.name).dofadr[0], m.joint(j.name).dofadr[0]]
+                        for j in robot.joints if j.name in robot.actuated_joint_names}
+    return _STABLE[key]
 
 
 def explicit_damping_stable_joints(robot, physics_dt: float = 0.001, b_max_share: float = 0.4) -> tuple[str, ...]:
@@ -86,27 +113,18 @@ def explicit_damping_stable_joints(robot, physics_dt: float = 0.001, b_max_share
     the drawn range: their "real" recordings would be a numerical blow-up, not physics, so the
     referee does not draw damping on them (documented in the benchmark's results).
     """
-    key = (robot.name, physics_dt, b_max_share)
-    if key not in _STABLE:
-        import mujoco
+    inertia = _effective_inertia(robot, physics_dt)
+    return tuple(j.name for j in robot.joints if j.name in inertia
+                 and physics_dt * (j.kd + b_max_share * j.effort / 3.0) / inertia[j.name] < 2.0)
 
-        from envs.mujoco_world import build_model
 
-        m = build_model(robot, fixed_base=True, physics_dt=physics_dt)
-        d = mujoco.MjData(m)
-        mujoco.mj_forward(m, d)
-        M = np.zeros((m.nv, m.nv))
-        mujoco.mj_fullM(m, d, M)
-        Minv = np.linalg.inv(M)
-        ok = []
-        for j in robot.joints:
-            if j.name not in robot.actuated_joint_names:
-                continue
-            i = m.joint(j.name).dofadr[0]
-            if physics_dt * (j.kd + b_max_share * j.effort / 3.0) * Minv[i, i] < 2.0:
-                ok.append(j.name)
-        _STABLE[key] = tuple(ok)
-    return _STABLE[key]
+def explicit_spring_stable_joints(robot, physics_dt: float = 0.001, ratio_max: float = 4.0) -> tuple[str, ...]:
+    """Actuated joints on which the referees' explicit series spring (stiffness up to ``ratio_max``
+    x kp, applied to the link once per step) stays stable with a factor 2 margin:
+    ``dt^2 k / I_eff < 1``."""
+    inertia = _effective_inertia(robot, physics_dt)
+    return tuple(j.name for j in robot.joints if j.name in inertia
+                 and physics_dt ** 2 * ratio_max * j.kp / inertia[j.name] < 1.0)
 
 
 def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
@@ -119,12 +137,19 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
     x0.6-0.75 on one link >= 0.1 kg; armature 0.003-0.012 kg m^2; sensor bias ±5-20 mrad;
     1-3 joints (any actuated joint; for damping only those of
     :func:`explicit_damping_stable_joints`) for local effects; foot friction 0.2-0.4 (nominal 0.8); ground
-    contact time constant 35-60 ms (nominal 20 ms); terrain roughness: peak bump height 5-15 mm.
+    contact time constant 35-60 ms (nominal 20 ms); terrain roughness: peak bump height 5-15 mm;
+    joint compliance: a series spring of stiffness 1.5-4 x the joint's kp (statically x0.6-0.8 of the
+    servo stiffness) on 1-3 joints of :func:`explicit_spring_stable_joints` other than HipYawPitch, value its compliance
+    1/k [rad/(N m)].
     """
     joints = list(robot.actuated_joint_names)
     eff = dict(zip(robot.joint_names, robot.effort))
     if family == "viscous_damping":
         joints = [j for j in joints if j in explicit_damping_stable_joints(robot)]
+    if family == "joint_compliance":  # not on the HipYawPitch pair (one motor drives both outputs)
+        coupled = set(robot.mimic) | set(robot.mimic.values())
+        joints = [j for j in joints if j in explicit_spring_stable_joints(robot) and j not in coupled]
+    kp = dict(zip(robot.joint_names, robot.kp))
     if family == "latency":
         # on the 1 ms physics grid: the FIFO delays by whole physics steps (mean of the jitter)
         return {"family": family, "targets": [None], "values": [float(rng.integers(8, 36)) / 1000.0]}
@@ -159,6 +184,8 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
             v = rng.uniform(0.003, 0.012) * s
         elif family == "sensor_bias":
             v = rng.uniform(0.005, 0.02) * rng.choice([-1.0, 1.0])
+        elif family == "joint_compliance":
+            v = 1.0 / (rng.uniform(1.5, 4.0) * kp[j])
         else:
             raise ValueError(family)
         vals.append(float(v))
@@ -170,7 +197,7 @@ def _arrays(effects: list[dict], robot) -> dict:
     nj, links = len(robot.joint_names), list(robot.links)
     jidx = {n: i for i, n in enumerate(robot.joint_names)}
     a = {"kp_scale": np.ones(nj), "backlash": np.zeros(nj), "coulomb": np.zeros(nj), "damping": np.zeros(nj),
-         "armature": np.zeros(nj), "bias": np.zeros(nj), "mass_scale": np.ones(len(links)), "latency": 0.0,
+         "armature": np.zeros(nj), "bias": np.zeros(nj), "compliance": np.zeros(nj), "mass_scale": np.ones(len(links)), "latency": 0.0,
          "torque_scale": 1.0, "foot_friction": None, "ground_timeconst": None}
     for e in effects:
         for tg, v in zip(e["targets"], e["values"]):
@@ -189,7 +216,8 @@ def _arrays(effects: list[dict], robot) -> dict:
                 a["mass_scale"][links.index(tg)] = v
             else:
                 key = {"pd_gain": "kp_scale", "backlash": "backlash", "coulomb_friction": "coulomb",
-                       "viscous_damping": "damping", "armature": "armature", "sensor_bias": "bias"}[f]
+                       "viscous_damping": "damping", "armature": "armature", "sensor_bias": "bias",
+                       "joint_compliance": "compliance"}[f]
                 a[key][jidx[tg]] = v
     return a
 
@@ -210,6 +238,39 @@ class _Fifo:
     def push_pop(self, targets: np.ndarray) -> np.ndarray:
         self.hist.append(targets)
         return self.hist[-1 - self.d] if self.d > 0 else targets
+
+
+class _SeriesSpring:
+    """Referee joint compliance: a massless motor behind a spring k = 1/c on the joints with c > 0.
+
+    The servo's PD acts on the motor angle th: clip(kp (u - th) - kd th', +-effort) = k (th - q) (no
+    motor inertia), integrated by backward Euler at the physics step (stable for any k); the link
+    gets k (th - q).
+    (The tool's candidate is a MuJoCo series hinge with joint stiffness and a light motor body.)
+    """
+
+    def __init__(self, compliance: np.ndarray, kp: np.ndarray, kd: np.ndarray, dt: float):
+        self.mask = np.asarray(compliance) > 0
+        self.k = 1.0 / np.asarray(compliance)[self.mask]
+        self.kp, self.kd, self.dt = kp[self.mask], kd[self.mask], dt
+        self.th = None
+
+    def __bool__(self) -> bool:
+        return bool(self.mask.any())
+
+    def reset(self, q: np.ndarray) -> None:
+        self.th = np.asarray(q, dtype=float)[self.mask].copy()
+
+    def link_torque(self, cmd: np.ndarray, q: np.ndarray, tmax: np.ndarray) -> np.ndarray:
+        """Spring torque on the links of the masked joints after one step toward ``cmd``. The motor
+        torque (= the spring torque, the motor being massless) is limited to ``tmax``; a limited
+        motor sits where the spring carries exactly that torque."""
+        qm, c, tm = q[self.mask], cmd[self.mask], tmax[self.mask]
+        a = self.kd / self.dt
+        th = (a * self.th + self.kp * c + self.k * qm) / (a + self.kp + self.k)
+        tau = np.clip(self.k * (th - qm), -tm, tm)
+        self.th = qm + tau / self.k
+        return tau
 
 
 class RefereeSimWorld(NaoSimEnv):
@@ -248,9 +309,11 @@ class RefereeSimWorld(NaoSimEnv):
         self._kd = r.kd + a["damping"]
         self._tmax = r.effort * a["torque_scale"]
         self._play = a["backlash"] / 2.0
+        self._spring = _SeriesSpring(a["compliance"], self._kp, r.kd, self.physics_dt)
 
     def _reset_world(self, seed, options) -> None:
         super()._reset_world(seed, options)
+        self._spring.reset(self.data.qpos[self._qadr])
         ss = np.random.SeedSequence(seed if seed is not None else 0).spawn(2)
         self._noise_rng = np.random.default_rng(ss[0])
         self._fifo = _Fifo(round(self.arr["latency"] / self.physics_dt), self.q0, np.random.default_rng(ss[1]))
@@ -267,7 +330,11 @@ class RefereeSimWorld(NaoSimEnv):
             err = cmd - q
             if use_play:
                 err = np.sign(err) * np.maximum(np.abs(err) - self._play, 0.0)
-            d.ctrl[:] = np.clip(self._kp * err - self._kd * dq, -self._tmax, self._tmax)
+            tau = self._kp * err - self._kd * dq
+            if self._spring:
+                sp = self._spring
+                tau[sp.mask] = sp.link_torque(cmd, q, self._tmax) - self.arr["damping"][sp.mask] * dq[sp.mask]
+            d.ctrl[:] = np.clip(tau, -self._tmax, self._tmax)
             mujoco.mj_step(m, d)
 
     def _sensor_noise(self, f) -> None:
@@ -297,17 +364,20 @@ class RefereeRealWorld(NaoRealEnv):
         super()._reset_world(seed, options)
         self._jfifo = _Fifo(round(self.arr["latency"] / self.physics_dt), self.q0,
                             np.random.default_rng(np.random.SeedSequence(seed or 0).spawn(4)[3]))
+        self._spring = _SeriesSpring(self.arr["compliance"], self._kp, self.robot.kd, self.physics_dt)
+        self._spring.reset(np.array([s[0] for s in self.client.getJointStates(self.body, self._jidx)]))
 
     def _advance(self, targets: np.ndarray) -> None:
         import pybullet
 
-        if self.arr["latency"] <= 0:
+        if self.arr["latency"] <= 0 and not self._spring:
             return super()._advance(targets)
         p, b, idx = self.client, self.body, self._jidx
         kp, kd, tmax, play = self._kp, self._kd, self._tau_max, self._half_play
         visc = self.effects.viscous_damping
         use_play = bool(np.any(play > 0))
         self._jfifo.new_control_step()
+        sp = self._spring
         for _ in range(self.n_substeps):
             cmd = self._jfifo.push_pop(targets)
             js = p.getJointStates(b, idx)
@@ -316,7 +386,10 @@ class RefereeRealWorld(NaoRealEnv):
             err = cmd - q
             if use_play:
                 err = np.sign(err) * np.maximum(np.abs(err) - play, 0.0)
-            tau = np.clip(kp * err - (kd + visc) * dq, -tmax, tmax)
+            tau = kp * err - (kd + visc) * dq
+            if sp:
+                tau[sp.mask] = sp.link_torque(cmd, q, tmax) - visc[sp.mask] * dq[sp.mask]
+            tau = np.clip(tau, -tmax, tmax)
             p.setJointMotorControlArray(b, idx, pybullet.TORQUE_CONTROL, forces=tau.tolist())
             p.stepSimulation()
 
@@ -568,7 +641,7 @@ def main(argv=None) -> int:
         tid = f"{kind}_{s:02d}_{cls}" if kind == "single" else f"two_{s:02d}"
         if tid in done:
             continue
-        cidx = (CLASSES["sim"] + CLASSES_FLOATING["sim"]).index(cls) if cls else 99
+        cidx = SEED_ORDER.index(cls) if cls else 99
         seed = int(np.random.SeedSequence([args.seed0, s, cidx, 0 if kind == "single" else 1]).generate_state(1)[0])
         rng = np.random.default_rng(seed)
         if kind == "single":
@@ -580,9 +653,12 @@ def main(argv=None) -> int:
         truth_dir = os.path.join(root, "truth")
         os.makedirs(truth_dir, exist_ok=True)
         truth_text = json.dumps({"trial": tid, "effects": hidden}, indent=1)
-        with open(os.path.join(truth_dir, f"{tid}.json"), "w") as f:
-            f.write(truth_text)
+        truth_file = os.path.join(truth_dir, f"{tid}.json")
         logs_dir = os.path.join(tdir, "logs")
+        if os.path.isdir(logs_dir) and (not os.path.exists(truth_file) or open(truth_file).read() != truth_text):
+            shutil.rmtree(logs_dir)  # recorded for other hidden effects (e.g. a class list that changed)
+        with open(truth_file, "w") as f:
+            f.write(truth_text)
         t_rec = record(args.world, hidden, logs_dir, args.logs, args.seconds, seed % 100000, fixed) \
             if not os.path.isdir(logs_dir) else 0.0
         rep = run_diagnose(["diagnose", "--real", logs_dir, "--out", os.path.join(tdir, "report"),

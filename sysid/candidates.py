@@ -18,16 +18,17 @@ armature            joint      kg m^2    ``dof_armature`` (added)               
 sensor_bias         joint      rad       measured angle offset (replay starts at q-b)  0.005
 foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
 ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.02 -> 0.04
+joint_compliance    joint      rad/(N m) series spring hinge, ``jnt_stiffness`` = 1/c    0.18/kp
 terrain_roughness   global     m         random heightfields (a distribution, fitted   (stochastic:
                                          by :mod:`sysid.roughness`)                    no column)
 ==================  =========  ========  ===========================================  ============
 
-``joint_compliance`` has no augmentation of its own: with the encoder on the output and a light
-motor side, a series spring k in a position loop kp is statically the gain kp k / (kp + k), and its
-motor-side resonance lies far above what 100 Hz encoder logs resolve, so in this data it is the
-``pd_gain`` column. The report gives every softer-servo finding its equivalent series compliance
-(1 - x) / (x kp) [rad/(N m)] under "cannot be told apart", with the experiment that separates them
-(torque or motor current against deflection).
+``joint_compliance`` is the flexible-joint model (Spong 1987): a spring of compliance c between
+the servo's motor, whose PD loop closes on the motor angle, and the output the encoder reads.
+Statically it softens the joint like a kp error (kp k / (kp + k)); dynamically it takes the servo
+damping off the output, so the two differ in the 1-4 Hz band of the chirp and in how fast a step
+settles. A compliance below 1 / :func:`sysid.model.spring_stiffness_max` (a spring stiffer than the
+1 ms step integrates) is modelled at that bound.
 
 ``terrain_roughness`` is *stochastic*: uneven ground is a random surface nobody measured, so it has
 no deterministic replay and no screening column. :mod:`sysid.roughness` fits the peak height of a
@@ -37,13 +38,14 @@ sampled surfaces (floating-base logs only).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from envs.effects import NOMINAL_FOOT_FRICTION
-from robots import RobotModel
+from robots import RobotModel, nao_h25
 
 #: Every family name the report may use (issue 8).
 FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
@@ -96,6 +98,8 @@ class Family:
             return f"{1000 * v:.2f} mrad"
         if self.unit == "m":
             return f"{1000 * v:.1f} mm"
+        if self.name == "joint_compliance":
+            return f"{v:.4g} rad/(N m) (series stiffness {1.0 / max(v, 1e-12):.3g} N m/rad)"
         return f"{v:.4g} {self.unit}".strip()
 
 
@@ -117,6 +121,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            smooth=False, contact=True, min_effect=0.02),
     Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", 0.02, 0.004, 0.1,
            0.04, smooth=False, contact=True, min_effect=0.002),
+    Family("joint_compliance", "series joint compliance (elastic transmission)", "joint", "rad/(N m)", 0.0, 0.0,
+           4.0, 0.0059, min_effect=0.002),
     Family("terrain_roughness", "uneven ground (random surface, peak height)", "global", "m", 0.0, 0.0, 0.03, 0.01,
            contact=True, min_effect=0.002, stochastic=True),
 )}
@@ -143,6 +149,47 @@ class Term:
 
     def __str__(self) -> str:  # pragma: no cover - display
         return self.label()
+
+
+def term_probe(term: Term, robot: RobotModel) -> float:
+    """Screening probe value of ``term``: the family's ``probe``, except for ``joint_compliance``,
+    whose probe is the compliance that statically softens that joint like a kp x0.85,
+    (1 / 0.85 - 1) / kp [rad/(N m)] (kp spans 1-30 N m/rad across NAO's joints)."""
+    if term.family == "joint_compliance":
+        kp = float(robot.kp[list(robot.joint_names).index(term.target)])
+        return (1.0 / 0.85 - 1.0) / kp
+    return term.fam.probe
+
+
+@functools.lru_cache(maxsize=1)
+def _robot() -> RobotModel:
+    """The robot whose kp the joint-scaled compliance bounds refer to."""
+    return nao_h25()
+
+
+def term_bounds(term: Term) -> tuple[float, float]:
+    """(low, high) of ``term``'s value: the family's bounds, except for a joint compliance: from
+    1 / :func:`sysid.model.spring_stiffness_max` of its joint (the stiffest spring the replay
+    integrates; below it the candidate is that spring, so a fit never reports less) to 4 / kp (a
+    spring that leaves x0.2 of the servo stiffness)."""
+    fam = term.fam
+    if term.family == "joint_compliance":
+        from sysid.model import spring_stiffness_max
+
+        k = min(spring_stiffness_max(True)[term.target], spring_stiffness_max(False)[term.target])
+        kp = float(_robot().kp[list(_robot().joint_names).index(term.target)])
+        return max(fam.lo, 1.0 / k), min(fam.hi, 4.0 / kp)
+    return fam.lo, fam.hi
+
+
+def term_allowed(term: Term, robot: RobotModel) -> bool:
+    """Whether ``term`` is a candidate on this robot: a series spring is not modelled on joints
+    coupled by an equality (HipYawPitch: the sim couples the motor hinges, so a spring on one side
+    would decouple the outputs)."""
+    if term.family == "joint_compliance":
+        coupled = set(robot.mimic) | set(robot.mimic.values())
+        return term.target not in coupled
+    return True
 
 
 def all_terms(robot: RobotModel, families=FIXED_BASE_FAMILIES, joints=None, links=None) -> list[Term]:
@@ -196,8 +243,11 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
         (24,) measurement offsets [rad] (sensor bias terms; zeros otherwise).
 
     Raises:
-        ValueError: a backlash term on a joint without a play hinge in ``rm``; unknown family.
+        ValueError: a backlash (compliance) term on a joint without a play (spring) hinge in
+            ``rm``; unknown family.
     """
+    from sysid.model import spring_stiffness_max
+
     robot = rm.robot
     jidx = {n: i for i, n in enumerate(robot.joint_names)}
     bias = np.zeros(len(robot.joint_names))
@@ -233,6 +283,11 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
                 raise ValueError(f"backlash term on {tg} needs a replay model with a play hinge there")
             g = max(v, 2e-4)
             m.jnt_range[rm.play_jnt[tg]] = [-g / 2, g / 2]
+        elif f == "joint_compliance":
+            if tg not in rm.spring_jnt:
+                raise ValueError(f"joint compliance term on {tg} needs a replay model with a series spring there")
+            k_max = spring_stiffness_max(rm.structure.fixed_base, rm.structure.physics_dt)[tg]
+            m.jnt_stiffness[rm.spring_jnt[tg]] = min(1.0 / max(v, 1e-12), k_max)
         elif f == "foot_friction":
             m.geom_friction[:, 0] = v
         elif f == "ground_compliance":
@@ -244,6 +299,12 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
     return bias
 
 
-def play_joints_of(values: dict[Term, float]) -> tuple[str, ...]:
-    """Joints that need a play hinge for ``values`` (sorted, so structures are cache keys)."""
-    return tuple(sorted(t.target for t in values if t.family == "backlash"))
+def series_structure(structure, values: dict[Term, float]):
+    """``structure`` (a :class:`sysid.model.Structure`) with the series hinges ``values`` need: a
+    play hinge per backlash term, a spring hinge per joint-compliance term (sorted, so structures
+    are cache keys)."""
+    import dataclasses
+
+    return dataclasses.replace(
+        structure, play_joints=tuple(sorted(t.target for t in values if t.family == "backlash")),
+        spring_joints=tuple(sorted(t.target for t in values if t.family == "joint_compliance")))

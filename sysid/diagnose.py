@@ -22,7 +22,8 @@ import time
 
 import numpy as np
 
-from sysid.candidates import CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above
+from sysid.candidates import (CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above, term_allowed,
+                              term_probe)
 from sysid.data import Log, split_by_trajectory
 from sysid.identify import FLAG_ENERGY, Problem, confidence, flagged_joints, refit, screen
 from sysid.replay import Window, predict, whole_logs, windows
@@ -35,6 +36,9 @@ MIN_FLOOR = 1e-5
 WINDOW_S = 0.5
 
 EXPERIMENTS = {
+    frozenset({"pd_gain", "joint_compliance"}): "a chirp through 1-4 Hz and steps: a series spring takes the servo "
+                                                "damping off the output (a larger, slower-settling resonance), a kp "
+                                                "error keeps it; or motor current against output deflection",
     frozenset({"pd_gain", "link_mass"}): "posture holds in several postures plus a chirp: a mass error follows the "
                                          "posture-dependent gravity torque, a kp error also shifts the servo resonance",
     frozenset({"latency", "pd_gain"}): "a chirp to 4 Hz: latency gives phase lag growing with frequency at constant "
@@ -52,12 +56,6 @@ EXPERIMENTS = {
     frozenset({"sensor_bias", "link_mass"}): "holds in postures with opposite gravity load on the joint",
     frozenset({"sensor_bias", "pd_gain"}): "holds in postures with opposite gravity load on the joint",
 }
-
-
-#: What separates a servo gain error from a series joint compliance (why they are one column in
-#: encoder data: see the :mod:`sysid.candidates` docstring).
-COMPLIANCE_EXPERIMENT = ("a torque or motor-current measurement against the output deflection, or a motor-side "
-                         "encoder: a series compliance deflects between motor and output, a gain error does not")
 
 
 def _experiment(a: str, b: str) -> str:
@@ -138,7 +136,7 @@ def _entry(t: Term, v: float, ci, robot) -> dict:
             "words": fam.words, "where": where, "display": fam.fmt(v)}
 
 
-def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int) -> tuple[dict, list]:
+def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, robot) -> tuple[dict, list]:
     """Fit competing joint families on the same joints and keep the best on held-out data.
 
     For each joint-scope family picked this round, the other joint families whose stage-A column
@@ -161,9 +159,11 @@ def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int) ->
         rivals = [g for g, sc in sorted(sr.family_score.items(), key=lambda kv: -kv[1])
                   if g != f and g in families and FAMILIES[g].scope == "joint" and sc >= 0.5 * top][:2]
         for g in rivals:
+            if not all(term_allowed(Term(g, tg), robot) for tg in targets):
+                continue
             alt = {t: v for t, v in cand.items() if t.family != f or t.target not in targets}
             for tg in targets:
-                alt[Term(g, tg)] = FAMILIES[g].probe
+                alt[Term(g, tg)] = term_probe(Term(g, tg), robot)
             fit = refit(problem, alt, free=[Term(g, tg) for tg in targets], max_nfev=8)
             c_alt = float(problem.cost([fit.values], "heldout")[0])
             if c_alt < best_c - _margin(best_c, k):
@@ -342,7 +342,7 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             start = {**model, **sr.selected}
             fit = refit(problem, start)
             cand = dict(fit.values)
-            cand, swaps = _compete(problem, model, cand, sr, families, k) if not over_budget() else (cand, [])
+            cand, swaps = _compete(problem, model, cand, sr, families, k, robot) if not over_budget() else (cand, [])
             for sw in swaps:
                 say(f"round {rnd + 1}: {sw['reason']}")
                 rejected.append(sw)
@@ -455,13 +455,6 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         if any(t.label() == a.replace("(-)", "") for t in model):
             indist.append({"a": a.replace("(-)", ""), "b": b.replace("(-)", ""), "corr": c,
                            "experiment": _experiment(fa, fb.split("(")[0])})
-    kp_of = dict(zip(robot.joint_names, robot.kp))
-    for e in effects:  # a softer servo is, in encoder data, also a series joint compliance (sysid.md §3)
-        if e["family"] == "pd_gain" and e["value"] < 1.0:
-            j = e["joints"][0]
-            c = (1.0 - e["value"]) / (e["value"] * kp_of[j])
-            indist.append({"a": f"pd_gain[{j}]", "b": f"joint_compliance[{j}] ({c:.3g} rad/(N m) in series)",
-                           "corr": 1.0, "experiment": COMPLIANCE_EXPERIMENT})
     if rough is not None and rough.declared:
         fam = FAMILIES["terrain_roughness"]
         effects.append({"family": "terrain_roughness", "joints": [], "links": [], "value": rough.amplitude,

@@ -25,7 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
-from sysid.candidates import FAMILIES, Term, joints_above, links_below
+from sysid.candidates import (FAMILIES, Term, joints_above, links_below, term_allowed, term_bounds,
+                               term_probe)
 from sysid.data import Log
 from sysid.replay import Window, measured, predict
 
@@ -249,7 +250,8 @@ def _columns_stage_a(robot, families, current, J, links, floating: bool) -> list
                 continue
             terms = {t: fam.probe}
         elif fam.scope == "joint":
-            terms = {Term(f, j): fam.probe for j in J if Term(f, j) not in current}
+            terms = {Term(f, j): term_probe(Term(f, j), robot) for j in J
+                     if Term(f, j) not in current and term_allowed(Term(f, j), robot)}
         else:
             terms = {Term(f, ln): fam.probe for ln in links if Term(f, ln) not in current}
         if not terms:
@@ -264,17 +266,16 @@ def _columns_stage_a(robot, families, current, J, links, floating: bool) -> list
     return cols
 
 
-def _columns_terms(fam_names, current, J, links, probes: dict | None = None) -> list[Column]:
+def _columns_terms(robot, fam_names, current, J, links, probes: dict | None = None) -> list[Column]:
     cols = []
     for f in fam_names:
         fam = FAMILIES[f]
-        pv = (probes or {}).get(f, fam.probe)
         targets = [None] if fam.scope == "global" else J if fam.scope == "joint" else links
         for tg in targets:
             t = Term(f, tg)
-            if t in current:
+            if t in current or not term_allowed(t, robot):
                 continue
-            cols.append(Column(t.label(), f, {t: pv}))
+            cols.append(Column(t.label(), f, {t: (probes or {}).get(f, term_probe(t, robot))}))
             if _two_sided(f):
                 cols.append(Column(t.label() + "(-)", f, {t: _mirror(fam)}))
     return cols
@@ -344,7 +345,7 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
         return ScreenResult(J, {}, {}, [], [c.label for c in cols_a], family_score=fam_score)
     # stage B: one column per term of the picked families (+ all globals)
     glob = [f for f in families if FAMILIES[f].scope == "global" and not (FAMILIES[f].contact and not floating)]
-    cols_b = _columns_terms(list(dict.fromkeys(fams + glob)), current, J, links, probes)
+    cols_b = _columns_terms(robot, list(dict.fromkeys(fams + glob)), current, J, links, probes)
     D, r = _dictionary(problem, current, cols_b)
     sel, w, path = omp_bic(D, r, n_eff, max_k=max_terms)
     selected, weights = {}, {}
@@ -354,7 +355,7 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
         fam = t.fam
         delta = pv - fam.nominal
         v0 = current.get(t, fam.nominal) + wi * delta
-        selected[t] = float(np.clip(v0, fam.lo, fam.hi))
+        selected[t] = float(np.clip(v0, *term_bounds(t)))
         weights[t] = float(wi)
     # dictionary columns that look like a selected one (cannot be told apart with this data)
     Dn = D / np.maximum(np.linalg.norm(D, axis=0), 1e-12)
@@ -415,8 +416,8 @@ def refit(problem: Problem, start: dict, free: list | None = None, *, max_nfev: 
     if not free:
         R = problem.residuals(problem.predict([values]))[0]
         return FitResult(values, [], float(R @ R), None, R, 1)
-    lo = np.array([t.fam.lo for t in free])
-    hi = np.array([t.fam.hi for t in free])
+    lo = np.array([term_bounds(t)[0] for t in free])
+    hi = np.array([term_bounds(t)[1] for t in free])
     span = hi - lo
     if grid:
         for t in free:
@@ -498,7 +499,8 @@ def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.95
     for i, t in enumerate(terms):
         v = fit.values[t]
         a, b = v - z * sd[i], v + z * sd[i]
-        out[t] = (max(t.fam.lo, a) if np.isfinite(a) else -np.inf, min(t.fam.hi, b) if np.isfinite(b) else np.inf)
+        tlo, thi = term_bounds(t)
+        out[t] = (max(tlo, a) if np.isfinite(a) else -np.inf, min(thi, b) if np.isfinite(b) else np.inf)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sd, sd)
     corr[~np.isfinite(corr)] = 0.0

@@ -18,7 +18,14 @@ the identified model can be exported as MJCF (``MjSpec.to_xml``). On top of the 
   ``dof_damping`` (implicit under Euler, so the light motor side stays stable at 1 ms). The
   measured angle is the sum of both hinges (MuJoCo docs, Modeling -> Backlash). 90 % of the
   servo damping acts on the output angle through a fixed tendon (motor + play), like a dead-band
-  servo whose damping sees the output velocity.
+  servo whose damping sees the output velocity;
+* optionally, for joint compliance, a "spring" hinge in series with a robot joint (same axis and
+  anchor) whose joint ``stiffness`` is the series spring 1/c (flexible-joint model, Spong 1987:
+  the servo closes its PD loop, damping included and clipped to the effort, on the motor angle;
+  the encoder reads the output = motor + spring). The motor hinge gets a small armature
+  (:func:`spring_motor_armature`). The spring force is explicit under Euler, so each joint has a
+  stiffest spring the 1 ms step integrates stably (:func:`spring_stiffness_max`). A joint may
+  have both a play and a spring hinge (motor -> play -> spring; the servo acts on the motor).
 
 A :class:`Structure` names one such layout; a :class:`ReplayModel` is its compiled model with the
 index maps replays and candidates use.
@@ -43,6 +50,20 @@ DELAY_MAX = 0.08
 #: (AnkleRoll ~1.8e-4) but >= kp dt^2 so the explicit PD stays stable at 1 ms.
 PLAY_MOTOR_ARMATURE = 5e-5
 _PLAY_SUFFIX = "__play"
+#: Smallest armature of the motor side of a series-spring pair [kg m^2] (a positive value keeps
+#: the motor + spring inertia matrix regular).
+SPRING_MOTOR_ARMATURE_MIN = 1e-6
+
+
+def spring_motor_armature(kp: float, kd: float, physics_dt: float) -> float:
+    """Armature [kg m^2] of the motor side of a series-spring pair: as light as the Euler step allows
+    (a servo's motor side is light against its link), with the explicit servo damping and a spring
+    up to 5 kp stable with a factor 2 margin: ``kd dt / I_m <= 1`` and ``dt^2 (kp + k) / I_m <= 1``,
+    i.e. ``max(kd dt, 6 kp dt^2)`` (1.3e-5 for WristYaw, 1.8e-4 for AnkleRoll at 1 ms)."""
+    return max(SPRING_MOTOR_ARMATURE_MIN, kd * physics_dt, 6.0 * kp * physics_dt ** 2)
+
+
+_SPRING_SUFFIX = "__spring"
 #: Time constant of the dry-friction constraint in physics steps: MuJoCo's default (20 ms) lets a
 #: joint creep under a load below the friction torque; geared servos (and PyBullet's velocity-motor
 #: friction) stick hard, which 2 steps reproduces (measured: PyBullet knee friction 0.2 N m is
@@ -58,6 +79,7 @@ class Structure:
         fixed_base: torso welded at ``hang_height`` (True) or on a free joint.
         physics_dt: physics step [s] (the recording's ``physics_dt``; default 1 ms).
         play_joints: robot joints that get a series backlash hinge.
+        spring_joints: robot joints that get a series compliance (spring) hinge.
         friction: sliding friction of all contacts (foot friction candidate edits the field).
         hang_height: torso height of a fixed-base model [m].
         terrain: the ground is a :data:`TERRAIN_SIZE` heightfield (``ground_hfield``) whose
@@ -71,6 +93,12 @@ class Structure:
     friction: float = NOMINAL_FOOT_FRICTION
     hang_height: float = 0.6
     terrain: bool = False
+    spring_joints: tuple[str, ...] = ()
+
+    @property
+    def n_series(self) -> int:
+        """Number of extra series hinges (models with the same count batch together)."""
+        return len(self.play_joints) + len(self.spring_joints)
 
 
 #: Heightfield of a ``terrain`` structure: (half x, half y) [m], cell [m], elevation range [m]
@@ -134,16 +162,35 @@ def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:
         motor.armature = PLAY_MOTOR_ARMATURE
         motor.damping = [0.1 * float(kd[name]), 0.0, 0.0]
         spec.actuator(name).biasprm[2] = 0.0
+        if name in s.spring_joints:  # play and spring in series: the servo (set below) drives the motor,
+            play.armature = PLAY_MOTOR_ARMATURE  # a gear stage between them (else M is singular)
+            continue
         ten = spec.add_tendon(name=name + "__out")
         ten.wrap_joint(name, 1.0)
         ten.wrap_joint(name + _PLAY_SUFFIX, 1.0)
         ten.damping = [0.9 * float(kd[name]), 0.0, 0.0]
+    for name in s.spring_joints:
+        if name not in kd:
+            raise KeyError(f"unknown joint {name!r} for a series spring")
+        motor = spec.joint(name)
+        spring = motor.parent.add_joint(name=name + _SPRING_SUFFIX, type=mujoco.mjtJoint.mjJNT_HINGE,
+                                        axis=list(motor.axis), pos=list(motor.pos))
+        spring.stiffness = [1e3, 0.0, 0.0]  # placeholder: the candidate writes jnt_stiffness = 1 / compliance
+        # the servo's PD, damping included, acts on the motor angle through the actuator (clipped
+        # to the effort like the sim's servo); the motor armature keeps that explicit PD stable
+        motor.armature = spring_motor_armature(float(robot.kp[list(robot.joint_names).index(name)]),
+                                               float(kd[name]), s.physics_dt)
+        motor.damping = [0.0, 0.0, 0.0]
+        spec.actuator(name).biasprm[2] = -float(kd[name])
     for name in robot.joint_names:
         spec.add_sensor(name=f"q:{name}", type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT,
                         objname=name)
     for name in s.play_joints:
         spec.add_sensor(name=f"play:{name}", type=mujoco.mjtSensor.mjSENS_JOINTPOS,
                         objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=name + _PLAY_SUFFIX)
+    for name in s.spring_joints:
+        spec.add_sensor(name=f"spring:{name}", type=mujoco.mjtSensor.mjSENS_JOINTPOS,
+                        objtype=mujoco.mjtObj.mjOBJ_JOINT, objname=name + _SPRING_SUFFIX)
     if not s.fixed_base:
         spec.add_sensor(name="torso_quat", type=mujoco.mjtSensor.mjSENS_FRAMEQUAT, objtype=mujoco.mjtObj.mjOBJ_XBODY,
                         objname=robot.root)
@@ -159,6 +206,7 @@ class ReplayModel:
         robot, structure, spec, model (template ``MjModel``; copy before editing).
         qadr, dadr: (24,) qpos / dof address of each robot joint's (motor) hinge.
         play_qadr, play_dadr, play_jnt: dict joint name -> address / joint id of its play hinge.
+        spring_qadr, spring_dadr, spring_jnt: the same for series-spring hinges.
         act: (24,) actuator id per robot joint.  body: dict link name -> body id.
         meas: (24, nsensordata) matrix mapping sensor data to the 24 measured joint angles.
         quat_adr, gyro_adr: sensordata addresses of the torso quaternion (4) and gyro (3), or None.
@@ -178,6 +226,9 @@ class ReplayModel:
         self.play_jnt = {n: m.joint(n + _PLAY_SUFFIX).id for n in structure.play_joints}
         self.play_qadr = {n: int(m.jnt_qposadr[j]) for n, j in self.play_jnt.items()}
         self.play_dadr = {n: int(m.jnt_dofadr[j]) for n, j in self.play_jnt.items()}
+        self.spring_jnt = {n: m.joint(n + _SPRING_SUFFIX).id for n in structure.spring_joints}
+        self.spring_qadr = {n: int(m.jnt_qposadr[j]) for n, j in self.spring_jnt.items()}
+        self.spring_dadr = {n: int(m.jnt_dofadr[j]) for n, j in self.spring_jnt.items()}
         self.act = np.array([m.actuator(n).id for n in robot.joint_names])
         self.body = {name: m.body(name).id for name in robot.links}
         self.meas = np.zeros((len(robot.joint_names), m.nsensordata))
@@ -185,6 +236,8 @@ class ReplayModel:
             self.meas[i, m.sensor_adr[m.sensor(f"q:{n}").id]] = 1.0
             if n in structure.play_joints:
                 self.meas[i, m.sensor_adr[m.sensor(f"play:{n}").id]] = 1.0
+            if n in structure.spring_joints:
+                self.meas[i, m.sensor_adr[m.sensor(f"spring:{n}").id]] = 1.0
         self.quat_adr = self.gyro_adr = None
         if not structure.fixed_base:
             self.quat_adr = int(m.sensor_adr[m.sensor("torso_quat").id])
@@ -216,6 +269,14 @@ class ReplayModel:
             R = quat_to_mat(np.asarray(base["quat"], dtype=float))
             d.qvel[0:3] = base.get("linvel", np.zeros(3))
             d.qvel[3:6] = R.T @ np.asarray(base.get("angvel", np.zeros(3)))
+        if self.spring_jnt:  # springs start at their static deflection under the gravity load
+            mujoco.mj_forward(m, d)
+            for i, n in enumerate(self.robot.joint_names):
+                if n in self.spring_jnt:
+                    k = float(m.jnt_stiffness[self.spring_jnt[n]])
+                    s = -float(d.qfrc_bias[self.spring_dadr[n]]) / k
+                    d.qpos[self.spring_qadr[n]] = s
+                    d.qpos[self.qadr[i]] = q[i] - s
         d.ctrl[self.act] = cmd_hist[-1]
         for i, a in enumerate(self.act):
             mujoco.mj_initCtrlHistory(m, d, int(a), None, np.ascontiguousarray(cmd_hist[:, i:i + 1]))
@@ -240,6 +301,35 @@ def set_terrain(m: mujoco.MjModel, heights: np.ndarray) -> None:
         raise ValueError(f"terrain heights must lie within +-{TERRAIN_RANGE / 2} m")
     adr = int(m.hfield_adr[hid])
     m.hfield_data[adr:adr + nx * ny] = (h.ravel() + TERRAIN_RANGE / 2) / TERRAIN_RANGE
+
+
+@functools.lru_cache(maxsize=8)
+def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = 0.001, robot_name: str = "nao_h25") -> dict:
+    """Stiffest series spring [N m/rad] per robot joint that the Euler step integrates stably.
+
+    The spring force is explicit: the output side needs ``k dt^2 / I_out < 2`` (I_out: the joint's
+    effective inertia, 1 / (M^-1)_ii of the sim's mass matrix at the reference pose) and the motor
+    side ``dt^2 (kp + k) / I_m < 2`` (I_m: :func:`spring_motor_armature`). The returned value keeps
+    a factor 2 margin on both.
+
+    Returns:
+        dict joint name -> k_max [N m/rad] (the smallest compliance a candidate can represent is
+        1 / k_max; a stiffer transmission is, at this step size, a rigid one).
+    """
+    robot = replay_model(Structure(fixed_base=fixed_base, physics_dt=physics_dt), robot_name).robot
+    m = base_spec(robot, fixed_base=fixed_base, physics_dt=physics_dt).compile()
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    Minv = np.linalg.inv(M)
+    out = {}
+    for n, kp, kd in zip(robot.joint_names, robot.kp, robot.kd):
+        i = int(m.jnt_dofadr[m.joint(n).id])
+        k_out = 1.0 / (Minv[i, i] * physics_dt ** 2)
+        k_motor = spring_motor_armature(float(kp), float(kd), physics_dt) / physics_dt ** 2 - float(kp)
+        out[n] = float(min(k_out, k_motor))
+    return out
 
 
 @functools.lru_cache(maxsize=64)

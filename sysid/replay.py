@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from sysid.candidates import Term, apply_terms, play_joints_of
+from sysid.candidates import Term, apply_terms, series_structure
 from sysid.data import Log
 from sysid.model import ReplayModel, Structure, replay_model
 
@@ -128,9 +128,7 @@ def build_models(values_list: list[dict[Term, float]], structure: Structure) -> 
     """Compile/copy one model per parameter set: (replay model, edited MjModel copy, (24,) bias)."""
     out = []
     for vals in values_list:
-        st = Structure(structure.fixed_base, structure.physics_dt, play_joints_of(vals), structure.friction,
-                       structure.hang_height, structure.terrain)
-        rm = replay_model(st)
+        rm = replay_model(series_structure(structure, vals))
         m = copy.copy(rm.model)
         bias = apply_terms(rm, m, vals)
         out.append((rm, m, bias))
@@ -162,7 +160,7 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
     groups: dict = {}
     for s, (rm, _, _) in enumerate(models):
         for wi, w in enumerate(wins):
-            key = (len(rm.structure.play_joints), w.length)
+            key = (rm.structure.n_series, w.length)
             groups.setdefault(key, []).append((s, wi))
     pool, nt = _pool()
     for (_, L), pairs in groups.items():

@@ -140,11 +140,11 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float) -> str:
     Sensor biases are not physics: they are stored as ``<numeric name="sensor_bias:JOINT">``.
     """
     from robots import nao_h25
-    from sysid.candidates import play_joints_of
-    from sysid.model import Structure, replay_spec
+    from sysid.candidates import series_structure
+    from sysid.model import Structure, replay_spec, spring_stiffness_max
 
     robot = nao_h25()
-    st = Structure(fixed_base=fixed_base, physics_dt=physics_dt, play_joints=play_joints_of(model_terms))
+    st = series_structure(Structure(fixed_base=fixed_base, physics_dt=physics_dt), model_terms)
     spec = replay_spec(robot, st)
     kp = dict(zip(robot.joint_names, robot.kp))
     eff = dict(zip(robot.joint_names, robot.effort))
@@ -176,6 +176,9 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float) -> str:
             b.fullinertia = [x * v for x in b.fullinertia]
         elif f == "backlash":
             spec.joint(t.target + "__play").range = [-v / 2, v / 2]
+        elif f == "joint_compliance":
+            k_max = spring_stiffness_max(fixed_base, physics_dt)[t.target]
+            spec.joint(t.target + "__spring").stiffness = [min(1.0 / max(v, 1e-12), k_max), 0.0, 0.0]
         elif f == "sensor_bias":
             spec.add_numeric(name=f"sensor_bias:{t.target}", data=[v])
         elif f == "foot_friction":

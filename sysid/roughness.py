@@ -48,7 +48,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from envs.base import FALL_TORSO_HEIGHT, quat_to_mat
-from sysid.candidates import apply_terms, play_joints_of
+from sysid.candidates import apply_terms, series_structure
 from sysid.data import Log
 from sysid.model import TERRAIN_CELL, TERRAIN_SHAPE, TERRAIN_SIZE, Structure, replay_model, set_terrain
 from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch, _start_velocity, build_models,
@@ -115,7 +115,7 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
     if any(lg.fixed_base for lg in logs):
         raise ValueError("terrain roughness needs floating-base (standing/stepping) logs")
     lg0 = logs[0]
-    st = Structure(fixed_base=False, physics_dt=lg0.physics_dt, play_joints=play_joints_of(values), terrain=True)
+    st = series_structure(Structure(fixed_base=False, physics_dt=lg0.physics_dt, terrain=True), values)
     rm = replay_model(st)
     nq, nv = rm.model.nq, rm.model.nv
     sole = [rm.model.site(s).id for s in ("l_sole", "r_sole")]

@@ -139,16 +139,16 @@ def test_foot_friction_found_from_stepping_logs():
     assert rep["heldout_rms_after"] < rep["heldout_rms_before"]
 
 
-def test_softer_servo_is_reported_with_its_equivalent_series_compliance():
-    """A kp x0.6 at RKneePitch is found as pd_gain, and the report says that, in encoder data, it is
-    the same as a series joint compliance c = (1 - 0.6) / (0.6 kp) and names the experiment that
-    would tell them apart."""
-    logs = synthetic_logs({Term("pd_gain", "RKneePitch"): 0.6}, n_logs=3, seconds=3.0, seed=4)
-    rep = diagnose(logs, families=("pd_gain", "sensor_bias"))
-    (e,) = rep["effects"]
-    assert e["family"] == "pd_gain" and e["joints"] == ["RKneePitch"] and abs(e["value"] - 0.6) < 0.03
-    (p,) = [p for p in rep["indistinguishable"] if "joint_compliance" in p["b"]]
+@pytest.mark.parametrize("hidden", ["pd_gain", "joint_compliance"])
+def test_softer_servo_and_series_compliance_are_told_apart(hidden):
+    """A kp x0.6 and a series spring of the same static stiffness (c = (1 - 0.6) / (0.6 kp)) at
+    RKneePitch: each is named as itself, with its value, not as the other (the spring takes the
+    servo damping off the output, which the chirp and steps show)."""
     kp = dict(zip(nao_h25().joint_names, nao_h25().kp))["RKneePitch"]
-    c = float(p["b"].split("(")[1].split()[0])
-    assert abs(c - (1 - e["value"]) / (e["value"] * kp)) < 5e-3 * c  # printed to 3 digits
-    assert "motor-current" in p["experiment"] and "joint_compliance[RKneePitch]" in format_report(rep)
+    truth = 0.6 if hidden == "pd_gain" else (1 - 0.6) / (0.6 * kp)
+    logs = synthetic_logs({Term(hidden, "RKneePitch"): truth}, n_logs=3, seconds=3.0, seed=4)
+    rep = diagnose(logs, families=("pd_gain", "joint_compliance", "sensor_bias"))
+    (e,) = rep["effects"]
+    assert e["family"] == hidden and e["joints"] == ["RKneePitch"]
+    assert abs(e["value"] - truth) < 0.05 * abs(truth - e["nominal"])
+    assert hidden.replace("_", " ") in format_report(rep) or e["words"] in format_report(rep)

@@ -24,6 +24,7 @@ CASES = [
     ({Term("link_mass", "r_ankle"): 1.7}, 0.10),
     ({Term("armature", "LKneePitch"): 0.008}, 0.15),
     ({Term("sensor_bias", "RShoulderRoll"): -0.012}, 0.05),
+    ({Term("joint_compliance", "LHipPitch"): 0.02}, 0.10),  # [rad/(N m)]: k = 50 N m/rad vs kp 30
 ]
 
 

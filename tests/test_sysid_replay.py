@@ -77,6 +77,37 @@ def test_backlash_structure_reduces_to_nominal_and_models_are_batched(robot, cmd
     assert rm.model.nv == 25 and rm.meas.sum() == 25
 
 
+def test_series_spring_deflects_by_load_times_compliance(robot):
+    """A held pose under gravity: a series spring of compliance c adds c * tau_g to the output sag
+    (the PD's own sag tau_g / kp is common to both), the stiffest spring is nearly the rigid
+    joint, and the replay starts at the measured angle (spring pre-loaded)."""
+    import mujoco
+
+    from sysid.model import spring_stiffness_max
+
+    pose = robot.pose("crouch", actuated=True).copy()
+    j = robot.joint_names.index("RShoulderPitch")
+    pose[robot.actuated_joint_names.index("RShoulderPitch")] = 0.0  # arm held forward: pitch loaded
+    cmd = np.tile(pose, (150, 1))
+    lg = from_recording(rollout(NaoSimEnv(fixed_base=True), CommandLog(cmd), seed=0, seconds=1.5), "hold")
+    c = 0.05
+    k_max = spring_stiffness_max(True)["RShoulderPitch"]
+    out = predict([lg], whole_logs([lg]), [{}, {Term("joint_compliance", "RShoulderPitch"): c},
+                                           {Term("joint_compliance", "RShoulderPitch"): 1.0 / k_max}])[0]
+    assert abs(out[1][0, j] - lg.q[0, j]) < 1e-9  # starts at the measured output angle
+    rm = replay_model(Structure())
+    m = rm.model
+    d = mujoco.MjData(m)
+    d.qpos[rm.qadr] = out[0][-1]
+    mujoco.mj_forward(m, d)
+    tau_g = float(d.qfrc_bias[rm.dadr[j]])  # gravity torque the joint holds at the end [N m]
+    assert abs(tau_g) > 0.05
+    sag = out[1][-1, j] - out[0][-1, j]
+    assert abs(sag - (-c * tau_g)) < 0.1 * abs(c * tau_g)
+    assert np.abs(out[2][-60:, j] - out[0][-60:, j]).max() < 0.1 * abs(c * tau_g)
+    assert np.delete(np.abs(out[1][-1] - out[0][-1]), j).max() < 0.1 * abs(sag)
+
+
 def test_windowed_replay_of_floating_sim_log_is_exact(robot):
     env = NaoSimEnv(fixed_base=False)
     c = np.tile(robot.pose("crouch", actuated=True), (150, 1))
