@@ -62,8 +62,14 @@ def _xyzw_to_wxyz(q) -> np.ndarray:
     return np.array([q[3], q[0], q[1], q[2]])
 
 
-def add_heightfield(client: BulletClient, terrain: Heightfield, friction: float) -> int:
-    """Create ``terrain`` in ``client`` as a static body; returns its body id."""
+#: Lateral friction of the ground. Bullet combines the two bodies' coefficients by their product
+#: (``btManifoldResult::calculateCombinedFriction``: a box with 0.3 on a ground with 0.3 starts to
+#: slide at 6 deg, tan = 0.09), so the ground is 1 and a foot's own coefficient is the contact's.
+GROUND_FRICTION = 1.0
+
+
+def add_heightfield(client: BulletClient, terrain: Heightfield, friction: float = GROUND_FRICTION) -> int:
+    """Create ``terrain`` in ``client`` as a static body with lateral ``friction``; returns its body id."""
     h = terrain.heights
     ny, nx = h.shape
     c = terrain.cell_size
@@ -147,9 +153,9 @@ class NaoRealEnv(NaoEnv):
         if self._terrain is None:
             plane = p.createCollisionShape(pybullet.GEOM_PLANE)
             ground = p.createMultiBody(0, plane)
-            p.changeDynamics(ground, -1, lateralFriction=fric)
+            p.changeDynamics(ground, -1, lateralFriction=GROUND_FRICTION)
         else:
-            add_heightfield(p, self._terrain, fric)
+            add_heightfield(p, self._terrain)
         flags = pybullet.URDF_USE_INERTIA_FROM_FILE | pybullet.URDF_MAINTAIN_LINK_ORDER
         start = [0.0, 0.0, self.hang_height if self.fixed_base else 1.0]
         self.body = b = p.loadURDF(r.write_urdf(), start, [0, 0, 0, 1], useFixedBase=self.fixed_base, flags=flags)

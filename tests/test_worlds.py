@@ -168,3 +168,34 @@ def test_fixed_base_hangs_and_never_falls(world):
     assert not rec.fell and np.all(rec.group("fsr") == 0)
     assert np.abs(rec.group("gt.base") - [0.0, 0.0, 0.6]).max() < 1e-9  # the base stays where it hangs
     env.close()
+
+
+@pytest.mark.parametrize("ground", ["plane", "heightfield"])
+def test_real_world_foot_friction_is_the_contact_coefficient(ground):
+    """Bullet multiplies the two bodies' friction coefficients; the real world's ground is 1, so a
+    foot friction of 0.3 is a contact coefficient of 0.3 (it was 0.3^2 = 0.09): a block with the
+    feet's coefficient sticks at tan(slope) = 0.25 and slides at 0.36 (slope made by tilting gravity)."""
+    import pybullet
+
+    from terrain import flat
+
+    env = NaoRealEnv(fixed_base=False, profile={"foot_friction": (0.3, 0.3)})
+    env.reset(seed=0, options={"terrain": None if ground == "plane" else flat()})
+    p = env.client
+    foot = env._link[env.robot.frames["l_sole"].link]
+    mu = p.getDynamicsInfo(env.body, foot)[1]
+    assert mu == pytest.approx(0.3)
+    p.removeBody(env.body)
+    slid = {}
+    for tan in (0.25, 0.36):
+        box = p.createMultiBody(1.0, p.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[0.05] * 3),
+                                basePosition=[0.0, 0.0, 0.0505])
+        p.changeDynamics(box, -1, lateralFriction=mu)
+        a = np.arctan(tan)
+        p.setGravity(9.81 * np.sin(a), 0.0, -9.81 * np.cos(a))
+        for _ in range(1000):
+            p.stepSimulation()
+        slid[tan] = p.getBasePositionAndOrientation(box)[0][0]
+        p.removeBody(box)
+    env.close()
+    assert abs(slid[0.25]) < 2e-3 and slid[0.36] > 0.05
