@@ -16,9 +16,21 @@ gait            gait-like pattern at 0.9-1.6 Hz (legs in      everything at walk
 chirp           0.3-4 Hz linear chirp, random per-joint        latency (phase ∝ ω), damping,
                 signs and weights                             armature, kp (resonance), torque
                                                               limit (peaks)
-stepping        weight shift side to side with small knee     foot friction, ground compliance
+stepping        weight shift side to side with small knee     ground compliance, foot friction
                 lifts (floating base only)                    (contact phases)
+slip            feet pushed apart and pulled together in      foot friction (the feet slide
+                double support at 2-3.5 Hz, growing           on a slippery floor, stick on a
+                amplitude (hip and ankle roll in opposition,  grippy one; the amplitude at
+                soles kept flat; floating base only)          which they start tells μ)
 ==============  ============================================  =================================
+
+A floating-base (standing) log is ``slip``, ``stepping``, ``holds`` and ``gait``, the last two at
+0.3 of the amplitudes. The other segments load the feet sideways little (tangential/normal force
+ratio at the soles mostly under 0.3, more only on a nearly unloaded foot), so a floor with
+μ = 0.2-0.4 hardly changes them; in ``slip`` the legs' lateral forces are internal (the torso
+hardly moves) and the ratio grows to 0.5-0.7 with the amplitude. It comes first, while the robot
+stands still on both feet: after ``stepping`` it still rocks from foot to foot, and a lifted foot
+is put down, not slid.
 
 Different seeds give different trajectories (amplitudes, frequencies, postures, weights), which
 is what a held-out split by trajectory needs. All targets stay 0.01 rad inside the joint limits.
@@ -33,7 +45,10 @@ from robots import RobotModel
 SEGMENTS = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
 #: Share of the log each segment takes (fixed base), after 0.4 s of holding the start pose.
 _SHARE = {"holds": 0.17, "ramps": 0.13, "steps": 0.12, "reversals": 0.1, "gait": 0.16, "chirp": 0.32,
-          "stepping": 0.5}
+          "stepping": 0.5, "slip": 0.25}
+#: Segments of a floating-base log, in this order, when ``segments`` has no ``"stepping"``
+#: (``holds`` and ``gait`` only if asked for).
+_FLOATING = ("slip", "stepping")
 
 
 def _amplitudes(robot: RobotModel) -> np.ndarray:
@@ -56,7 +71,10 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     Args:
         robot: the robot; ``pose``: the named pose the motion is centred on (and starts/ends in).
         seconds: log duration [s] (>= 3).  seed: trajectory seed.
-        segments: subset/order of :data:`SEGMENTS` (``"stepping"`` is added for a floating base).
+        segments: subset/order of :data:`SEGMENTS`. For a floating base (``fixed_base=False``)
+            without ``"stepping"`` in it, the log is ``slip``, ``stepping`` and then the asked-for
+            ``holds`` and ``gait`` (at 0.3 of the amplitudes; ``slip`` is about a fifth of the
+            log); a list with ``"stepping"`` is taken as given.
         scale: multiplies every amplitude (0.5 for a cautious first run on hardware).
 
     Raises:
@@ -68,7 +86,7 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
         raise ValueError(f"scale must be positive, got {scale}")
     segments = list(segments)
     if not fixed_base and "stepping" not in segments:
-        segments = ["stepping"] + [s for s in segments if s in ("holds", "gait")]
+        segments = list(_FLOATING) + [s for s in segments if s in ("holds", "gait")]
     for s in segments:
         if s not in _SHARE:
             raise ValueError(f"unknown excitation segment {s!r}; known: {', '.join(_SHARE)}")
@@ -140,6 +158,21 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
             w = rng.uniform(0.5, 1.0, na) * rng.choice([-1.0, 1.0], na)
             phi = rng.uniform(0, 0.5 * np.pi, na)
             d = (amp * w)[None] * (np.sin(phase[:, None] + phi[None]) - np.sin(phi)[None]) * (taper * env)[:, None]
+        elif seg == "slip":
+            # legs apart/together in double support: hip and ankle roll in opposition keep the
+            # soles flat; the feet's lateral forces cancel, so the torso stays put while their
+            # ratio to the normal force grows with the amplitude (slip from μ ~0.6 down)
+            f = rng.uniform(2.0, 3.5)
+            a = rng.uniform(0.06, 0.09) * scale * rng.choice([-1.0, 1.0])
+            grow = 0.4 + 0.6 * t / T
+            spread = a * grow * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) * env
+            d = np.zeros((L, na))
+            for i, nm in enumerate(names):
+                side = 1.0 if nm.startswith("L") else -1.0
+                if "HipRoll" in nm:
+                    d[:, i] = side * spread
+                elif "AnkleRoll" in nm:
+                    d[:, i] = -side * spread
         else:  # stepping (floating base): weight shift with small alternating knee lifts
             f = rng.uniform(0.5, 0.7)
             ph = 2 * np.pi * f * t
