@@ -595,6 +595,8 @@ def main(argv=None) -> int:
     ap.add_argument("--two-effect", type=int, default=20, help="number of two-effect trials")
     ap.add_argument("--logs", type=int, default=3, help="logs per trial (one held out)")
     ap.add_argument("--seconds", type=float, default=6.0, help="seconds per log")
+    ap.add_argument("--calibration-logs", type=int, help="'none' logs for the engine-gap calibration "
+                    "(default: twice --logs, so its own diagnosis has held-out logs to keep a gap term on)")
     ap.add_argument("--out", default="runs/sysid_blind")
     ap.add_argument("--seed0", type=int, default=1000)
     ap.add_argument("--classes", help="comma list to restrict the single-effect classes")
@@ -618,7 +620,8 @@ def main(argv=None) -> int:
     if not os.path.exists(cal_file):
         logs_dir = os.path.join(root, "none_logs")
         if not os.path.isdir(logs_dir):
-            record(args.world, [], logs_dir, args.logs, args.seconds, args.seed0 - 1, fixed)
+            record(args.world, [], logs_dir, args.calibration_logs or 2 * args.logs, args.seconds, args.seed0 - 1,
+                   fixed)
         run_diagnose(["diagnose", "--real", logs_dir, "--out", cal_dir, "--calibrate"])
         print(f"calibrated engine gap on {logs_dir}", flush=True)
     trials = []
