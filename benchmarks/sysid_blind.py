@@ -137,7 +137,8 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
     x0.6-0.75 on one link >= 0.1 kg; armature 0.003-0.012 kg m^2; sensor bias ±5-20 mrad;
     1-3 joints (any actuated joint; for damping only those of
     :func:`explicit_damping_stable_joints`) for local effects; foot friction 0.2-0.4 (nominal 0.8); ground
-    contact time constant 35-60 ms (nominal 20 ms); terrain roughness: peak bump height 5-15 mm;
+    contact time constant 35-60 ms (nominal 20 ms); terrain roughness: peak bump height 5-15 mm
+    (scored as the RMS height of the laid surfaces, :func:`roughness_truth`);
     joint compliance: a series spring of stiffness 1.5-4 x the joint's kp (statically x0.6-0.8 of the
     servo stiffness) on 1-3 joints of :func:`explicit_spring_stable_joints` other than HipYawPitch, value its compliance
     1/k [rad/(N m)].
@@ -416,7 +417,7 @@ def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: f
     t0 = time.perf_counter()
     env = make_world(world, hidden, fixed_base)
     tmp = out_dir + ".tmp"
-    amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e["values"])
+    amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e["peak"])
     paths = record_excitation(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed, prefix="log",
                               terrain=rough_ground(amp, seed) if amp > 0 else None)
     env.close()
@@ -429,6 +430,21 @@ def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: f
         os.remove(p)
     os.rmdir(tmp)
     return time.perf_counter() - t0
+
+
+def roughness_truth(hidden: list[dict], seed: int, n_logs: int) -> list[dict]:
+    """The referee lays sparse bumps of the drawn peak height (its own parameter, kept as ``peak``)
+    and scores the RMS height Sq of the surfaces it laid (``values``: the mean over the trial's logs
+    of the heights' standard deviation over the 2 x 2 m patch), which is what the tool's value means.
+    ``seed``: the recording seed :func:`record` passes to :func:`sysid.worlds.rough_ground`."""
+    from sysid.worlds import rough_ground
+
+    for e in hidden:
+        if e["family"] == "terrain_roughness":
+            e["peak"] = list(e["values"])
+            ground = rough_ground(e["peak"][0], seed)
+            e["values"] = [float(np.mean([ground(i).heights.std() for i in range(n_logs)]))]
+    return hidden
 
 
 def run_diagnose(args_list: list[str]) -> dict:
@@ -652,6 +668,7 @@ def main(argv=None) -> int:
         else:
             fa, fb = rng.choice(pair_fams, 2, replace=False)
             hidden = [draw_effect(str(fa), rng, robot), draw_effect(str(fb), rng, robot)]
+        hidden = roughness_truth(hidden, seed % 100000, args.logs)
         tdir = os.path.join(root, "trials", tid)
         truth_dir = os.path.join(root, "truth")
         os.makedirs(truth_dir, exist_ok=True)

@@ -31,7 +31,7 @@ settles. A compliance below 1 / :func:`sysid.model.spring_stiffness_max` (a spri
 1 ms step integrates) is modelled at that bound.
 
 ``terrain_roughness`` is *stochastic*: uneven ground is a random surface nobody measured, so it has
-no deterministic replay and no screening column. :mod:`sysid.roughness` fits the peak height of a
+no deterministic replay and no screening column. :mod:`sysid.roughness` fits the RMS height (Sq) of a
 distribution of random heightfields by matching the residual statistics of simulated logs on
 sampled surfaces (floating-base logs only).
 """
@@ -123,8 +123,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            0.04, smooth=False, contact=True, min_effect=0.002),
     Family("joint_compliance", "series joint compliance (elastic transmission)", "joint", "rad/(N m)", 0.0, 0.0,
            4.0, 0.0059, min_effect=0.002),
-    Family("terrain_roughness", "uneven ground (random surface, peak height)", "global", "m", 0.0, 0.0, 0.03, 0.01,
-           contact=True, min_effect=0.002, stochastic=True),
+    Family("terrain_roughness", "uneven ground (random surface, RMS height)", "global", "m", 0.0, 0.0, 0.015, 0.003,
+           contact=True, min_effect=0.0006, stochastic=True),
 )}
 #: Families screened on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact)

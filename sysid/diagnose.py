@@ -418,11 +418,11 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             say("terrain roughness: simulating the logs on random surfaces (distribution fit)")
             rough = fit_roughness(problem, {})
             problem.n_rollouts += rough.n_rollouts
-            say(f"terrain roughness: peak height {1000 * rough.amplitude:.1f} mm; "
+            say(f"terrain roughness: RMS height {1000 * rough.rms_height:.2f} mm; "
                 f"{'declared' if rough.declared else 'rejected'}: {rough.reason}")
             if not rough.declared:
                 rejected.append({"term": "terrain_roughness", "family": "terrain_roughness",
-                                 "value": rough.amplitude, "reason": rough.reason})
+                                 "value": rough.rms_height, "reason": rough.reason})
     # final fit quality, intervals, identifiability
     effects, indist = [], []
     if model:
@@ -457,11 +457,12 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                            "experiment": _experiment(fa, fb.split("(")[0])})
     if rough is not None and rough.declared:
         fam = FAMILIES["terrain_roughness"]
-        effects.append({"family": "terrain_roughness", "joints": [], "links": [], "value": rough.amplitude,
+        effects.append({"family": "terrain_roughness", "joints": [], "links": [], "value": rough.rms_height,
                         "unit": "m", "ci95": [rough.ci95[0], rough.ci95[1]], "nominal": 0.0, "words": fam.words,
                         "where": "feet/ground (stance)",
-                        "display": (f"{1000 * rough.amplitude:.1f} mm peak ({1000 * rough.rms_height:.1f} mm RMS, "
-                                    f"{100 * CORRELATION_RADIUS:.0f} cm correlation radius assumed)"),
+                        "display": (f"{1000 * rough.rms_height:.2f} mm RMS height (the model's surfaces peak at "
+                                    f"{1000 * rough.peak_height:.1f} mm; {100 * CORRELATION_RADIUS:.0f} cm correlation "
+                                    "radius assumed)"),
                         "heldout_cost_without": min(rough.excess_heldout_obs, rough.excess_heldout_pred),
                         "stochastic": True,
                         "evidence": rough.reason})
@@ -496,7 +497,7 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         if unexplained:
             verdict += f". Still above 1.5x floor energy: {', '.join(unexplained)}"
     if rough is not None and rough.declared:
-        verdict += (f". The residual left is what uneven ground of {1000 * rough.amplitude:.1f} mm peak height gives "
+        verdict += (f". The residual left is what uneven ground of {1000 * rough.rms_height:.2f} mm RMS height gives "
                     f"(held-out excess {rough.excess_heldout_obs:.1f} floor², simulated logs on such ground "
                     f"{rough.sim_log_excess[0]:.1f}-{rough.sim_log_excess[2]:.1f}); a random surface is not the one "
                     "that was there, so it does not lower the RMS")

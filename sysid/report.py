@@ -273,14 +273,14 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
         ax.legend(fontsize=8)
         save(fig, "residual_by_phase.png", 100)
     rough = rep.get("terrain_roughness")
-    if rough:  # the distribution fit: simulated excess vs peak height, and what the logs show
+    if rough:  # the distribution fit: simulated excess vs RMS height, and what the logs show
         fig, ax = plt.subplots(figsize=(6, 3.8))
         g = 1000 * np.asarray(rough["grid"])
         ax.plot(g, rough["excess"], "C0o-", label="logs simulated on random surfaces")
         ax.axhline(rough["excess_obs"], color="k", ls="--", lw=1, label="recordings (all logs)")
-        ax.axvline(1000 * rough["amplitude"], color="C1", lw=1.2, label=f"fitted {1000 * rough['amplitude']:.1f} mm")
+        ax.axvline(1000 * rough["rms_height"], color="C1", lw=1.2, label=f"fitted {1000 * rough['rms_height']:.2f} mm")
         ax.axvspan(1000 * rough["ci95"][0], 1000 * rough["ci95"][1], color="C1", alpha=0.15, label="95 % CI")
-        ax.set_xlabel("peak height of the ground surface [mm]")
+        ax.set_xlabel("RMS height of the ground surface, Sq [mm]")
         ax.set_ylabel("excess residual per window [floor²]")
         ax.set_title("uneven ground: " + ("declared" if rough["declared"] else "rejected"), fontsize=9)
         ax.legend(fontsize=7)

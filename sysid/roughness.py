@@ -7,8 +7,8 @@ stance phases. The sim cannot replay the true surface, only surfaces drawn from 
 so the family is fitted by matching statistics, the way BayesSim/ABC fit stochastic effects,
 with DROPO's short windows restarted from the measured state:
 
-1. **Simulated real logs.** For each amplitude ``A`` of a grid and ``S`` random surfaces per
-   amplitude, each log's commands are run open-loop in MuJoCo on the surface, from the log's
+1. **Simulated real logs.** For each RMS height ``A`` of a grid and ``S`` random surfaces per
+   grid point, each log's commands are run open-loop in MuJoCo on the surface, from the log's
    initial posture with the feet set on the surface (:func:`simulate_on_surfaces`). These logs are
    consistent with their ground (the robot stands on what is simulated), as a real log is.
 2. **Same statistic as the real logs.** They are replayed exactly like the real ones (windowed,
@@ -16,7 +16,7 @@ with DROPO's short windows restarted from the measured state:
    is the statistic the diagnosis already uses, with its per-channel profile v_c(A).
 3. **Fit.** Â solves ε(Â) = ε_obs (the windows' cost above the channel count, all logs: a robot
    stepping in place samples only the few spots its feet stand on, so one log is one draw of the
-   surface and the amplitude needs every draw there is), by interpolation of the monotone curve in
+   surface and the fit needs every draw there is), by interpolation of the monotone curve in
    log-log coordinates; its 95 % interval comes from a bootstrap over logs (observed) and surfaces
    (simulated).
 4. **Held-out check.** A random surface cannot lower the held-out RMS (it is not the surface that
@@ -31,10 +31,14 @@ with DROPO's short windows restarted from the measured state:
 
 Surface model (different code and form from the blind referee's sparse Gaussian bumps of
 ``terrain.lumpy``): a Gaussian random field, white noise filtered with a Gaussian kernel of
-:data:`CORRELATION_RADIUS` (``scipy.ndimage.gaussian_filter``), scaled so that its largest
-excursion over the 2 x 2 m patch under the robot is ``A``; this peak height [m] is the family's
-value. The correlation radius is an assumption of the model (8 cm: foam, turf, gravel-sized
-lumps), stated in the report.
+:data:`CORRELATION_RADIUS` (``scipy.ndimage.gaussian_filter``), scaled to RMS height ``Sq`` over the
+2 x 2 m patch under the robot (ISO 25178 areal roughness: the standard deviation of the height
+about its mean plane); this RMS height [m] is the family's value. It is a property of the ground
+the feet feel, where the largest excursion over the patch (also reported, as the model's surfaces'
+peak at that Sq) depends on the surface family: at the same peak the dense field is rougher than
+sparse bumps (measured: 1.26x the RMS height and slope of ``terrain.lumpy``'s fields, which made a
+peak-height fit 33 % low). The correlation radius is an assumption of the model (8 cm: foam, turf,
+gravel-sized lumps), stated in the report.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter
 
 from envs.base import FALL_TORSO_HEIGHT, quat_to_mat
-from sysid.candidates import apply_terms, series_structure
+from sysid.candidates import FAMILIES, apply_terms, series_structure
 from sysid.data import Log
 from sysid.model import TERRAIN_CELL, TERRAIN_SHAPE, TERRAIN_SIZE, Structure, replay_model, set_terrain
 from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch, _start_velocity, build_models,
@@ -56,33 +60,37 @@ from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch,
 
 #: Correlation radius of the surface model [m] (standard deviation of the smoothing kernel).
 CORRELATION_RADIUS = 0.08
-#: Amplitude grid [m] (peak height over the patch); 0 is the flat reference.
-AMPLITUDES = (0.0, 0.003, 0.006, 0.01, 0.015, 0.022, 0.03)
-#: Smallest amplitude the report names [m].
-MIN_AMPLITUDE = 0.002
+#: RMS-height grid [m] (Sq over the patch); 0 is the flat reference (peaks ~3.5-4x these).
+RMS_HEIGHTS = (0.0, 0.0008, 0.0016, 0.0027, 0.004, 0.006, 0.0085)
+#: Smallest RMS height the report names [m] (the family's smallest reported effect).
+MIN_RMS_HEIGHT = FAMILIES["terrain_roughness"].min_effect
+#: Largest RMS height a model surface may have [m].
+MAX_RMS_HEIGHT = 0.015
 #: Smallest held-out excess [floor², summed over channels] and per-channel profile agreement.
 MIN_HELDOUT_EXCESS = 0.25
 MIN_PROFILE_COSINE = 0.5
 
 
-def surface(amplitude: float, seed) -> np.ndarray:
+def surface(rms_height: float, seed) -> np.ndarray:
     """A random ground surface of the candidate model: heights [m], shape (51, 51) on the 4 cm
-    grid of the 2 x 2 m patch of :data:`sysid.model.TERRAIN_SIZE` (row = y, from -1 m).
+    grid of the 2 x 2 m patch of :data:`sysid.model.TERRAIN_SIZE` (row = y, from -1 m), with mean 0
+    and standard deviation ``rms_height`` (Sq, ISO 25178).
 
     Args:
-        amplitude: largest |height| over the patch [m] (>= 0, <= 0.05).
+        rms_height: RMS height about the mean plane [m] (>= 0, <= :data:`MAX_RMS_HEIGHT`).
         seed: anything :func:`numpy.random.default_rng` accepts.
 
     Raises:
-        ValueError: amplitude outside [0, 0.05] m.
+        ValueError: rms_height outside [0, MAX_RMS_HEIGHT].
     """
-    if not 0.0 <= amplitude <= 0.05:
-        raise ValueError(f"terrain amplitude must be within [0, 0.05] m, got {amplitude}")
-    if amplitude == 0:
+    if not 0.0 <= rms_height <= MAX_RMS_HEIGHT:
+        raise ValueError(f"terrain RMS height must be within [0, {MAX_RMS_HEIGHT}] m, got {rms_height}")
+    if rms_height == 0:
         return np.zeros(TERRAIN_SHAPE)
     rng = np.random.default_rng(seed)
     h = gaussian_filter(rng.standard_normal(TERRAIN_SHAPE), CORRELATION_RADIUS / TERRAIN_CELL, mode="wrap")
-    return h * (amplitude / np.abs(h).max())
+    h = h - h.mean()
+    return h * (rms_height / h.std())
 
 
 def _height_at(h: np.ndarray, x: float, y: float) -> float:
@@ -184,9 +192,10 @@ class RoughnessFit:
     """Result of :func:`fit_roughness`.
 
     Attributes:
-        amplitude: fitted peak height Â [m] (0 when nothing is left to explain).
-        ci95: (lo, hi) [m] bootstrap interval.  rms_height: RMS height of the model's surfaces at Â [m].
-        grid: amplitudes simulated [m].  excess: (n_grid,) simulated excess cost ε(A) per window
+        rms_height: fitted RMS height Ŝq [m] (0 when nothing is left to explain).
+        ci95: (lo, hi) [m] bootstrap interval.  peak_height: mean largest |height| of the model's
+            surfaces at Ŝq [m] (a property of the dense model, not of the real ground).
+        grid: RMS heights simulated [m].  excess: (n_grid,) simulated excess cost ε(A) per window
             (mean over surfaces and windows of all logs).  excess_obs: observed excess cost per window.
         excess_heldout_obs, excess_heldout_pred: held-out excess cost, observed and predicted at Â.
         heldout_p: smallest two-sided rank p-value of a held-out log's excess among the simulated
@@ -199,9 +208,9 @@ class RoughnessFit:
             open-loop simulation had tipped over.
     """
 
-    amplitude: float
-    ci95: tuple[float, float]
     rms_height: float
+    ci95: tuple[float, float]
+    peak_height: float
     grid: list[float]
     excess: list[float]
     excess_obs: float
@@ -246,15 +255,15 @@ def _excess_per_window(meas: list[np.ndarray], pred: list[np.ndarray], floor: np
     return np.stack([np.mean(((m[1:] - p[1:]) / floor) ** 2, axis=0) for m, p in zip(meas, pred)])
 
 
-def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, grid=AMPLITUDES,
+def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, grid=RMS_HEIGHTS,
                   n_boot: int = 200) -> RoughnessFit:
     """Fit the terrain-roughness distribution to the residual the deterministic model leaves.
 
     Args:
         problem: the diagnosis' :class:`sysid.identify.Problem` (floating base, IMU channels).
         model: the fitted deterministic terms (the problem's base terms are added).
-        n_surfaces: random surfaces per amplitude.  seed: seed of the surfaces.
-        grid: amplitudes [m], starting with 0.  n_boot: bootstrap resamples for the interval.
+        n_surfaces: random surfaces per grid point.  seed: seed of the surfaces.
+        grid: RMS heights [m], starting with 0.  n_boot: bootstrap resamples for the interval.
 
     Returns:
         A :class:`RoughnessFit` (see the module docstring for the method and decision rule).
@@ -266,7 +275,7 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
         raise ValueError("terrain roughness needs floating-base logs with IMU channels")
     grid = np.asarray(grid, dtype=float)
     if grid[0] != 0.0 or len(grid) < 3:
-        raise ValueError("the amplitude grid must start at 0 and have >= 3 points")
+        raise ValueError("the RMS-height grid must start at 0 and have >= 3 points")
     values = {**problem.base, **model}
     floor = problem.floor
     # observed: per-window excess of the current model
@@ -352,10 +361,10 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
         f = (np.sum(per_log_sim < o) + 0.5 * np.sum(per_log_sim == o)) / len(per_log_sim)
         ps.append(float(min(1.0, 2 * min(f, 1 - f) + 1.0 / len(per_log_sim))))
     p_ho = min(ps) if ps else 0.0
-    rms_h = float(np.mean([np.sqrt(np.mean(surface(a_hat, rs) ** 2)) for rs in rng_seeds])) if a_hat > 0 else 0.0
-    if a_hat < MIN_AMPLITUDE:
-        declared, reason = False, (f"fitted peak height {1000 * a_hat:.1f} mm is below the smallest reported "
-                                   f"({1000 * MIN_AMPLITUDE:.0f} mm)")
+    peak = float(np.mean([np.abs(surface(min(a_hat, MAX_RMS_HEIGHT), rs)).max() for rs in rng_seeds])) if a_hat > 0 else 0.0
+    if a_hat < MIN_RMS_HEIGHT:
+        declared, reason = False, (f"fitted RMS height {1000 * a_hat:.2f} mm is below the smallest reported "
+                                   f"({1000 * MIN_RMS_HEIGHT:.1f} mm)")
     elif obs_ho < MIN_HELDOUT_EXCESS:
         declared, reason = False, (f"the held-out logs show no excess over flat ground ({obs_ho:.2f} floor² "
                                    f"< {MIN_HELDOUT_EXCESS:g})")
@@ -366,7 +375,7 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
         declared, reason = True, (f"held-out excess {obs_ho:.1f} floor² over flat ground (which predicts 0); "
                                   f"simulated logs on such ground give {pcts[0]:.1f}-{pcts[2]:.1f} (5-95 %, median {pcts[1]:.1f}), "
                                   f"rank p = {p_ho:.2f}; profile agreement {cos:.2f}")
-    return RoughnessFit(amplitude=a_hat, ci95=(float(lo), float(hi)), rms_height=rms_h, grid=[float(g) for g in grid],
+    return RoughnessFit(rms_height=a_hat, ci95=(float(lo), float(hi)), peak_height=peak, grid=[float(g) for g in grid],
                         excess=[float(c) for c in curve], excess_obs=obs_all, excess_heldout_obs=obs_ho,
                         excess_heldout_pred=float(pred_prof.sum()), heldout_p=p_ho, sim_log_excess=pcts,
                         profile_cosine=cos,
