@@ -455,6 +455,19 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         if any(t.label() == a.replace("(-)", "") for t in model):
             indist.append({"a": a.replace("(-)", ""), "b": b.replace("(-)", ""), "corr": c,
                            "experiment": _experiment(fa, fb.split("(")[0])})
+    if rough is not None and rough.declared and model:
+        from sysid.roughness import MIN_HELDOUT_EXCESS, MIN_RMS_HEIGHT, excess_left
+
+        left, ho_left = excess_left(rough, problem, model)
+        rough.excess_heldout_left = ho_left
+        if left < MIN_RMS_HEIGHT or ho_left < MIN_HELDOUT_EXCESS:
+            rough.declared = False
+            rough.reason = (f"the deterministic model ({', '.join(t.label() for t in model)}) explains the excess "
+                            f"over flat ground: what it leaves corresponds to {1000 * left:.2f} mm RMS (held-out "
+                            f"excess {ho_left:.2f} floor²), below the smallest reported ({1000 * MIN_RMS_HEIGHT:.1f} mm)")
+            say(f"terrain roughness: rejected: {rough.reason}")
+            rejected.append({"term": "terrain_roughness", "family": "terrain_roughness", "value": rough.rms_height,
+                             "reason": rough.reason})
     if rough is not None and rough.declared:
         fam = FAMILIES["terrain_roughness"]
         effects.append({"family": "terrain_roughness", "joints": [], "links": [], "value": rough.rms_height,
@@ -463,7 +476,9 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                         "display": (f"{1000 * rough.rms_height:.2f} mm RMS height (the model's surfaces peak at "
                                     f"{1000 * rough.peak_height:.1f} mm; {100 * CORRELATION_RADIUS:.0f} cm correlation "
                                     "radius assumed)"),
-                        "heldout_cost_without": min(rough.excess_heldout_obs, rough.excess_heldout_pred),
+                        # what the deterministic model leaves on held-out logs, as far as such ground explains it
+                        "heldout_cost_without": min(rough.excess_heldout_obs if rough.excess_heldout_left is None
+                                                    else rough.excess_heldout_left, rough.excess_heldout_pred),
                         "stochastic": True,
                         "evidence": rough.reason})
         effects.sort(key=lambda e: -e["heldout_cost_without"])

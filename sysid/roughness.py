@@ -225,6 +225,21 @@ class RoughnessFit:
     profile_pred: list[float] = field(default_factory=list)
     n_rollouts: int = 0
     n_fallen: int = 0
+    excess_heldout_left: float | None = None
+
+
+def excess_left(rough: RoughnessFit, problem, model: dict) -> tuple[float, float]:
+    """What uneven ground still has to explain after the deterministic ``model`` (fitted after the
+    roughness, on the same residual): the RMS height [m] whose simulated excess (the curve of
+    ``rough``) equals the excess over flat ground ``model`` leaves in all logs, and the held-out
+    excess it leaves [floor², summed over channels]. A deterministic effect (low foot friction)
+    removes its own excess, which a roughness fit before it had read as uneven ground; a contact
+    term fitted on truly uneven ground removes little of it (a random surface is not repeatable)."""
+    ex = {w: _excess_per_window(problem.meas[w], [p[0] for p in problem.predict([model], w)], problem.floor) - 1.0
+          for w in ("train", "heldout")}
+    obs_all = float(np.concatenate([ex["train"], ex["heldout"]]).sum(axis=1).mean())
+    left = _invert(np.asarray(rough.grid), np.asarray(rough.excess), obs_all) if obs_all > 0 else 0.0
+    return left, float(ex["heldout"].sum(axis=1).mean())
 
 
 def _invert(grid: np.ndarray, curve: np.ndarray, target: float) -> float:

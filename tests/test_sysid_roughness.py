@@ -9,14 +9,15 @@ import pytest
 
 from robots import nao_h25
 from sysid.model import TERRAIN_CELL, Structure, replay_model, set_terrain
-from sysid.roughness import (CORRELATION_RADIUS, MIN_RMS_HEIGHT, _excess_per_window, fit_roughness,
+from sysid.candidates import Term
+from sysid.roughness import (CORRELATION_RADIUS, MIN_RMS_HEIGHT, _excess_per_window, excess_left, fit_roughness,
                              simulate_on_surfaces, surface)
 from terrain import Heightfield
 
 FLOOR = np.array([1e-3] * 24 + [2e-3] * 2 + [1e-2] * 3)  # encoders, torso roll/pitch, gyro
 
 
-def _stepping_logs(amplitude: float, seeds, seconds: float = 4.0):
+def _stepping_logs(amplitude: float, seeds, seconds: float = 4.0, friction: float | None = None):
     """Stepping-in-place logs in the MuJoCo sim world on a fresh sparse-bump field per log
     (``terrain.lumpy``, the blind referee's generator, not the tool's dense random field), with
     encoder and IMU noise."""
@@ -28,7 +29,7 @@ def _stepping_logs(amplitude: float, seeds, seconds: float = 4.0):
     r = nao_h25()
     ground = rough_ground(amplitude, seed=3)
     logs = []
-    env = NaoSimEnv(fixed_base=False)
+    env = NaoSimEnv(fixed_base=False, **({} if friction is None else {"friction": friction}))
     for i, s in enumerate(seeds):
         rec = rollout(env, CommandLog(protocol(r, seconds, seed=s, fixed_base=False)), seed=0, seconds=seconds,
                       options={"terrain": ground(i)})
@@ -114,11 +115,27 @@ def test_terrain_roughness_injection_and_recovery():
 
     truth = np.mean([rough_ground(0.012, seed=3)(i).heights.std() for i in range(3)])
     grid = (0.0, 0.001, 0.002, 0.0032, 0.0055)
-    rough = fit_roughness(_problem(_stepping_logs(0.012, [30, 31, 32])), {}, n_surfaces=2, grid=grid, n_boot=50)
+    problem = _problem(_stepping_logs(0.012, [30, 31, 32]))
+    rough = fit_roughness(problem, {}, n_surfaces=2, grid=grid, n_boot=50)
     assert rough.declared, rough.reason
     assert 0.5 * truth < rough.rms_height < 2.0 * truth
+    # a wrong contact term fitted next to it leaves most of the surface's excess (not repeatable)
+    left, _ = excess_left(rough, problem, {Term("ground_compliance"): 0.03})
+    assert left > 0.5 * rough.rms_height
     assert rough.ci95[0] <= rough.rms_height <= rough.ci95[1]
     assert rough.peak_height > 2.5 * rough.rms_height  # a Gaussian field's extreme over the patch
     flat = fit_roughness(_problem(_stepping_logs(0.0, [30, 31, 32])), {}, n_surfaces=2, grid=grid, n_boot=50)
     assert not flat.declared
     assert flat.rms_height < MIN_RMS_HEIGHT
+
+
+def test_a_deterministic_contact_effect_is_not_left_to_uneven_ground():
+    """Low foot friction (0.2) on flat ground leaves an excess over the nominal replay that a
+    roughness fit alone would name as uneven ground; with the friction term in the model, what is
+    left corresponds to less than the smallest reported RMS height (the diagnosis then rejects it)."""
+    problem = _problem(_stepping_logs(0.0, [30, 31, 32], friction=0.2))
+    grid = (0.0, 0.0005, 0.001, 0.002, 0.0035)
+    rough = fit_roughness(problem, {}, n_surfaces=2, grid=grid, n_boot=20)
+    assert rough.declared, rough.reason  # the friction's excess, read as ground
+    left, _ = excess_left(rough, problem, {Term("foot_friction"): 0.2})
+    assert left < MIN_RMS_HEIGHT and left < 0.5 * rough.rms_height
