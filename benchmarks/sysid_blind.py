@@ -71,8 +71,8 @@ CLASSES_FLOATING = {"sim": ["none", "foot_friction", "ground_compliance", "terra
 SEED_ORDER = ("none", "latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
               "link_mass", "armature", "sensor_bias", "none", "foot_friction", "ground_compliance",
               "terrain_roughness", "joint_compliance")
-NOMINAL = {"joint_compliance": 0.0, "latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
-           "torque_limit": 1.0, "link_mass": 1.0, "armature": 0.0, "sensor_bias": 0.0, "foot_friction": 0.8,
+NOMINAL = {"latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
+           "joint_compliance": 0.0, "torque_limit": 1.0, "link_mass": 1.0, "armature": 0.0, "sensor_bias": 0.0, "foot_friction": 0.8,
            "ground_compliance": 0.02, "terrain_roughness": 0.0}
 ANGLE_NOISE, GYRO_NOISE = 2e-3, 1e-2  # floating base: torso roll/pitch [rad], gyro [rad/s]
 NOISE = 1e-3  # encoder noise [rad]

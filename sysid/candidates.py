@@ -38,6 +38,7 @@ sampled surfaces (floating-base logs only).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -303,8 +304,6 @@ def series_structure(structure, values: dict[Term, float]):
     """``structure`` (a :class:`sysid.model.Structure`) with the series hinges ``values`` need: a
     play hinge per backlash term, a spring hinge per joint-compliance term (sorted, so structures
     are cache keys)."""
-    import dataclasses
-
     return dataclasses.replace(
         structure, play_joints=tuple(sorted(t.target for t in values if t.family == "backlash")),
         spring_joints=tuple(sorted(t.target for t in values if t.family == "joint_compliance")))
