@@ -1,7 +1,8 @@
 """``sgatwalk excite``: record the system-identification excitation protocol in a world.
 
 Runs :func:`sysid.excitation.protocol` (posture holds, slow ramps, target steps, load reversals,
-a gait-like pattern and a 0.3-4 Hz chirp; stepping and weight shifts for a floating base) for
+a gait-like pattern and a 0.3-4 Hz chirp; for a floating base: legs pushed apart and pulled
+together in double support so the feet slide on a slippery floor, then stepping and weight shifts) for
 ``--logs`` trajectories and writes one Parquet recording per trajectory into ``--out``. In the
 real world the profile's effects are drawn once (from ``--seed``) and kept for every log, like one
 physical robot; sensor noise differs per log. ``sgatwalk diagnose --real OUT`` reads the folder.

@@ -32,6 +32,9 @@ from sysid.stats import integrated_autocorr, localisation, noise_sigma
 
 #: Minimum noise floor [rad] (noise-free logs would otherwise divide by ~0).
 MIN_FLOOR = 1e-5
+#: Encoder noise [rad] below which recordings are taken as noise-free (simulated): NAO-like encoders
+#: are ~1 mrad, so a diagnosis without a calibration warns that any engine gap will read as physics.
+NOISE_FREE_SIGMA = 1e-4
 #: Window length of windowed replay for floating-base logs [s] (sysid.md §5.5).
 WINDOW_S = 0.5
 
@@ -516,11 +519,21 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                     f"(held-out excess {rough.excess_heldout_obs:.1f} floor², simulated logs on such ground "
                     f"{rough.sim_log_excess[0]:.1f}-{rough.sim_log_excess[2]:.1f}); a random surface is not the one "
                     "that was there, so it does not lower the RMS")
+    warnings = []
+    if calibration is None and finfo["sigma"]["encoders"] < NOISE_FREE_SIGMA and not nothing:
+        # noise-free recordings (a simulator) judged against their own numerical noise: an engine gap
+        # between the recording simulator and this sim is hundreds of floors and is read as physics
+        warnings.append(f"the recordings' encoder noise is {1000 * finfo['sigma']['encoders']:.3f} mrad and no engine-gap "
+                        "calibration was given: every difference between the recording's simulator (or robot) and "
+                        "this sim counts as missing physics; record logs without injected effects, run "
+                        "'sgatwalk diagnose --calibrate' on them and pass --calibration")
+        verdict += ". CAUTION: " + warnings[-1]
     considered = sorted({lbl.split("[")[0].replace("(-)", "") for lbl in screened})
     if rough is not None:
         considered = sorted(set(considered) | {"terrain_roughness"})
     report = {
         "verdict": verdict,
+        "warnings": warnings,
         "noise_floor": noise_floor,
         "heldout_rms_before": rms_before,
         "heldout_rms_after": rms_after,

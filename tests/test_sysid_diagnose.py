@@ -152,3 +152,14 @@ def test_softer_servo_and_series_compliance_are_told_apart(hidden):
     assert e["family"] == hidden and e["joints"] == ["RKneePitch"]
     assert abs(e["value"] - truth) < 0.05 * abs(truth - e["nominal"])
     assert hidden.replace("_", " ") in format_report(rep) or e["words"] in format_report(rep)
+
+
+def test_noise_free_logs_without_calibration_carry_a_caution():
+    """Recordings with no sensor noise (a simulator's) and no engine-gap calibration: the floor is
+    numerical noise, so the verdict warns that any engine gap reads as physics; noisy logs do not."""
+    hidden = {Term("latency"): 0.02}
+    clean = diagnose(synthetic_logs(hidden, n_logs=3, seconds=3.0, noise=0.0), families=("latency",))
+    assert clean["warnings"] and "--calibration" in clean["warnings"][0]
+    assert "CAUTION" in clean["verdict"]
+    noisy = diagnose(synthetic_logs(hidden, n_logs=3, seconds=3.0, seed=1), families=("latency",))
+    assert noisy["warnings"] == [] and "CAUTION" not in noisy["verdict"]
