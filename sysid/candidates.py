@@ -157,7 +157,7 @@ def term_probe(term: Term, robot: RobotModel) -> float:
     whose probe is the compliance that statically softens that joint like a kp x0.85,
     (1 / 0.85 - 1) / kp [rad/(N m)] (kp spans 1-30 N m/rad across NAO's joints)."""
     if term.family == "joint_compliance":
-        kp = float(robot.kp[list(robot.joint_names).index(term.target)])
+        kp = float(robot.kp[robot.joint_index([term.target])[0]])
         return (1.0 / 0.85 - 1.0) / kp
     return term.fam.probe
 
@@ -178,7 +178,7 @@ def term_bounds(term: Term) -> tuple[float, float]:
         from sysid.model import spring_stiffness_max
 
         k = min(spring_stiffness_max(True)[term.target], spring_stiffness_max(False)[term.target])
-        kp = float(_robot().kp[list(_robot().joint_names).index(term.target)])
+        kp = float(_robot().kp[_robot().joint_index([term.target])[0]])
         return max(fam.lo, 1.0 / k), min(fam.hi, 4.0 / kp)
     return fam.lo, fam.hi
 

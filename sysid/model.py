@@ -178,7 +178,7 @@ def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:
         spring.stiffness = [1e3, 0.0, 0.0]  # placeholder: the candidate writes jnt_stiffness = 1 / compliance
         # the servo's PD, damping included, acts on the motor angle through the actuator (clipped
         # to the effort like the sim's servo); the motor armature keeps that explicit PD stable
-        motor.armature = spring_motor_armature(float(robot.kp[list(robot.joint_names).index(name)]),
+        motor.armature = spring_motor_armature(float(robot.kp[robot.joint_index([name])[0]]),
                                                float(kd[name]), s.physics_dt)
         motor.damping = [0.0, 0.0, 0.0]
         spec.actuator(name).biasprm[2] = -float(kd[name])

@@ -64,8 +64,8 @@ CORRELATION_RADIUS = 0.08
 RMS_HEIGHTS = (0.0, 0.0008, 0.0016, 0.0027, 0.004, 0.006, 0.0085)
 #: Smallest RMS height the report names [m] (the family's smallest reported effect).
 MIN_RMS_HEIGHT = FAMILIES["terrain_roughness"].min_effect
-#: Largest RMS height a model surface may have [m].
-MAX_RMS_HEIGHT = 0.015
+#: Largest RMS height a model surface may have [m] (the family's upper bound).
+MAX_RMS_HEIGHT = FAMILIES["terrain_roughness"].hi
 #: Smallest held-out excess [floor², summed over channels] and per-channel profile agreement.
 MIN_HELDOUT_EXCESS = 0.25
 MIN_PROFILE_COSINE = 0.5
@@ -235,11 +235,10 @@ def excess_left(rough: RoughnessFit, problem, model: dict) -> tuple[float, float
     excess it leaves [floor², summed over channels]. A deterministic effect (low foot friction)
     removes its own excess, which a roughness fit before it had read as uneven ground; a contact
     term fitted on truly uneven ground removes little of it (a random surface is not repeatable)."""
-    ex = {w: _excess_per_window(problem.meas[w], [p[0] for p in problem.predict([model], w)], problem.floor) - 1.0
-          for w in ("train", "heldout")}
-    obs_all = float(np.concatenate([ex["train"], ex["heldout"]]).sum(axis=1).mean())
+    ex_tr, ex_ho = _observed_excess(problem, model)
+    obs_all = float(np.concatenate([ex_tr, ex_ho]).sum(axis=1).mean())
     left = _invert(np.asarray(rough.grid), np.asarray(rough.excess), obs_all) if obs_all > 0 else 0.0
-    return left, float(ex["heldout"].sum(axis=1).mean())
+    return left, float(ex_ho.sum(axis=1).mean())
 
 
 def _invert(grid: np.ndarray, curve: np.ndarray, target: float) -> float:
@@ -270,6 +269,13 @@ def _excess_per_window(meas: list[np.ndarray], pred: list[np.ndarray], floor: np
     return np.stack([np.mean(((m[1:] - p[1:]) / floor) ** 2, axis=0) for m, p in zip(meas, pred)])
 
 
+def _observed_excess(problem, model: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(train, held-out) per-window, per-channel excess over the floor of the recordings replayed
+    under ``model`` on flat ground: ``_excess_per_window - 1`` (0 where only noise is left)."""
+    return tuple(_excess_per_window(problem.meas[w], [p[0] for p in problem.predict([model], w)], problem.floor) - 1.0
+                 for w in ("train", "heldout"))
+
+
 def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, grid=RMS_HEIGHTS,
                   n_boot: int = 200) -> RoughnessFit:
     """Fit the terrain-roughness distribution to the residual the deterministic model leaves.
@@ -294,8 +300,7 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
     values = {**problem.base, **model}
     floor = problem.floor
     # observed: per-window excess of the current model
-    ex_tr = _excess_per_window(problem.meas["train"], [p[0] for p in problem.predict([model], "train")], floor) - 1.0
-    ex_ho = _excess_per_window(problem.meas["heldout"], [p[0] for p in problem.predict([model], "heldout")], floor) - 1.0
+    ex_tr, ex_ho = _observed_excess(problem, model)
     obs_ho = float(ex_ho.sum(axis=1).mean())
     # simulated: per amplitude and surface, train and held-out windows of the simulated logs
     rng_seeds = [[seed, s] for s in range(n_surfaces)]
