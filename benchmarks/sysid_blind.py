@@ -73,7 +73,7 @@ SEED_ORDER = ("none", "latency", "backlash", "coulomb_friction", "viscous_dampin
               "terrain_roughness", "joint_compliance")
 NOMINAL = {"latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
            "joint_compliance": 0.0, "torque_limit": 1.0, "link_mass": 1.0, "armature": 0.0, "sensor_bias": 0.0, "foot_friction": 0.8,
-           "ground_compliance": 0.02, "terrain_roughness": 0.0}
+           "ground_compliance": 0.01, "terrain_roughness": 0.0}
 ANGLE_NOISE, GYRO_NOISE = 2e-3, 1e-2  # floating base: torso roll/pitch [rad], gyro [rad/s]
 NOISE = 1e-3  # encoder noise [rad]
 MIN_LINK_MASS = 0.1  # links lighter than this are not drawn for mass errors [kg]
@@ -137,7 +137,7 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
     x0.6-0.75 on one link >= 0.1 kg; armature 0.003-0.012 kg m^2; sensor bias ±5-20 mrad;
     1-3 joints (any actuated joint; for damping only those of
     :func:`explicit_damping_stable_joints`) for local effects; foot friction 0.2-0.4 (nominal 0.8); ground
-    contact time constant 35-60 ms (nominal 20 ms); terrain roughness: peak bump height 5-15 mm
+    contact time constant 20-40 ms (nominal 10 ms); terrain roughness: peak bump height 5-15 mm
     (scored as the RMS height of the laid surfaces, :func:`roughness_truth`);
     joint compliance: a series spring of stiffness 1.5-4 x the joint's kp (statically x0.6-0.8 of the
     servo stiffness) on 1-3 joints of :func:`explicit_spring_stable_joints` other than HipYawPitch, value its compliance
@@ -160,8 +160,8 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
         return {"family": family, "targets": [None], "values": [float(rng.uniform(0.2, 0.4))]}
     if family == "terrain_roughness":  # peak height of the sparse-bump field [m]
         return {"family": family, "targets": [None], "values": [float(rng.uniform(0.005, 0.015))]}
-    if family == "ground_compliance":  # MuJoCo contact time constant [s] (nominal 0.02)
-        return {"family": family, "targets": [None], "values": [float(rng.uniform(0.035, 0.06))]}
+    if family == "ground_compliance":  # MuJoCo contact time constant [s] (the sim's hard floor: 10 ms)
+        return {"family": family, "targets": [None], "values": [float(rng.uniform(0.02, 0.04))]}
     if family == "link_mass":
         masses = {j.child: j.inertial.mass for j in robot.joints}
         links = [ln for ln, m in masses.items() if m >= MIN_LINK_MASS]

@@ -25,6 +25,7 @@ import os
 import sys
 from collections import deque
 
+import mujoco
 import numpy as np
 
 
@@ -180,7 +181,14 @@ class NaoRealEnv(NaoEnv):
         for foot in ("l_sole", "r_sole"):
             p.changeDynamics(b, link_of[r.frames[foot].link], lateralFriction=fric)
         self._links_all = links
-        self._com_local_base = np.array(p.getDynamicsInfo(b, -1)[3])
+        # Bullet's base pose is the pose of the root's *inertial* frame: its centre of mass, rotated onto
+        # the principal axes of its inertia (getDynamicsInfo[3], [4]; for the NAO torso roll -19, pitch
+        # +23, yaw +74 mrad). The torso (URDF link) frame, which the IMU and every other world read, is
+        # that pose times the inverse of the local inertial frame (see _base_link_pose).
+        info = p.getDynamicsInfo(b, -1)
+        self._com_local_base = np.array(info[3])
+        self._base_inertial_conj = np.zeros(4)
+        mujoco.mju_negQuat(self._base_inertial_conj, _xyzw_to_wxyz(info[4]))
         # HipYawPitch coupling: a gear constraint keeps both angles equal (MuJoCo's equality).
         li, ri = names["LHipYawPitch"], names["RHipYawPitch"]
         c = p.createConstraint(b, li, b, ri, pybullet.JOINT_GEAR, [1, 0, 0], [0, 0, 0], [0, 0, 0])
@@ -206,14 +214,23 @@ class NaoRealEnv(NaoEnv):
         self._delay = int(round(e.latency_s / self.physics_dt))
         self._fifo = deque([self.q0.copy()] * self._delay)
 
+    def _base_link_pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The root's centre of mass (3,) [m], and the world position (3,) [m] and orientation (w, x, y,
+        z) of its URDF link frame, from Bullet's base pose (the pose of the inertial frame; PyBullet
+        quickstart guide, ``getBasePositionAndOrientation``) times the inverse local inertial frame."""
+        pos, orn = self.client.getBasePositionAndOrientation(self.body)
+        quat = np.empty(4)  # q_link = q_inertial * q_local^-1, in double precision (MuJoCo's quaternion ops)
+        mujoco.mju_mulQuat(quat, _xyzw_to_wxyz(orn), self._base_inertial_conj)
+        com = np.array(pos)
+        return com, com - quat_to_mat(quat) @ self._com_local_base, quat
+
     def _frame_world(self, frame: str) -> tuple[np.ndarray, np.ndarray]:
         """World position (3,) and rotation (3, 3) of a robot frame."""
         fr = self.robot.frames[frame]
         li = self._link[fr.link]
         if li == -1:
-            pos, orn = self.client.getBasePositionAndOrientation(self.body)
-            R = quat_to_mat(_xyzw_to_wxyz(orn))
-            origin = np.array(pos) - R @ self._com_local_base
+            _, origin, quat = self._base_link_pose()
+            R = quat_to_mat(quat)
         else:
             ls = self.client.getLinkState(self.body, li, computeForwardKinematics=True)
             origin, R = np.array(ls[4]), quat_to_mat(_xyzw_to_wxyz(ls[5]))
@@ -246,12 +263,9 @@ class NaoRealEnv(NaoEnv):
         js = p.getJointStates(b, self._jidx)
         q = np.array([s[0] for s in js])
         dq = np.array([s[1] for s in js])
-        pos, orn = p.getBasePositionAndOrientation(b)
+        com_world, origin, quat = self._base_link_pose()
         v_com, w = (np.array(v) for v in p.getBaseVelocity(b))
-        quat = _xyzw_to_wxyz(orn)
         R = quat_to_mat(quat)
-        com_world = np.array(pos)
-        origin = com_world - R @ self._com_local_base
         linvel = v_com + cross(w, origin - com_world)
         acc_pt = origin + R @ self._accel_offset
         accel_vel = v_com + cross(w, acc_pt - com_world)

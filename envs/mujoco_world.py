@@ -27,6 +27,12 @@ from robots import RobotModel
 from terrain import Heightfield
 
 _FLAT_ELEVATION = 1e-6  # MuJoCo needs a positive elevation range even for a constant field
+#: Contact time constant of the sim's ground [s] (MuJoCo ``solref[0]``, damping ratio 1): a hard floor
+#: (a standing robot sinks 0.2 mm; 0.6 mm with MuJoCo's 20 ms default). Windowed replays of 6 s
+#: excitation logs without effects (leg joints' residual RMS, 1 mrad noise included): PyBullet's
+#: 4.95 / 3.48 / 3.37 mrad at 20 / 10 / 5 ms, MuJoCo's own 2.86 / 3.03 / 3.37 (stiffer contacts
+#: amplify the start-state noise); the sim's walking speeds match PyBullet's within 0.3 cm/s at 10 ms.
+GROUND_TIMECONST = 0.01
 
 
 def build_model(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_base: bool = False,
@@ -54,7 +60,17 @@ def build_spec(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_b
     spec.compiler.fusestatic = False
     spec.option.timestep = physics_dt
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_EULER
-    spec.option.cone = mujoco.mjtCone.mjCONE_PYRAMIDAL  # the contact-force sum in NaoSimEnv._state relies on it
+    # Contacts of a hard floor (MuJoCo docs, "Computation > Contact"; measured against PyBullet's
+    # near-rigid contacts by replaying its recordings, and against its walking speeds):
+    # * elliptic friction cone, the Coulomb cone itself (a pyramid allows only mu/sqrt(2) along its
+    #   diagonals; PyBullet clamps each tangent direction to mu);
+    # * impratio 10 (frictional-to-normal impedance ratio): with 1 a loaded sole that should stick
+    #   creeps about 12 mm over the 2-3.5 Hz slip segment of sysid.excitation at mu 0.8 (PyBullet
+    #   0.1 mm); with 10 about 2 mm, while real slip stays (48 mm at mu 0.3);
+    # * contact time constant GROUND_TIMECONST (solref) instead of MuJoCo's 20 ms default, a soft mat.
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.impratio = 10.0
+    timeconst = max(GROUND_TIMECONST, 2.0 * physics_dt)  # MuJoCo needs >= 2 steps
     torso = spec.body(robot.root)
     if fixed_base:
         torso.pos = [0.0, 0.0, hang_height]
@@ -63,6 +79,7 @@ def build_spec(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_b
     for g in spec.geoms:
         g.contype, g.conaffinity = 1, 0
         g.friction = [friction, 0.005, 0.0001]
+        g.solref = [timeconst, 1.0]
     for eq in spec.equalities:  # the HipYawPitch mimic: make it stiff (the default solref is 20 ms)
         eq.solref = [2 * physics_dt, 1.0]
         eq.solimp = [0.99, 0.999, 0.001, 0.5, 2.0]
@@ -90,6 +107,7 @@ def build_spec(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_b
                                          pos=[0.0, 0.0, lo])
     ground.contype, ground.conaffinity = 1, 1
     ground.friction = [friction, 0.005, 0.0001]
+    ground.solref = [timeconst, 1.0]
     return spec
 
 
@@ -176,9 +194,9 @@ class NaoSimEnv(NaoEnv):
             foot = np.where(g2 == self._ground, self._geom_foot[g1], np.where(g1 == self._ground, self._geom_foot[g2], -1))
             sel = foot >= 0
             if sel.any():
-                # pyramidal cone, condim 3: the normal force is the sum of the 4 facet forces
-                adr = con.efc_address[sel]
-                fn = d.efc_force[adr[:, None] + np.arange(4)].sum(1)
+                # elliptic cone: a contact's first constraint row is its normal force (MuJoCo docs,
+                # "Computation > Contact"; what mj_contactForce returns as force[0])
+                fn = d.efc_force[con.efc_address[sel]]
                 for k in (0, 1):
                     m_k = foot[sel] == k
                     force[k] = fn[m_k].sum()

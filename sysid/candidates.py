@@ -17,7 +17,7 @@ link_mass           link       x mass    ``body_mass``, ``body_inertia`` + mj_se
 armature            joint      kg m^2    ``dof_armature`` (added)                      0.002
 sensor_bias         joint      rad       measured angle offset (replay starts at q-b)  0.005
 foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
-ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.02 -> 0.04
+ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.01 -> 0.025
 joint_compliance    joint      rad/(N m) series spring hinge, ``jnt_stiffness`` = 1/c    0.18/kp
 terrain_roughness   global     m         random heightfields (a distribution, fitted   (stochastic:
                                          by :mod:`sysid.roughness`)                    no column)
@@ -46,6 +46,7 @@ import mujoco
 import numpy as np
 
 from envs.effects import NOMINAL_FOOT_FRICTION
+from envs.mujoco_world import GROUND_TIMECONST
 from robots import RobotModel, nao_h25
 
 #: Every family name the report may use (issue 8).
@@ -120,8 +121,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005, min_effect=5e-4),
     Family("foot_friction", "foot-ground friction", "global", "", NOMINAL_FOOT_FRICTION, 0.05, 1.5, 0.4,
            smooth=False, contact=True, min_effect=0.02),
-    Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", 0.02, 0.004, 0.1,
-           0.04, smooth=False, contact=True, min_effect=0.002),
+    Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", GROUND_TIMECONST, 0.002,
+           0.1, 0.025, smooth=False, contact=True, min_effect=0.002),
     Family("joint_compliance", "series joint compliance (elastic transmission)", "joint", "rad/(N m)", 0.0, 0.0,
            4.0, 0.0059, min_effect=0.002),
     Family("terrain_roughness", "uneven ground (random surface, RMS height)", "global", "m", 0.0, 0.0, 0.015, 0.003,

@@ -36,15 +36,15 @@ def _sole_slide(friction: float, seed: int) -> tuple[np.ndarray, bool]:
 
 @pytest.mark.parametrize("seed", [0, 3])
 def test_slip_segment_slides_feet_on_a_slippery_floor_only(seed):
-    """μ 0.25 vs 0.8: the soles slide >= 20 mm more (measured 29-67 mm more over seeds 0-5; the
-    protocol without the slip segment: 2-5 mm); no fall down to μ 0.15."""
+    """μ 0.25 vs 0.8: the soles slide >= 20 mm more (measured 39-51 mm vs 0.5 mm at seeds 0 and 3;
+    the protocol without the slip segment: 2-5 mm); no fall down to μ 0.15."""
     slide = {}
     for mu in (0.15, 0.25, 0.8):
         path, fell = _sole_slide(mu, seed)
         assert not fell, f"fell at friction {mu}"
         slide[mu] = path
     assert np.all(slide[0.25] - slide[0.8] > 0.020), slide
-    assert np.all(slide[0.8] < 0.025), slide  # MuJoCo's soft contact creeps ~12 mm at μ 0.8
+    assert np.all(slide[0.8] < 0.006), slide  # creep of MuJoCo's soft friction (12 mm with impratio 1)
 
 
 def test_floating_protocol_starts_with_the_slip_segment():

@@ -69,8 +69,9 @@ def _speed(**kw):
 def test_parameters_move_speed_in_the_expected_direction():
     """Longer steps -> faster; longer step period -> slower (speed ≈ step_length / period);
     deeper crouch (lower CoM) -> slower (the knee at 1.7 rad needs more torque than the servo
-    gives, so the support leg sags and the steps shorten)."""
-    assert _speed(step_length=0.02) < _speed(step_length=0.04) < _speed(step_length=0.06)
+    gives, so the support leg sags and the steps shorten). 6 cm steps tip over in the sim's hard-floor
+    contacts as in the flat real world without effects, so the longest step here is 5.5 cm."""
+    assert _speed(step_length=0.02) < _speed(step_length=0.04) < _speed(step_length=0.055)
     assert _speed(step_period=0.30) > _speed(step_period=0.36) > _speed(step_period=0.45)
     assert _speed(com_height=0.23) < _speed(com_height=0.27)
 

@@ -157,6 +157,23 @@ def test_fall_is_detected_with_reason():
     assert 0 < rec.meta["fall_time"] < 5.0
 
 
+def test_real_world_reports_the_torso_link_frame_not_bullets_inertial_frame():
+    """Bullet's base pose is the torso's centre-of-mass frame rotated onto its principal axes (for a
+    free base; roll -19, pitch +23, yaw +74 mrad here). The state must be the URDF torso frame: the
+    robot is loaded upright, and standing in the crouch both engines' IMU angles agree (an earlier
+    version read the inertial frame: a 20 mrad roll offset and a gyro rotated by 74 mrad)."""
+    real = NaoRealEnv(profile="none", terrain="flat")
+    _, info = real.reset(seed=0)
+    assert np.abs(info["base_quat"] - [1.0, 0.0, 0.0, 0.0]).max() < 1e-9
+    rec_real = rollout(real, HoldPose(real.robot, "crouch"), seed=0, seconds=2.0)
+    real.close()
+    sim = NaoSimEnv()
+    rec_sim = rollout(sim, HoldPose(sim.robot, "crouch"), seed=0, seconds=2.0)
+    d_angle = rec_real.group("angle")[-50:].mean(0) - rec_sim.group("angle")[-50:].mean(0)
+    assert np.abs(d_angle).max() < 3e-3, d_angle  # measured 1.6 mrad in pitch, 0 in roll
+    assert np.abs(rec_real.group("gt.base")[-1] - rec_sim.group("gt.base")[-1]).max() < 2e-3
+
+
 @pytest.mark.parametrize("world", ["sim", "real"])
 def test_fixed_base_hangs_and_never_falls(world):
     env = NaoSimEnv(fixed_base=True) if world == "sim" else NaoRealEnv(fixed_base=True, profile="real")
