@@ -9,7 +9,7 @@
 3. Walk θ0 in the grounded sims (default state) with α = 1 (the paper's formula) and α = 0.5 and
    compare speed and falls with the real world and the plain sim.
 
-Usage: ``python benchmarks/grounding_fidelity.py [--real 6] [--sim 6] [--trials 6] [--workers 2]``.
+Usage: ``python benchmarks/grounding_fidelity.py [--real 6] [--sim 6] [--trials 6] [--alphas 1 0.5] [--workers 2]``.
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ def main(argv=None):
     ap.add_argument("--sim", type=int, default=6, help="sim episodes with exploration noise")
     ap.add_argument("--noise", type=float, default=0.05, help="exploration noise [rad]")
     ap.add_argument("--trials", type=int, default=6, help="θ0 walks per world")
+    ap.add_argument("--alphas", type=float, nargs="+", default=[1.0, 0.5],
+                    help="blend factors α of the grounded sims to walk θ0 in")
     ap.add_argument("--workers", type=int, default=None)
     args = ap.parse_args(argv)
 
@@ -68,7 +70,7 @@ def main(argv=None):
         rows = [("real (PyBullet, 'real' profile)", "real", {}), ("sim (MuJoCo)", "sim", {})]
         with tempfile.TemporaryDirectory() as tmp:
             for m in ("gat", "sgat"):
-                for alpha in (1.0, 0.5):
+                for alpha in args.alphas:
                     tr = fits[("legs", 1, m)].transformer
                     path = f"{tmp}/{m}_{alpha}"
                     ActionTransformer(tr.spec, tr.forward, tr.inverse, method=m, alpha=alpha).save(path)

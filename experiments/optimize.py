@@ -26,8 +26,10 @@ The transformed action is blended with the agent's, ã = (1 - α) a + α g(s, a)
 default (the value in the GAT/GARAT code, ``reference/grounding.md`` §4): with α = 1 (the paper's
 formula) the model errors of a one-step inverse model on a walking robot -- it cannot tell a
 command change from the unobserved contact forces, and regresses toward the commands it saw --
-make θ0 fall in every grounded episode although it walks in the real world; with α = 0.5 the
-grounded sim reproduces θ0's real speed and fall rate (``benchmarks/grounding_fidelity.py``).
+make θ0 fall in every grounded episode although it walks in the real world. α = 0.5 is
+pessimistic too (θ0 falls in the grounded sim more often than in the real world), and α ≤ 0.3 is
+as optimistic as the plain sim; no α reproduces θ0's real walk (``benchmarks/grounding_fidelity.py
+--alphas``, README "Grounding choices").
 
 Methods: ``sgat``, ``gat``, ``none`` (CMA-ES in the plain sim), ``ane`` (action-noise envelope:
 sim with Gaussian noise of ``ane_sigma`` on the leg targets; no real data), ``real`` (CMA-ES
