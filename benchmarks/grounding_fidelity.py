@@ -6,8 +6,8 @@
    episode and report held-out one-step errors: the forward model's normalized MSE of Δs on real
    data (1.0 = no better than predicting the mean change) and the inverse model's RMS action error
    on sim data [mrad] (the exploration noise sets the scale).
-3. Walk θ0 in the grounded sims (default state) with α = 1 (the paper's formula) and α = 0.5 and
-   compare speed and falls with the real world and the plain sim.
+3. Walk θ0 in the grounded sims (default state) for each blend α of ``--alphas`` (default 1, the
+   paper's formula, and 0.5) and compare speed and falls with the real world and the plain sim.
 
 Usage: ``python benchmarks/grounding_fidelity.py [--real 6] [--sim 6] [--trials 6] [--alphas 1 0.5] [--workers 2]``.
 """
