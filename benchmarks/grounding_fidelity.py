@@ -59,7 +59,7 @@ def main(argv=None):
             R, Rh = recording_transitions(real[:-1], env.layout, spec), recording_transitions(real[-1:], env.layout, spec)
             S, Sh = recording_transitions(sim[:-1], env.layout, spec), recording_transitions(sim[-1:], env.layout, spec)
             for m in ("gat", "sgat"):
-                f = fit_transformer(R, S, spec, method=m, seed=0, fit_kwargs={"lr": 3e-3, "max_epochs": 150})
+                f = fit_transformer(R, S, spec, method=m, alpha=1.0, seed=0, fit_kwargs={"lr": 3e-3, "max_epochs": 150})
                 mu, _ = f.transformer.forward.predict(np.hstack([Rh.H, Rh.A]))
                 nmse = float(np.mean(((mu - Rh.dS) / R.dS.std(0)) ** 2))
                 inv = float(np.sqrt(np.mean((f.transformer.inverse.predict(np.hstack([Sh.H, Sh.dS])) - Sh.A) ** 2)))

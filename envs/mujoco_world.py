@@ -133,9 +133,14 @@ class NaoSimEnv(NaoEnv):
         self._terrain = make_terrain(terrain)
         self._build()
 
+    def _compile(self) -> mujoco.MjModel:
+        """The world's model on the current terrain (a subclass may build another one with the same
+        robot joints, actuators, sites and ``ground`` geom)."""
+        return build_model(self.robot, self._terrain, fixed_base=self.fixed_base, hang_height=self.hang_height,
+                           physics_dt=self.physics_dt, friction=self.friction)
+
     def _build(self) -> None:
-        self.model = build_model(self.robot, self._terrain, fixed_base=self.fixed_base, hang_height=self.hang_height,
-                                 physics_dt=self.physics_dt, friction=self.friction)
+        self.model = self._compile()
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in self.robot.joint_names])
@@ -203,10 +208,14 @@ class NaoSimEnv(NaoEnv):
                     cop[k] = fn[m_k] @ con.pos[sel][m_k]
         with np.errstate(invalid="ignore", divide="ignore"):
             cop = np.where(force[:, None] > 0, cop / force[:, None], np.nan)
-        q, dq = d.qpos[self._qadr].copy(), d.qvel[self._dadr].copy()
+        q, dq = self._joint_state()
         if self._bad_state_warnings() > self._warnings:
             q[:] = np.nan  # MuJoCo reset the state after a bad qpos/qvel/qacc: report "unstable"
         return StepState(q, dq, base_pos, base_quat, linvel, angvel, accel_vel, force, cop)
+
+    def _joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """The 24 joint angles [rad] and velocities [rad/s] the encoders measure."""
+        return self.data.qpos[self._qadr].copy(), self.data.qvel[self._dadr].copy()
 
     def _com(self) -> np.ndarray:
         return self.data.subtree_com[self._torso].copy()

@@ -32,6 +32,8 @@ COMMANDS: list[str] = [
     "experiments.cmd_diagnose",
     "experiments.cmd_visualize",
     "experiments.cmd_stress",
+    "experiments.cmd_fidelity",
+    "experiments.cmd_table1",
 ]
 
 

@@ -25,9 +25,10 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("optimize", help="SGAT grounding + CMA-ES gait optimization (the main job)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = OptimizeConfig()
-    p.add_argument("--methods", default="sgat", help=f"comma list of {', '.join(METHODS)} (default sgat)")
+    p.add_argument("--methods", default="sgat", help=f"comma list of {', '.join(METHODS)} (default sgat; identified and "
+                   "hybrid first identify the real world from excitation logs, ~4 min)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="quick",
-                   help="quick (default: ~15 min on 2 cores) or paper (population 150, 2 grounding steps)")
+                   help="quick (default; README: measured time) or paper (population 150, 2 grounding steps)")
     p.add_argument("--grounding-steps", type=int, help=f"grounding steps (default {d.grounding_steps})")
     p.add_argument("--popsize", type=int, help=f"CMA-ES population (default {d.popsize})")
     p.add_argument("--generations", type=int, help=f"CMA-ES generations per grounding step (default {d.generations})")
@@ -40,11 +41,16 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--exploration-noise", type=float, help=f"sim data action noise [rad] (default {d.exploration_noise})")
     p.add_argument("--select-episodes", type=int, help=f"episodes on which the CMA-ES mean, best candidate and θ_i "
                    f"are compared to pick θ_i+1 (default {d.select_episodes})")
-    p.add_argument("--eval-trials", type=int, help=f"real trials per evaluation (default {d.eval_trials})")
+    p.add_argument("--eval-trials", type=int, help=f"real trials per evaluation (default {d.eval_trials}; 0: none)")
     p.add_argument("--profile", help=f"real-world effect profile (default {d.profile})")
     p.add_argument("--grounding-state", choices=["legs", "legs+imu"], help="grounding state (default legs)")
     p.add_argument("--history", type=int, help="frames of state history in the models (default 1)")
-    p.add_argument("--alpha", type=float, help="blend ã = (1-α) a + α g(s,a) of raw and grounded action (default 0.5; 1 = the paper's formula)")
+    p.add_argument("--alpha", type=float, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
+                   "1 = the paper's formula)")
+    p.add_argument("--hybrid-alpha", type=float, help=f"blend of the hybrid method (default {d.hybrid_alpha})")
+    p.add_argument("--ensemble", type=int, help=f"forward/inverse model pairs; SGAT draws one per episode (default {d.ensemble})")
+    p.add_argument("--inverse-command", dest="inverse_command", action="store_true", default=None,
+                   help="the inverse model also sees the commanded action (default off)")
     p.add_argument("--model-epochs", type=int, help=f"max training epochs of each model (default {d.model_epochs})")
     p.add_argument("--no-aggregate", dest="aggregate", action="store_false", default=None,
                    help="fit each grounding step's models on θ_i's walks only (default: on the walks of "

@@ -23,17 +23,22 @@ For each method and grounding step i (θ_0 = the walk engine's initial parameter
    by all methods): speed mean ± std and falls, the paper's Table I.
 
 The transformed action is blended with the agent's, ã = (1 - α) a + α g(s, a), with α = 0.5 by
-default (the value in the GAT/GARAT code, ``reference/grounding.md`` §4): with α = 1 (the paper's
-formula) the model errors of a one-step inverse model on a walking robot -- it cannot tell a
-command change from the unobserved contact forces, and regresses toward the commands it saw --
-make θ0 fall in every grounded episode although it walks in the real world. α = 0.5 is
-pessimistic too (θ0 falls in the grounded sim more often than in the real world), and α ≤ 0.3 is
-as optimistic as the plain sim; no α reproduces θ0's real walk (``benchmarks/grounding_fidelity.py
---alphas``, README "Grounding choices").
+default (the GAT/GARAT code's value; the paper's formula is α = 1), and the models are an ensemble
+of 5 forward/inverse pairs fitted on bootstrap resamples, SGAT drawing one per episode
+(``experiments.grounding.DEFAULT_GROUNDING``). With a single fit the grounded sim's verdict on
+every gait flipped between "walks like the plain sim" and "everything falls" depending on which 4
+real walks it was fitted on, and with α between 0.3 and 0.4; with the ensemble and sim walks whose
+exploration noise does not topple the robot (0.02 rad) its fitness bias moves smoothly with α and
+stays within a point across draws (``sgatwalk fidelity``, README "Grounding that holds").
 
 Methods: ``sgat``, ``gat``, ``none`` (CMA-ES in the plain sim), ``ane`` (action-noise envelope:
-sim with Gaussian noise of ``ane_sigma`` on the leg targets; no real data), ``real`` (CMA-ES
-directly in the real world: the upper bound, and slow).
+sim with Gaussian noise of ``ane_sigma`` on the leg targets; no real data), ``identified`` (CMA-ES in
+the sim with the physics ``sgatwalk diagnose`` identified from excitation logs of the real world,
+``sysid.identified``), ``hybrid`` (SGAT grounding on top of that identified sim: the transformer
+learns only what the physics library could not name), ``real`` (CMA-ES directly in the real world:
+the upper bound, and slow). ``identified`` and ``hybrid`` share one identification per run, done
+first (``experiments.identify``: engine-gap calibration, fixed-base and stepping excitation logs of
+the real world, two diagnoses); its logs count as real data in ``results.json``'s ``real_data``.
 
 Everything random comes from ``numpy.random.SeedSequence`` keyed by (seed, purpose, step,
 generation), never from worker state, so the executor does not change results, and a run killed
@@ -57,8 +62,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from experiments.files import atomic_write_bytes as _atomic_write
+from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 
-METHODS = ("sgat", "gat", "none", "ane", "real")
+METHODS = ("sgat", "gat", "none", "ane", "identified", "hybrid", "real")
+#: Methods that ground the sim with a learned action transformer.
+GROUNDED = ("sgat", "gat", "hybrid")
 STATE_FILE = "cma_state.pkl"
 
 
@@ -68,9 +76,9 @@ class OptimizeConfig:
 
     methods: tuple = ("sgat",)
     grounding_steps: int = 2
-    real_episodes: int = 4
-    sim_episodes: int = 4
-    exploration_noise: float = 0.05
+    real_episodes: int = REAL_WALKS
+    sim_episodes: int = SIM_WALKS
+    exploration_noise: float = EXPLORATION_NOISE
     popsize: int = 12
     generations: int = 30
     sigma0: float = 0.05
@@ -82,10 +90,13 @@ class OptimizeConfig:
     profile: str = "real"
     grounding_state: str = "legs"
     history: int = 1
-    alpha: float = 0.5
-    hidden: tuple = (64, 64)
+    alpha: float = DEFAULT_GROUNDING.alpha
+    hybrid_alpha: float = HYBRID_GROUNDING.alpha
+    ensemble: int = DEFAULT_GROUNDING.ensemble
+    inverse_command: bool = DEFAULT_GROUNDING.inverse_command
+    hidden: tuple = DEFAULT_GROUNDING.hidden
     ane_sigma: float = 0.05
-    model_epochs: int = 150
+    model_epochs: int = DEFAULT_GROUNDING.max_epochs
     aggregate: bool = True
     seed: int = 0
     params: str | None = None
@@ -96,9 +107,11 @@ class OptimizeConfig:
         if bad or not self.methods:
             raise ValueError(f"unknown method(s) {bad or '(none given)'}; choose from {', '.join(METHODS)}")
         for name in ("grounding_steps", "real_episodes", "sim_episodes", "popsize", "generations",
-                     "episodes_per_candidate", "select_episodes", "eval_trials", "history", "model_epochs"):
+                     "episodes_per_candidate", "select_episodes", "history", "model_epochs", "ensemble"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if int(self.eval_trials) < 0:
+            raise ValueError(f"eval_trials must be >= 0 (0: no real evaluation), got {self.eval_trials}")
         if self.popsize < 2:
             raise ValueError("popsize must be >= 2")
         if not (0 < self.sigma0 <= 1):
@@ -109,8 +122,9 @@ class OptimizeConfig:
             raise ValueError(f"seconds must be positive, got {self.seconds}")
         if self.exploration_noise < 0 or self.ane_sigma < 0:
             raise ValueError("noise levels must be >= 0")
-        if not (0 <= self.alpha <= 1):
-            raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
+        for name in ("alpha", "hybrid_alpha"):
+            if not (0 <= getattr(self, name) <= 1):
+                raise ValueError(f"{name} must be in [0, 1], got {getattr(self, name)}")
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -234,25 +248,36 @@ class Optimizer:
         return [Recording.from_parquet(p) for p in paths]
 
     # ---------------------------------------------------------------- the stages
+    def grounding_config(self, method: str) -> "GroundingConfig":
+        """The model settings of ``method``'s grounding steps (``experiments.grounding``)."""
+        from sgat.grounding import GroundingConfig
+
+        cfg = self.cfg
+        alpha = cfg.hybrid_alpha if method == "hybrid" else cfg.alpha
+        return GroundingConfig(alpha=alpha, method="sgat" if method == "hybrid" else method, hidden=tuple(cfg.hidden),
+                               ensemble=cfg.ensemble,
+                               inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs)
+
     def _fit(self, method: str, step: int, theta) -> str:
-        from envs import NaoSimEnv
-        from sgat.grounding import fit_transformer, recording_transitions
-        from sgat.transformer import GroundingSpec
+        from experiments.grounding import fit_nao_grounding
 
         cfg = self.cfg
         out = os.path.join(self.run_dir, "models", f"{method}_step{step}")
         if os.path.exists(os.path.join(out, "transformer.json")):
             return out
         real, sim = [], []
+        sim_world, sim_kw = "sim", {"action_noise": cfg.exploration_noise}
+        if method == "hybrid":  # the transformer grounds the identified sim: its inverse model is of that sim
+            sim_world, sim_kw["identified"] = "identified", self.state["identification"]["reports"]
         for j, th in self._data_thetas(method, step, theta):
             real += self._recordings("real", th, _seeds(cfg, 1, j, n=cfg.real_episodes))
-            sim += self._recordings("sim", th, _seeds(cfg, 2, j, n=cfg.sim_episodes), action_noise=cfg.exploration_noise)
-        env = NaoSimEnv()
-        spec = GroundingSpec.for_nao(env, cfg.grounding_state, cfg.history)
+            sim += self._recordings(sim_world, th, _seeds(cfg, 2, j, n=cfg.sim_episodes), **sim_kw)
+        used = self.state.setdefault("real_used", {}).setdefault(method, {})
+        for r in real:
+            used[f"{_theta_key(list(r.meta['params'].values()))}_{r.meta['seed']}"] = len(r) * r.meta["control_dt"]
         t0 = time.perf_counter()
-        fit = fit_transformer(recording_transitions(real, env.layout, spec), recording_transitions(sim, env.layout, spec),
-                              spec, method=method, hidden=tuple(cfg.hidden), alpha=cfg.alpha, seed=cfg.seed + step,
-                              fit_kwargs={"max_epochs": cfg.model_epochs, "lr": 3e-3})
+        fit = fit_nao_grounding(real, sim, self.grounding_config(method), state=cfg.grounding_state,
+                                history=cfg.history, seed=cfg.seed + step)
         fit.transformer.save(out)
         self.log(f"[{method} step {step}] grounded on {fit.info['n_real']} real / {fit.info['n_sim']} sim transitions "
                  f"(forward val loss {fit.forward_report.val_loss:.3f}, inverse {fit.inverse_report.val_loss:.3f}, "
@@ -273,8 +298,13 @@ class Optimizer:
         return [(j, thetas[j - 1]) for j in range(1, step)] + [(step, np.asarray(theta))]
 
     def _world_kw(self, method: str, step: int) -> tuple[str, dict]:
-        if method in ("sgat", "gat"):
-            return "grounded", {"transformer": os.path.join(self.run_dir, "models", f"{method}_step{step}")}
+        if method in GROUNDED:
+            kw = {"transformer": os.path.join(self.run_dir, "models", f"{method}_step{step}")}
+            if method == "hybrid":
+                kw["identified"] = self.state["identification"]["reports"]
+            return "grounded", kw
+        if method == "identified":
+            return "identified", {"identified": self.state["identification"]["reports"]}
         if method == "ane":
             return "sim", {"action_noise": self.cfg.ane_sigma}
         return ("real" if method == "real" else "sim"), {}
@@ -357,6 +387,8 @@ class Optimizer:
         return cands[k]
 
     def _evaluate(self, theta, step: int, label: str) -> dict:
+        if self.cfg.eval_trials == 0:
+            return {"trials": 0}
         res = self._map(self._tasks("real", theta, _seeds(self.cfg, 6, step, n=self.cfg.eval_trials)), f"{label} real eval")
         if self.rerun:
             self._log_eval(label, step, theta)
@@ -415,6 +447,9 @@ class Optimizer:
             self._write_config()
             self._save()
         cfg = self.cfg
+        if any(m in ("identified", "hybrid") for m in cfg.methods) and not self.state.get("identification"):
+            self.state["identification"] = self._identify()
+            self._save()
         if not any(r["method"] == "theta0" for r in self.state["rows"]):
             ev = self._evaluate(self.state["theta0"], 0, "theta0")
             self.state["rows"].append({"method": "theta0", "step": 0, **ev})
@@ -424,7 +459,7 @@ class Optimizer:
             while prog["step"] <= cfg.grounding_steps:
                 step = prog["step"]
                 if prog["stage"] == "fit":
-                    if method in ("sgat", "gat"):
+                    if method in GROUNDED:
                         self._fit(method, step, prog["theta"])
                     prog["stage"] = "cma"
                     self._save()
@@ -439,18 +474,47 @@ class Optimizer:
                     GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
                     self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist(),
                                                "select_scores": prog.get("select_scores")})
-                    self.log(f"[{method} step {step}] real: {ev['speed_mean']:.2f} ± {ev['speed_std']:.2f} cm/s, "
-                             f"falls {ev['falls']}/{ev['trials']}")
+                    if ev["trials"]:
+                        self.log(f"[{method} step {step}] real: {ev['speed_mean']:.2f} ± {ev['speed_std']:.2f} cm/s, "
+                                 f"falls {ev['falls']}/{ev['trials']}")
                     prog.update(step=step + 1, stage="fit", theta=theta.tolist(), es=None, gen=0)
                     self._save()
         self._figure()
         return self.result()
 
+    def _identify(self) -> dict:
+        """Identify the real world once for ``identified`` and ``hybrid`` (``experiments.identify``)."""
+        from experiments.identify import calibrate_engines, identify_real
+
+        t0 = time.perf_counter()
+        root = os.path.join(self.run_dir, "identified")
+        self.log("[identify] engine-gap calibration and excitation logs of the real world, then two diagnoses")
+        cal = calibrate_engines(os.path.join(root, "calibration"), seed=_seeds(self.cfg, 7, n=1)[0] % 1_000_000)
+        res = identify_real(root, seed=_seeds(self.cfg, 8, n=1)[0] % 1_000_000, profile=self.cfg.profile, calibration=cal)
+        self.log(f"[identify] {len(res['effects'])} terms, uneven ground Sq {1000 * res['terrain_rms_height']:.2f} mm "
+                 f"from {res['logs']} logs ({res['seconds']:.0f} s of recording; {time.perf_counter() - t0:.0f} s)")
+        return res
+
+    def real_data(self) -> dict:
+        """Real data each method learned from: grounding walks (count, seconds of recording) and
+        excitation logs of the identification (count, seconds)."""
+        out = {}
+        ident = self.state.get("identification") or {}
+        for method in self.cfg.methods:
+            used = self.state.get("real_used", {}).get(method, {})
+            uses_id = method in ("identified", "hybrid")
+            out[method] = {"walks": len(used), "walk_seconds": float(sum(used.values())),
+                           "excitation_logs": ident.get("logs", 0) if uses_id else 0,
+                           "excitation_seconds": ident.get("seconds", 0.0) if uses_id else 0.0}
+        return out
+
     # ---------------------------------------------------------------- outputs
     def result(self) -> dict:
         rows = [{k: v for k, v in r.items() if k not in ("episodes",)} for r in self.state["rows"]]
-        best = max((r for r in rows if r["method"] != "theta0"), key=lambda r: r["fitness_mean"], default=None)
-        return {"run_dir": self.run_dir, "rows": rows, "best": best, "table": format_table(self.state["rows"])}
+        scored = [r for r in rows if r["method"] != "theta0" and r.get("trials")]
+        best = max(scored, key=lambda r: r["fitness_mean"], default=None)
+        return {"run_dir": self.run_dir, "rows": rows, "best": best, "real_data": self.real_data(),
+                "table": format_table(self.state["rows"])}
 
     def _write_config(self) -> None:
         import yaml
@@ -476,7 +540,7 @@ class Optimizer:
         if self.state.get("rows"):
             res = self.result()
             _atomic_write(os.path.join(self.run_dir, "results.json"),
-                          json.dumps({"rows": self.state["rows"]}, indent=1).encode())
+                          json.dumps({"rows": self.state["rows"], "real_data": self.real_data()}, indent=1).encode())
             _atomic_write(os.path.join(self.run_dir, "table.txt"), (res["table"] + "\n").encode())
 
     def _figure(self) -> None:
@@ -513,10 +577,12 @@ class Optimizer:
 
 def format_table(rows: list[dict]) -> str:
     """The paper's Table I: a row per method and grounding step (θ0 first)."""
-    lines = [f"{'method':8s} {'step':>4s} {'speed [cm/s]':>16s} {'falls':>7s}", "-" * 38]
+    lines = [f"{'method':10s} {'step':>4s} {'speed [cm/s]':>16s} {'falls':>7s}", "-" * 40]
     for r in rows:
+        if not r.get("trials"):
+            continue
         name = "θ0" if r["method"] == "theta0" else r["method"].upper()
         step = "-" if r["method"] == "theta0" else str(r["step"])
-        lines.append(f"{name:8s} {step:>4s} {r['speed_mean']:8.2f} ± {r['speed_std']:5.2f} "
+        lines.append(f"{name:10s} {step:>4s} {r['speed_mean']:8.2f} ± {r['speed_std']:5.2f} "
                      f"{r['falls']:>3d}/{r['trials']:<3d}")
     return "\n".join(lines)

@@ -58,11 +58,10 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from experiments.files import atomic_write_bytes as _atomic_write_bytes
+from experiments.stats import wilson_interval
 
 #: Terrain kinds a stress run sweeps (``terrain.TERRAINS`` without "flat": amplitude 0 is flat).
 TERRAIN_KINDS = ("lumpy", "fractal", "steps", "slope")
-#: z of a two-sided 95 % normal interval.
-Z95 = 1.959963984540054
 #: Columns of ``trials.csv`` / ``trials.parquet``, one row per episode.
 TRIAL_COLUMNS = [
     "policy", "theta_hash", "level", "trial", "terrain_seed", "episode_seed", "world", "terrain",
@@ -438,22 +437,6 @@ def run_trial(task: dict) -> dict:
 def _key(r: dict) -> tuple:
     """Identity of an episode: (policy label, gait hash, level, trial)."""
     return (r["policy"], r["theta_hash"], r["level"], r["trial"])
-
-
-def wilson_interval(k: int, n: int, z: float = Z95) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion k/n (95 % for the default z).
-
-    Returns (nan, nan) for n == 0. Matches ``scipy.stats.binomtest(k, n).proportion_ci(
-    confidence_level=0.95, method="wilson")``.
-    """
-    if n <= 0:
-        return (math.nan, math.nan)
-    p = k / n
-    z2 = z * z
-    denom = 1.0 + z2 / n
-    centre = (p + z2 / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
 
 
 def _mean(x) -> float:

@@ -5,8 +5,10 @@ A task is a plain dict (so it pickles cheaply and travels to process-pool or Ray
 ====================  =====================================================================
 key                   meaning
 ====================  =====================================================================
-``world``             ``"sim"`` (MuJoCo), ``"real"`` (PyBullet), ``"grounded"`` (MuJoCo wrapped
-                      in ``sgat.GroundedEnv`` with the transformer saved in ``transformer``)
+``world``             ``"sim"`` (MuJoCo), ``"real"`` (PyBullet), ``"identified"`` (MuJoCo with
+                      the effects of the diagnosis reports in ``identified``), ``"grounded"``
+                      (the sim, or the identified sim if ``identified`` is given, wrapped in
+                      ``sgat.GroundedEnv`` with the transformer saved in ``transformer``)
 ``theta``             the 16 gait parameters in SI units (list)
 ``seed``              the episode seed (terrain, effects, noise, SGAT sampling)
 ``seconds``           episode length [s] (the paper: 7.5)
@@ -14,6 +16,8 @@ key                   meaning
 ``action_noise``      std [rad] of Gaussian noise on the applied leg targets (sim data
                       collection with exploration noise, or the ANE baseline)
 ``transformer``       directory of a saved ``sgat.ActionTransformer`` (grounded world)
+``identified``        list of ``report.json`` paths of ``sgatwalk diagnose`` (identified world,
+                      or the base of a grounded one: hybrid grounding)
 ``record``            return the recording too (columns + metadata)
 ``meta``              extra metadata for the recording
 ====================  =====================================================================
@@ -45,22 +49,33 @@ def _transformer(path: str):
 def _world(task: dict):
     from envs import NaoRealEnv, NaoSimEnv
     from envs.wrappers import ActionMismatch
-    from sgat.transformer import GroundedEnv, GroundingSpec
+    from sgat.transformer import GroundedEnv
+    from experiments.grounding import nao_spec
 
     world = task["world"]
-    key = (world, task.get("profile", "real"), task.get("terrain", "lumpy"))
+    if world not in ("real", "sim", "grounded", "identified"):
+        raise ValueError(f"unknown world {world!r}; choose sim, real, identified or grounded")
+    reports = tuple(task.get("identified") or ())
+    if world == "identified" and not reports:
+        raise ValueError("the identified world needs the diagnosis reports (task['identified'])")
+    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports)
     if key not in _WORLDS:
+        if len(_WORLDS) >= 8:  # a fidelity sweep builds one identified world per draw: keep a few
+            for env in _WORLDS.values():
+                env.close()
+            _WORLDS.clear()
         if world == "real":
             _WORLDS[key] = NaoRealEnv(profile=task.get("profile", "real"), terrain=task.get("terrain", "lumpy"))
-        elif world in ("sim", "grounded"):
-            _WORLDS[key] = NaoSimEnv()
+        elif reports:
+            from sysid.identified import IdentifiedSimEnv
+
+            _WORLDS[key] = IdentifiedSimEnv.from_reports(list(reports))
         else:
-            raise ValueError(f"unknown world {world!r}; choose sim, real or grounded")
+            _WORLDS[key] = NaoSimEnv()
     env = _WORLDS[key]
     sigma = float(task.get("action_noise", 0.0) or 0.0)
     if sigma > 0:
-        legs = GroundingSpec.for_nao(env).action_index
-        env = ActionMismatch(env, noise_std=sigma, index=legs, seed=task["seed"])
+        env = ActionMismatch(env, noise_std=sigma, index=nao_spec().action_index, seed=task["seed"])
     if world == "grounded":
         env = GroundedEnv(env, _transformer(task["transformer"]))
     return env
@@ -86,3 +101,31 @@ def run_episode(task: dict) -> dict:
     if task.get("record"):
         out["recording"] = (rec.columns, rec.meta)
     return out
+
+
+def fit_grounding_task(task: dict) -> dict:
+    """Fit and save the action transformer of one grounding step (a picklable executor task).
+
+    Task keys: ``real``, ``sim`` (lists of recording paths), ``config`` (a
+    :class:`sgat.grounding.GroundingConfig` as a dict), ``seed``, ``out`` (directory to save to),
+    optional ``state``/``history`` (the grounding state).
+
+    Returns:
+        ``{"out", "forward_val", "inverse_val", "n_real", "n_sim", "wall_s"}``.
+    """
+    import time
+
+    from envs import Recording
+    from experiments.grounding import fit_nao_grounding
+    from sgat.grounding import GroundingConfig
+
+    t0 = time.perf_counter()
+    cfg = dict(task["config"])
+    cfg["hidden"] = tuple(cfg["hidden"])
+    fit = fit_nao_grounding([Recording.from_parquet(p) for p in task["real"]],
+                            [Recording.from_parquet(p) for p in task["sim"]], GroundingConfig(**cfg),
+                            state=task.get("state", "legs"), history=int(task.get("history", 1)), seed=int(task["seed"]))
+    fit.transformer.save(task["out"])
+    return {"out": task["out"], "forward_val": float(np.mean([r.val_loss for r in fit.forward_reports])),
+            "inverse_val": float(np.mean([r.val_loss for r in fit.inverse_reports])), "n_real": fit.info["n_real"],
+            "n_sim": fit.info["n_sim"], "wall_s": time.perf_counter() - t0}

@@ -2,102 +2,201 @@
 
 ``f_real`` is fitted on real transitions ``(s_t, a_t, s_{t+1})`` (SGAT: Gaussian NLL; GAT: MSE)
 and ``f_sim^-1`` on sim transitions collected with exploration noise on the actions, so that it
-covers the next states the forward model proposes (``reference/grounding.md`` §11, "narrow
-inverse-model data"). The action of a transition is the one *applied* to the world (for real
-data with a noisy actuator this is still the commanded one: the noise is part of the real
-dynamics the forward model must learn).
+covers the next states the forward model proposes (Desai et al., IROS 2020, §III-B; the GAT code
+adds noise to the sim policy for the same reason). The action of a transition is the one *applied*
+to the world (for real data with a noisy actuator this is still the commanded one: the noise is
+part of the real dynamics the forward model must learn); the commanded one rides along for an
+inverse model that is conditioned on it (:class:`sgat.models.InverseModel` ``command_input``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from sgat.models import FitReport, ForwardModel, InverseModel
-from sgat.transformer import ActionTransformer, GroundingSpec
+from sgat.transformer import METHODS, ActionTransformer, GroundingSpec
 
 
 @dataclass
 class Transitions:
-    """Stacked transitions: histories H (N, k*S), actions A (N, A), state changes dS (N, S)."""
+    """Stacked transitions: histories H (N, k*S), applied actions A (N, A), state changes dS (N, S)
+    and commanded actions C (N, A) (None: the applied ones)."""
 
     H: np.ndarray
     A: np.ndarray
     dS: np.ndarray
+    C: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.H)
+
+    @property
+    def commands(self) -> np.ndarray:
+        return self.A if self.C is None else self.C
 
     @classmethod
     def concat(cls, parts: list["Transitions"]) -> "Transitions":
         if not parts:
             raise ValueError("no transitions")
-        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("H", "A", "dS")))
+        C = None if all(p.C is None for p in parts) else np.concatenate([p.commands for p in parts])
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("H", "A", "dS")), C)
 
 
-def trajectory_transitions(obs: np.ndarray, actions: np.ndarray, spec: GroundingSpec) -> Transitions:
+def trajectory_transitions(obs: np.ndarray, actions: np.ndarray, spec: GroundingSpec,
+                           commands: np.ndarray | None = None) -> Transitions:
     """Transitions of one trajectory: ``obs`` (T, n_obs) observed before each ``actions`` (T, n_act)
-    was applied (row t of ``obs`` is s_t; the transition t -> t+1 uses actions[t]).
+    was applied (row t of ``obs`` is s_t; the transition t -> t+1 uses actions[t]); ``commands``
+    (T, n_act): what the agent commanded (None: the applied actions).
 
     Raises:
         ValueError: mismatched lengths or fewer than 2 steps.
     """
     obs = np.asarray(obs, dtype=np.float64)
     actions = np.asarray(actions, dtype=np.float64)
-    if len(obs) != len(actions) or len(obs) < 2:
+    if len(obs) != len(actions) or len(obs) < 2 or (commands is not None and len(commands) != len(obs)):
         raise ValueError(f"need >= 2 observation/action rows of equal length, got {len(obs)} and {len(actions)}")
     S = spec.states(obs)
     H = spec.stack_history(S)
-    return Transitions(H[:-1], actions[:-1][:, spec.action_index], S[1:] - S[:-1])
+    C = None if commands is None else np.asarray(commands, dtype=np.float64)[:-1][:, spec.action_index]
+    return Transitions(H[:-1], actions[:-1][:, spec.action_index], S[1:] - S[:-1], C)
 
 
 def recording_observations(rec, layout) -> np.ndarray:
     """The observation matrix (N, layout.size) of an ``envs.Recording`` (columns ``layout.names``).
 
     Raises:
-        KeyError: a needed observation column is missing from the recording.
+        KeyError: a needed observation column is missing from the recording (all named).
     """
     missing = [n for n in layout.names if n not in rec.columns]
     if missing:
-        raise KeyError(f"recording lacks observation column(s) {', '.join(missing[:5])} needed for grounding")
+        raise KeyError(f"recording lacks observation column(s) {', '.join(missing)} needed for grounding")
     return np.stack([rec.columns[n] for n in layout.names], axis=1)
 
 
 def recording_transitions(recs, layout, spec: GroundingSpec) -> Transitions:
-    """Transitions of ``envs.Recording``s, using their applied actions (``app``, else ``cmd``)."""
-    parts = [trajectory_transitions(recording_observations(r, layout), r.group("app"), spec) for r in recs if len(r) >= 2]
+    """Transitions of ``envs.Recording``s: applied actions (``app``, else ``cmd``) and commands (``cmd``)."""
+    parts = [trajectory_transitions(recording_observations(r, layout), r.group("app"), spec, r.group("cmd"))
+             for r in recs if len(r) >= 2]
     return Transitions.concat(parts)
+
+
+@dataclass(frozen=True)
+class GroundingConfig:
+    """How a grounding step fits its action transformer.
+
+    Attributes:
+        alpha: blend ã = (1 - α) a + α g(s, a) (required: 1 is the paper's formula, 0.5 the GAT code's).
+        method: ``"sgat"`` (stochastic forward model, sampled) or ``"gat"`` (deterministic).
+        hidden: hidden layer sizes of both models (the paper: (64, 64)).
+        ensemble: members (forward/inverse pairs) fitted on bootstrap resamples of the transitions with
+            their own seeds; SGAT draws a member per episode (:class:`ActionTransformer`).
+        inverse_command: the inverse model also sees the commanded action (a denoising inverse model,
+            :class:`sgat.models.InverseModel`).
+        residual_noise: SGAT on a stochastic sim: also fit a stochastic forward model of the sim and
+            sample the real forward model with the variance the sim does not already have
+            (:class:`sgat.transformer.ActionTransformer` ``sim_forward``).
+        max_epochs, lr, patience, batch_size: training of each model (Adam, mini-batches, early
+            stopping after ``patience`` epochs without a better validation loss).
+    """
+
+    alpha: float
+    method: str = "sgat"
+    hidden: tuple = (64, 64)
+    ensemble: int = 1
+    inverse_command: bool = False
+    residual_noise: bool = False
+    max_epochs: int = 150
+    lr: float = 3e-3
+    patience: int = 15
+    batch_size: int = 128
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"unknown grounding method {self.method!r}; choose from {', '.join(METHODS)}")
+        if not 0.0 <= float(self.alpha) <= 1.0:
+            raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
+        if int(self.ensemble) < 1:
+            raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
+        object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["hidden"] = list(self.hidden)
+        return d
 
 
 @dataclass
 class GroundingFit:
-    """The fitted transformer and how the fits went."""
+    """The fitted transformer and how the fits went (one report per ensemble member)."""
 
     transformer: ActionTransformer
-    forward_report: FitReport
-    inverse_report: FitReport
+    forward_reports: list[FitReport]
+    inverse_reports: list[FitReport]
     info: dict = field(default_factory=dict)
+
+    @property
+    def forward_report(self) -> FitReport:
+        return self.forward_reports[0]
+
+    @property
+    def inverse_report(self) -> FitReport:
+        return self.inverse_reports[0]
+
+
+def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg: GroundingConfig, *,
+                  seed: int = 0) -> GroundingFit:
+    """Fit ``f_real`` on ``real`` and ``f_sim^-1`` on ``sim`` (per ensemble member) and build the
+    transformer (Algorithm 1, lines "update f_real, f_sim^-1").
+
+    Member 0 is fitted on all transitions with ``seed``; further members on bootstrap resamples
+    (rows drawn with replacement) with seeds ``seed + 7919 i`` (bagging: Breiman 1996; deep ensembles:
+    Lakshminarayanan et al., NeurIPS 2017).
+
+    Raises:
+        ValueError: unusable data (see :meth:`sgat.models._Model.fit`).
+    """
+    S, A, k = spec.state_dim, spec.action_dim, spec.history
+    kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size}
+    Xf, Yf = np.concatenate([real.H, real.A], 1), real.dS
+    inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
+    Xi, Yi = np.concatenate(inv_in, 1), sim.A
+    Xs = np.concatenate([sim.H, sim.A], 1)  # the sim's own forward model: applied actions in, its spread out
+    fwds, invs, sims, rf, ri = [], [], [], [], []
+    for i in range(int(cfg.ensemble)):
+        s = seed + 7919 * i
+        fi = np.arange(len(Xf)) if i == 0 else np.random.default_rng([s, 1]).integers(0, len(Xf), len(Xf))
+        ii = np.arange(len(Xi)) if i == 0 else np.random.default_rng([s, 2]).integers(0, len(Xi), len(Xi))
+        fwd = ForwardModel(S, A, history=k, stochastic=(cfg.method == "sgat"), hidden=cfg.hidden)
+        rf.append(fwd.fit(Xf[fi], Yf[fi], seed=s, **kw))
+        inv = InverseModel(S, A, history=k, hidden=cfg.hidden, command_input=cfg.inverse_command)
+        ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, **kw))
+        fwds.append(fwd)
+        invs.append(inv)
+        if cfg.residual_noise and cfg.method == "sgat":
+            fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden)
+            fs.fit(Xs[ii], sim.dS[ii], seed=s + 2, **kw)
+            sims.append(fs)
+    tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None)
+    return GroundingFit(tr, rf, ri, {"n_real": len(real), "n_sim": len(sim)})
 
 
 def fit_transformer(real: Transitions, sim: Transitions, spec: GroundingSpec, *, method: str = "sgat",
-                    hidden=(64, 64), alpha: float = 1.0, seed: int = 0, fit_kwargs: dict | None = None) -> GroundingFit:
-    """Fit ``f_real`` on ``real`` and ``f_sim^-1`` on ``sim`` and build the transformer.
+                    hidden=(64, 64), alpha: float, seed: int = 0, fit_kwargs: dict | None = None) -> GroundingFit:
+    """One forward/inverse pair (no ensemble): :func:`fit_grounding` with keyword settings.
 
     Args:
         method: ``"sgat"`` (stochastic forward model, sampled) or ``"gat"`` (deterministic).
-        fit_kwargs: passed to :meth:`sgat.models._Model.fit` (lr, max_epochs, patience, ...).
+        alpha: the blend (required).
+        fit_kwargs: ``lr``, ``max_epochs``, ``patience``, ``batch_size`` of the fits.
 
     Raises:
-        ValueError: unknown method, or unusable data (see ``fit``).
+        ValueError: unknown method, unknown fit setting, or unusable data.
     """
-    if method not in ("sgat", "gat"):
-        raise ValueError(f"unknown grounding method {method!r}; choose 'sgat' or 'gat'")
     kw = dict(fit_kwargs or {})
-    S, A, k = spec.state_dim, spec.action_dim, spec.history
-    fwd = ForwardModel(S, A, history=k, stochastic=(method == "sgat"), hidden=hidden)
-    rf = fwd.fit(np.concatenate([real.H, real.A], 1), real.dS, seed=seed, **kw)
-    inv = InverseModel(S, A, history=k, hidden=hidden)
-    ri = inv.fit(np.concatenate([sim.H, sim.dS], 1), sim.A, seed=seed + 1, **kw)
-    tr = ActionTransformer(spec, fwd, inv, method=method, alpha=alpha, seed=seed)
-    return GroundingFit(tr, rf, ri, {"n_real": len(real), "n_sim": len(sim)})
+    unknown = set(kw) - {"lr", "max_epochs", "patience", "batch_size"}
+    if unknown:
+        raise ValueError(f"unknown fit setting(s) {sorted(unknown)}; use lr, max_epochs, patience, batch_size")
+    cfg = GroundingConfig(alpha=alpha, method=method, hidden=tuple(hidden), **kw)
+    return fit_grounding(real, sim, spec, cfg, seed=seed)

@@ -275,23 +275,39 @@ class ForwardModel(_Model):
 
 
 class InverseModel(_Model):
-    """``f_sim^-1``: (state history, state change) -> action.
+    """``f_sim^-1``: (state history, state change[, commanded action]) -> action applied in the sim.
 
-    Input layout: ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` of size k*S + S; output: action (A).
+    Args:
+        state_dim, action_dim, history, hidden: as :class:`ForwardModel`.
+        command_input: also condition on the agent's commanded action ``a_t`` (a *denoising* inverse
+            model). Trained on sim walks whose applied actions are the commands plus exploration noise
+            ε ~ N(0, σ²), it learns E[a_applied | s_t, Δs, a_t]: the sim action nearest the command
+            (under that Gaussian prior) that explains the state change. A one-step change of a PD-driven
+            walking robot says little about its target (the contact forces are unobserved), so an
+            inverse model without the command regresses toward the commands it saw; with it, the
+            command is the prior and Δs the evidence (``docs/grounding.md``).
+
+    Input layout: ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` (+ ``a_t`` with ``command_input``), size
+    k*S + S (+ A); output: action (A).
     """
 
     kind = "inverse"
 
-    def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, hidden=(64, 64)):
+    def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, hidden=(64, 64),
+                 command_input: bool = False):
         self.state_dim, self.action_dim, self.history = int(state_dim), int(action_dim), int(history)
-        super().__init__((self.history + 1) * self.state_dim, self.action_dim, hidden)
+        self.command_input = bool(command_input)
+        super().__init__((self.history + 1) * self.state_dim + (self.action_dim if self.command_input else 0),
+                         self.action_dim, hidden)
 
     def config(self) -> dict:
-        return {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history}
+        return {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history,
+                "command_input": self.command_input}
 
     @classmethod
     def from_config(cls, cfg: dict) -> "InverseModel":
-        return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], hidden=tuple(cfg["hidden"]))
+        return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], hidden=tuple(cfg["hidden"]),
+                   command_input=bool(cfg.get("command_input", False)))
 
     def _loss(self, out, y):
         return ((out - y) ** 2).mean()

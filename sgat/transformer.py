@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
-from sgat.models import ForwardModel, InverseModel
+from sgat.models import ForwardModel, InverseModel, ModelFileError
 
 METHODS = ("sgat", "gat")
 
@@ -116,71 +116,135 @@ class GroundingSpec:
         return S[idx].reshape(len(S), -1)
 
 
+def _members(m) -> list:
+    return [] if m is None else list(m) if isinstance(m, (list, tuple)) else [m]
+
+
 class ActionTransformer:
     """``(state history, action) -> grounded action``, NumPy inference.
 
     Args:
         spec: the :class:`GroundingSpec`.
-        forward, inverse: fitted models; both None means the identity (before the first fit).
+        forward, inverse: fitted models, or equal-length lists of them (an ensemble: member i is the
+            pair ``(forward[i], inverse[i])``); both None means the identity (before the first fit).
         method: ``"sgat"`` (sample the forward model) or ``"gat"`` (its mean).
-        alpha: blend ã = (1 - α) a + α g(s, a), in [0, 1].
+        alpha: blend ã = (1 - α) a + α g(s, a), in [0, 1]; required when models are given (the
+            paper's formula is α = 1; the GAT/GARAT code uses 0.5).
         seed: seed of the sampling generator (re-seeded by :meth:`reset`).
 
+    An ensemble expresses model uncertainty the way PETS's trajectory sampling does (Chua et al.,
+    NeurIPS 2018, §4.2 "TS∞"): SGAT draws one member per episode at :meth:`reset` and keeps it for
+    the whole episode, so a grounded sim is one plausible fit of the real data, not one arbitrary
+    fit; GAT (deterministic) averages the members' predictions.
+
+    ``sim_forward`` (SGAT on a *stochastic* sim, e.g. the identified sim with random ground): a
+    stochastic forward model of the sim itself per member. The paper's SGAT assumes a deterministic
+    sim, so all of the real world's spread must come from the sampled Δŝ; a sim that already has
+    random ground would then get its spread twice. With ``sim_forward`` the sample is drawn with the
+    residual variance only, Δŝ ~ N(μ_real, max(σ²_real − σ²_sim, 0)), and the sim adds its own.
+
     Raises:
-        ValueError: unknown method, α outside [0, 1], only one model given, or models whose
-            sizes do not match the spec.
+        ValueError: unknown method, α missing or outside [0, 1], only one kind of model given,
+            ensembles of different sizes, or models whose sizes do not match the spec.
     """
 
-    def __init__(self, spec: GroundingSpec, forward: ForwardModel | None = None, inverse: InverseModel | None = None,
-                 *, method: str = "sgat", alpha: float = 1.0, seed: int = 0):
+    def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
+                 alpha: float | None = None, seed: int = 0, sim_forward=None):
         if method not in METHODS:
             raise ValueError(f"unknown grounding method {method!r}; choose from {', '.join(METHODS)}")
+        fwds, invs = _members(forward), _members(inverse)
+        if bool(fwds) != bool(invs) or len(fwds) != len(invs):
+            raise ValueError("give forward and inverse models in equal numbers (ensemble members), or neither (identity)")
+        if fwds and alpha is None:
+            raise ValueError("alpha (the blend of the agent's and the grounded action) is required with fitted models")
+        alpha = 1.0 if alpha is None else alpha
         if not 0.0 <= alpha <= 1.0:
             raise ValueError(f"alpha must be in [0, 1], got {alpha}")
-        if (forward is None) != (inverse is None):
-            raise ValueError("give both a forward and an inverse model, or neither (identity)")
-        if forward is not None:
-            S, A, k = spec.state_dim, spec.action_dim, spec.history
-            if (forward.state_dim, forward.action_dim, forward.history) != (S, A, k) or \
-                    (inverse.state_dim, inverse.action_dim, inverse.history) != (S, A, k):
+        S, A, k = spec.state_dim, spec.action_dim, spec.history
+        for f, i in zip(fwds, invs):
+            if (f.state_dim, f.action_dim, f.history) != (S, A, k) or (i.state_dim, i.action_dim, i.history) != (S, A, k):
                 raise ValueError(f"model sizes do not match the grounding spec (S={S}, A={A}, k={k})")
-        self.spec, self.forward, self.inverse = spec, forward, inverse
+        if len({i.command_input for i in invs}) > 1:
+            raise ValueError("ensemble members disagree on whether the inverse model sees the command")
+        sims = _members(sim_forward)
+        if sims and (len(sims) != len(fwds) or not all(m.stochastic for m in sims)):
+            raise ValueError("give one stochastic sim forward model per ensemble member, or none")
+        self.spec, self.forwards, self.inverses, self.sim_forwards = spec, fwds, invs, sims
         self.method, self.alpha, self.seed = method, float(alpha), seed
+        self.member = 0
         self.rng = np.random.default_rng(seed)
 
     @property
+    def forward(self):
+        """The first member's forward model (None for the identity)."""
+        return self.forwards[0] if self.forwards else None
+
+    @property
+    def inverse(self):
+        """The first member's inverse model (None for the identity)."""
+        return self.inverses[0] if self.inverses else None
+
+    @property
+    def n_members(self) -> int:
+        return len(self.forwards)
+
+    @property
     def is_identity(self) -> bool:
-        return self.forward is None
+        return not self.forwards
 
     def reset(self, seed: int | None = None) -> None:
-        """Re-seed the sampling generator (an episode's seed makes grounded rollouts repeatable)."""
+        """Re-seed the sampling generator (an episode's seed makes grounded rollouts repeatable) and,
+        for an SGAT ensemble, draw the episode's member."""
         self.rng = np.random.default_rng(self.seed if seed is None else np.random.SeedSequence([int(seed), 0x5a7]))
+        if self.n_members > 1 and self.method == "sgat":
+            self.member = int(self.rng.integers(self.n_members))
+
+    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool) -> np.ndarray:
+        fwd, inv = self.forwards[k], self.inverses[k]
+        x = np.concatenate([hist, a], axis=-1)
+        if not sample:
+            ds = fwd.predict(x)[0]
+        elif self.sim_forwards:
+            mu, sd = fwd.predict(x)
+            sd_sim = self.sim_forwards[k].predict(x)[1]
+            ds = mu + np.sqrt(np.maximum(sd ** 2 - sd_sim ** 2, 0.0)) * self.rng.standard_normal(mu.shape)
+        else:
+            ds = fwd.sample(x, self.rng)
+        z = [hist, ds, a] if inv.command_input else [hist, ds]
+        return inv.predict(np.concatenate(z, axis=-1))
 
     def transform(self, hist: np.ndarray, a: np.ndarray) -> np.ndarray:
         """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A)."""
         a = np.asarray(a, dtype=np.float64)
-        if self.forward is None:
+        if self.is_identity:
             return a.copy()
         hist = np.asarray(hist, dtype=np.float64)
-        x = np.concatenate([hist, a], axis=-1)
-        if self.method == "sgat" and self.forward.stochastic:
-            ds = self.forward.sample(x, self.rng)
+        if self.method == "sgat" and self.forwards[0].stochastic:
+            g = self._ground(self.member, hist, a, sample=True)
         else:
-            ds = self.forward.predict(x)[0]
-        g = self.inverse.predict(np.concatenate([hist, ds], axis=-1))
+            g = np.mean([self._ground(k, hist, a, sample=False) for k in range(self.n_members)], axis=0)
         out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
         return np.clip(out, self.spec.action_low, self.spec.action_high)
 
     # -- persistence ---------------------------------------------------------------------------
+    @staticmethod
+    def _files(n: int) -> list[tuple[str, str]]:
+        if n == 1:
+            return [("forward.pt", "inverse.pt")]
+        return [(f"forward_{i}.pt", f"inverse_{i}.pt") for i in range(n)]
+
     def save(self, directory: str | os.PathLike) -> str:
-        """Write ``forward.pt``, ``inverse.pt`` and ``transformer.json`` into ``directory``."""
+        """Write the models (``forward.pt``/``inverse.pt``, or ``forward_<i>.pt``/``inverse_<i>.pt`` per
+        ensemble member) and ``transformer.json`` (written last: its presence marks a complete save)."""
         directory = os.fspath(directory)
         os.makedirs(directory, exist_ok=True)
-        if self.forward is not None:
-            self.forward.save(os.path.join(directory, "forward.pt"))
-            self.inverse.save(os.path.join(directory, "inverse.pt"))
+        for (ff, fi), f, i in zip(self._files(self.n_members), self.forwards, self.inverses):
+            f.save(os.path.join(directory, ff))
+            i.save(os.path.join(directory, fi))
+        for (ff, _), m in zip(self._files(self.n_members), self.sim_forwards):
+            m.save(os.path.join(directory, "sim_" + ff))
         meta = {"method": self.method, "alpha": self.alpha, "seed": self.seed, "identity": self.is_identity,
-                "spec": self.spec.to_dict()}
+                "members": self.n_members, "sim_forward": bool(self.sim_forwards), "spec": self.spec.to_dict()}
         tmp = os.path.join(directory, f"transformer.json.{os.getpid()}.tmp")
         with open(tmp, "w") as f:
             json.dump(meta, f, indent=1)
@@ -201,12 +265,21 @@ class ActionTransformer:
         with open(path) as f:
             meta = json.load(f)
         spec = GroundingSpec.from_dict(meta["spec"])
-        fwd = inv = None
+        fwds, invs, sims = [], [], []
         if not meta["identity"]:
             S, A, k = spec.state_dim, spec.action_dim, spec.history
-            fwd = ForwardModel.load(os.path.join(directory, "forward.pt"), expect_in=k * S + A, expect_out=S)
-            inv = InverseModel.load(os.path.join(directory, "inverse.pt"), expect_in=(k + 1) * S, expect_out=A)
-        return cls(spec, fwd, inv, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"])
+            for ff, fi in cls._files(int(meta.get("members", 1))):
+                fwds.append(ForwardModel.load(os.path.join(directory, ff), expect_in=k * S + A, expect_out=S))
+                if meta.get("sim_forward"):
+                    sims.append(ForwardModel.load(os.path.join(directory, "sim_" + ff), expect_in=k * S + A, expect_out=S))
+                inv = InverseModel.load(os.path.join(directory, fi), expect_out=A)
+                want = (k + 1) * S + (A if inv.command_input else 0)
+                if inv.n_in != want:
+                    raise ModelFileError(f"{os.path.join(directory, fi)!r}: model has {inv.n_in} inputs, "
+                                         f"this setting needs {want}")
+                invs.append(inv)
+        return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"],
+                   sim_forward=sims or None)
 
 
 class GroundedEnv(gym.Wrapper):

@@ -43,6 +43,7 @@ from envs.base import quat_to_mat
 from envs.effects import NOMINAL_FOOT_FRICTION
 from envs.mujoco_world import build_spec
 from robots import RobotModel, nao_h25
+from terrain import Heightfield
 
 #: Longest actuation latency a candidate can take [s] (history buffer length).
 DELAY_MAX = 0.08
@@ -111,22 +112,31 @@ TERRAIN_SHAPE = (int(round(2 * TERRAIN_SIZE[1] / TERRAIN_CELL)) + 1, int(round(2
 
 
 def base_spec(robot: RobotModel, *, fixed_base: bool, physics_dt: float, hang_height: float = 0.6,
-              friction: float = NOMINAL_FOOT_FRICTION) -> mujoco.MjSpec:
-    """The ``MjSpec`` of :func:`envs.mujoco_world.build_model` on flat ground (same steps, same order).
+              friction: float = NOMINAL_FOOT_FRICTION, terrain: Heightfield | None = None) -> mujoco.MjSpec:
+    """The ``MjSpec`` of :func:`envs.mujoco_world.build_model` (same steps, same order) on flat ground,
+    or on the heightfield ``terrain``.
 
     Returns:
         An uncompiled spec: 24 hinges (+ free joint ``root`` unless ``fixed_base``), 24 PD
         actuators named like the joints, sites for ``robot.frames``, a ground plane ``ground``.
     """
-    return build_spec(robot, None, fixed_base=fixed_base, hang_height=hang_height, physics_dt=physics_dt,
+    return build_spec(robot, terrain, fixed_base=fixed_base, hang_height=hang_height, physics_dt=physics_dt,
                       friction=friction)
 
 
-def replay_spec(robot: RobotModel, structure: Structure) -> mujoco.MjSpec:
-    """:func:`base_spec` plus history buffers, sensors and the structure's play hinges."""
+def replay_spec(robot: RobotModel, structure: Structure, ground: Heightfield | None = None) -> mujoco.MjSpec:
+    """:func:`base_spec` plus history buffers, sensors and the structure's play hinges; ``ground``: a
+    fixed heightfield (the walking terrain of :class:`sysid.identified.IdentifiedSimEnv`) instead of
+    the plane (not with a ``terrain`` structure, whose field is written at run time).
+
+    Raises:
+        ValueError: both a ``terrain`` structure and a ``ground``.
+    """
     s = structure
+    if s.terrain and ground is not None:
+        raise ValueError("a terrain structure writes its own heightfield: give no fixed ground")
     spec = base_spec(robot, fixed_base=s.fixed_base, physics_dt=s.physics_dt, hang_height=s.hang_height,
-                     friction=s.friction)
+                     friction=s.friction, terrain=ground)
     if s.terrain:  # swap the plane for a heightfield with a fixed elevation range (data set at run time)
         ground = spec.geom("ground")
         ny, nx = TERRAIN_SHAPE
@@ -213,9 +223,9 @@ class ReplayModel:
         nsample: history samples per actuator.
     """
 
-    def __init__(self, robot: RobotModel, structure: Structure):
+    def __init__(self, robot: RobotModel, structure: Structure, ground: Heightfield | None = None):
         self.robot, self.structure = robot, structure
-        self.spec = replay_spec(robot, structure)
+        self.spec = replay_spec(robot, structure, ground)
         self.model = self.spec.compile()
         m = self.model
         if structure.terrain:  # MuJoCo normalises a constant userdata to 0: set the flat field at z = 0

@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
-from scipy.ndimage import gaussian_filter
 
 from envs.base import FALL_TORSO_HEIGHT, quat_to_mat
 from sysid.candidates import FAMILIES, apply_terms, series_structure
@@ -57,6 +56,7 @@ from sysid.data import Log
 from sysid.model import TERRAIN_CELL, TERRAIN_SHAPE, TERRAIN_SIZE, Structure, replay_model, set_terrain
 from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch, _start_velocity, build_models,
                           measured, predict)
+from terrain import gaussian
 
 #: Correlation radius of the surface model [m] (standard deviation of the smoothing kernel).
 CORRELATION_RADIUS = 0.08
@@ -85,12 +85,8 @@ def surface(rms_height: float, seed) -> np.ndarray:
     """
     if not 0.0 <= rms_height <= MAX_RMS_HEIGHT:
         raise ValueError(f"terrain RMS height must be within [0, {MAX_RMS_HEIGHT}] m, got {rms_height}")
-    if rms_height == 0:
-        return np.zeros(TERRAIN_SHAPE)
-    rng = np.random.default_rng(seed)
-    h = gaussian_filter(rng.standard_normal(TERRAIN_SHAPE), CORRELATION_RADIUS / TERRAIN_CELL, mode="wrap")
-    h = h - h.mean()
-    return h * (rms_height / h.std())
+    return gaussian(seed, rms_height, CORRELATION_RADIUS, size=(2 * TERRAIN_SIZE[0], 2 * TERRAIN_SIZE[1]),
+                    cell_size=TERRAIN_CELL, start_radius=0.0).heights
 
 
 def _height_at(h: np.ndarray, x: float, y: float) -> float:

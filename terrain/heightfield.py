@@ -11,7 +11,8 @@ copy so that Bullet's other diagonal lands on the same one (engines.md §3.1).
 
 Generators (all seeded through a :class:`numpy.random.Generator` or an int seed):
 ``flat``, ``lumpy`` (Gaussian bumps like foam under turf), ``fractal`` (spectral fBm noise),
-``steps`` (stairs along +x), ``slope`` (incline along +x). Each keeps a flat start pad of radius
+``steps`` (stairs along +x), ``slope`` (incline along +x), ``gaussian`` (a Gaussian random field of a
+given RMS height: the diagnosis's model of uneven ground). Each keeps a flat start pad of radius
 ``start_radius`` [m] around the origin so the robot can be placed; the pad blends smoothly.
 """
 
@@ -24,7 +25,7 @@ import numpy as np
 #: Default field: 6 m x 3 m at 4 cm cells (151 x 76 nodes), robot spawned at the origin.
 DEFAULT_SIZE = (6.0, 3.0)
 DEFAULT_CELL = 0.04
-TERRAINS = ("flat", "lumpy", "fractal", "steps", "slope")
+TERRAINS = ("flat", "lumpy", "fractal", "steps", "slope", "gaussian")
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,6 +220,34 @@ def fractal(seed=0, amplitude: float = 0.02, hurst: float = 0.8, min_wavelength:
     return Heightfield(h, cell_size, f"fractal(a={amplitude:g},H={hurst:g})")
 
 
+def gaussian(seed=0, rms_height: float = 0.003, correlation_radius: float = 0.08, size=DEFAULT_SIZE,
+             cell_size=DEFAULT_CELL, start_radius: float = 0.25) -> Heightfield:
+    """A Gaussian random surface: white noise smoothed by a Gaussian kernel of standard deviation
+    ``correlation_radius`` [m] (``scipy.ndimage.gaussian_filter``, periodic edges), mean 0, scaled
+    to RMS height ``rms_height`` [m] (Sq, ISO 25178) before the flat start pad is blended in.
+
+    This is the uneven-ground model of the mismatch diagnosis (``sysid.roughness``): what a fitted
+    RMS height means as a surface.
+
+    Raises:
+        ValueError: negative RMS height or non-positive correlation radius.
+    """
+    from scipy.ndimage import gaussian_filter
+
+    if rms_height < 0 or not correlation_radius > 0:
+        raise ValueError(f"gaussian terrain needs rms_height >= 0 and correlation_radius > 0, got {rms_height}, "
+                         f"{correlation_radius}")
+    rng = _rng(seed)
+    X, Y = _grid(size, cell_size)
+    if rms_height == 0:
+        return Heightfield(np.zeros_like(X), cell_size, "gaussian(sq=0)")
+    h = gaussian_filter(rng.standard_normal(X.shape), correlation_radius / cell_size, mode="wrap")
+    h -= h.mean()
+    h *= rms_height / h.std()
+    h *= _start_pad(X, Y, start_radius)
+    return Heightfield(h, cell_size, f"gaussian(sq={rms_height:g},r={correlation_radius:g})")
+
+
 def steps(seed=0, amplitude: float = 0.02, step_length: float = 0.3, size=DEFAULT_SIZE,
           cell_size=DEFAULT_CELL, start_radius: float = 0.25) -> Heightfield:
     """Stairs along +x: every ``step_length`` [m] the height changes by a random amount in
@@ -251,13 +280,16 @@ def slope(seed=0, amplitude: float = 0.05, size=DEFAULT_SIZE, cell_size=DEFAULT_
 
 
 def make(kind: str, seed=0, amplitude: float = 0.02, **kwargs) -> Heightfield:
-    """Build terrain ``kind`` (one of :data:`TERRAINS`) with ``amplitude`` [m] from ``seed``.
+    """Build terrain ``kind`` (one of :data:`TERRAINS`) with ``amplitude`` [m] from ``seed`` (for
+    ``gaussian`` the amplitude is the RMS height; for ``slope`` the grade).
 
     Raises:
         ValueError: unknown kind.
     """
     if kind == "flat":
         return flat(**{k: v for k, v in kwargs.items() if k in ("size", "cell_size")})
+    if kind == "gaussian":
+        return gaussian(seed=seed, rms_height=amplitude, **kwargs)
     gens = {"lumpy": lumpy, "fractal": fractal, "steps": steps, "slope": slope}
     if kind not in gens:
         raise ValueError(f"unknown terrain {kind!r}; choose one of {', '.join(TERRAINS)}")

@@ -57,7 +57,7 @@ def pair():
         O, AP = run(sim, A, ep, noise=0.1, rng=rng)  # exploration noise for the inverse model
         S.append(trajectory_transitions(O, AP, spec))
     real_tr, sim_tr = Transitions.concat(R), Transitions.concat(S)
-    fits = {m: fit_transformer(real_tr, sim_tr, spec, method=m, seed=0, fit_kwargs={"lr": 3e-3})
+    fits = {m: fit_transformer(real_tr, sim_tr, spec, method=m, alpha=1.0, seed=0, fit_kwargs={"lr": 3e-3})
             for m in ("sgat", "gat")}
     A = random_leg_commands(robot, 300, np.random.default_rng(99))
     O, _ = run(real, A, 123)  # held-out real trajectory

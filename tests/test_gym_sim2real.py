@@ -92,7 +92,7 @@ def test_grounded_pendulum_predicts_the_heavy_real_pendulum_better():
     real_eps = G.collect(real, pd, 1500, seed=1)
     sim_eps = G.collect(sim, pd, 3000, seed=2, explore=0.3)
     fit = fit_transformer(G.episodes_to_transitions(real_eps, spec), G.episodes_to_transitions(sim_eps, spec), spec,
-                          method="gat", seed=0, fit_kwargs={"max_epochs": 40, "batch_size": 256, "lr": 3e-3})
+                          method="gat", alpha=1.0, seed=0, fit_kwargs={"max_epochs": 40, "batch_size": 256, "lr": 3e-3})
     # (a) states along held-out real trajectories (GARAT's per-step transition error)
     held = G.collect(real, pd, 400, seed=3)
     err = G.one_step_errors("InvertedPendulum", fit.transformer, held)

@@ -27,7 +27,8 @@ def test_tiny_run_writes_the_run_directory(tmp_path, capsys):
     for r in res["rows"]:
         assert r["trials"] == 2 and 0 <= r["falls"] <= 2 and np.isfinite(r["speed_mean"])
     for f in ("config.yaml", "generations.csv", "evals.parquet", "cma_state.pkl", "fitness.png", "table.txt",
-              "results.json", "thetas/sgat_step1.json", "thetas/none_step1.json", "models/sgat_step1/forward.pt"):
+              "results.json", "thetas/sgat_step1.json", "thetas/none_step1.json", "models/sgat_step1/forward_0.pt",
+              "models/sgat_step1/forward_4.pt"):
         assert (out / f).exists(), f
     import pyarrow.parquet as pq
 
@@ -90,7 +91,7 @@ def test_wrong_shape_weights_are_rejected(tmp_path):
     from sgat.transformer import ActionTransformer, GroundingSpec
 
     spec = GroundingSpec.for_nao(NaoSimEnv())
-    tr = ActionTransformer(spec, ForwardModel(24, 11), InverseModel(24, 11))
+    tr = ActionTransformer(spec, ForwardModel(24, 11), InverseModel(24, 11), alpha=0.5)
     tr.save(tmp_path / "m")
     ForwardModel(10, 11).save(tmp_path / "m" / "forward.pt")
     with pytest.raises(ModelFileError, match="inputs"):

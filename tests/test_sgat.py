@@ -102,13 +102,13 @@ def test_transformer_identity_sampling_clip_blend(fitted):
     ident = ActionTransformer(spec)
     a = np.array([0.3, -0.2])
     assert ident.is_identity and np.array_equal(ident.transform(np.zeros(3), a), a)
-    t = ActionTransformer(spec, sgat, inv, method="sgat", seed=3)
+    t = ActionTransformer(spec, sgat, inv, method="sgat", alpha=1.0, seed=3)
     t.reset(5)
     x1 = [t.transform(np.zeros(3), a) for _ in range(3)]
     t.reset(5)
     x2 = [t.transform(np.zeros(3), a) for _ in range(3)]
     assert np.array_equal(x1, x2) and not np.array_equal(x1[0], x1[1])  # seeded, stochastic
-    g = ActionTransformer(spec, gat, inv, method="gat")
+    g = ActionTransformer(spec, gat, inv, method="gat", alpha=1.0)
     assert np.array_equal(g.transform(np.zeros(3), a), g.transform(np.zeros(3), a))  # deterministic
     # this map has no sim/real gap, so GAT grounding is close to the identity
     assert np.abs(g.transform(np.zeros(3), a) - a).max() < 0.1
@@ -120,7 +120,7 @@ def test_transformer_identity_sampling_clip_blend(fitted):
     with pytest.raises(ValueError, match="alpha"):
         ActionTransformer(spec, alpha=2.0)
     with pytest.raises(ValueError, match="do not match"):
-        ActionTransformer(_spec(S=4), sgat, inv)
+        ActionTransformer(_spec(S=4), sgat, inv, alpha=1.0)
 
 
 def test_transformer_save_load(fitted, tmp_path):
@@ -142,3 +142,55 @@ def test_history_stacking():
     assert np.array_equal(H[0], [0, 1, 0, 1, 0, 1]) and np.array_equal(H[4], [4, 5, 6, 7, 8, 9])
     tr = trajectory_transitions(np.hstack([S, np.zeros((5, 1))]), np.ones((5, 1)), spec)
     assert tr.H.shape == (4, 6) and np.array_equal(tr.dS, np.full((4, 2), 2.0))
+
+
+def test_command_conditioned_inverse_uses_the_command_as_prior():
+    """Where a state change says little about the action (a walking robot's contact forces are not
+    observed), an inverse model that sees the command stays near it and explains the rest; one that
+    does not regresses toward the mean command."""
+    rng = np.random.default_rng(0)
+    n = 4000
+    s = rng.uniform(-1, 1, (n, 3))
+    cmd = rng.uniform(-1, 1, (n, 2))
+    applied = cmd + rng.normal(0, 0.1, (n, 2))  # exploration noise
+    ds = 0.3 * applied @ M.T + rng.normal(0, 0.3, (n, 3))  # weakly informative about the action
+    plain = InverseModel(3, 2)
+    plain.fit(np.hstack([s, ds]), applied, seed=0, lr=3e-3)
+    cond = InverseModel(3, 2, command_input=True)
+    cond.fit(np.hstack([s, ds, cmd]), applied, seed=0, lr=3e-3)
+    err_plain = np.sqrt(np.mean((plain.predict(np.hstack([s, ds])) - applied) ** 2))
+    err_cond = np.sqrt(np.mean((cond.predict(np.hstack([s, ds, cmd])) - applied) ** 2))
+    assert err_cond < 0.12 < err_plain, (err_cond, err_plain)
+
+
+def test_ensemble_draws_a_member_per_episode(fitted, tmp_path):
+    sgat, gat, inv = fitted
+    sgat2 = ForwardModel(3, 2, stochastic=True)
+    s, a, ds = synthetic(2000, 5)
+    sgat2.fit(np.hstack([s, a]), ds + 0.5, seed=1, lr=3e-3)  # a second member that disagrees (offset)
+    ens = ActionTransformer(_spec(), [sgat, sgat2], [inv, inv], method="sgat", alpha=1.0, seed=0)
+    members = set()
+    for ep in range(20):
+        ens.reset(ep)
+        members.add(ens.member)
+        first = ens.member
+        ens.transform(np.zeros(3), np.zeros(2))
+        assert ens.member == first  # kept for the whole episode
+    assert members == {0, 1}
+    ens.reset(4)
+    m4 = ens.member
+    ens.reset(4)
+    assert ens.member == m4  # the episode seed decides
+    ens.save(tmp_path / "ens")
+    back = ActionTransformer.load(tmp_path / "ens")
+    assert back.n_members == 2 and (tmp_path / "ens" / "forward_1.pt").exists()
+    back.reset(7)
+    ens.reset(7)
+    assert np.array_equal(back.transform(np.ones(3), np.zeros(2)), ens.transform(np.ones(3), np.zeros(2)))
+    g = ActionTransformer(_spec(), [gat, gat], [inv, inv], method="gat", alpha=1.0)
+    one = ActionTransformer(_spec(), gat, inv, method="gat", alpha=1.0)
+    assert np.allclose(g.transform(np.zeros(3), np.ones(2) * 0.2), one.transform(np.zeros(3), np.ones(2) * 0.2))
+    with pytest.raises(ValueError, match="equal numbers"):
+        ActionTransformer(_spec(), [sgat, sgat2], [inv], alpha=1.0)
+    with pytest.raises(ValueError, match="alpha"):
+        ActionTransformer(_spec(), sgat, inv)

@@ -1,0 +1,623 @@
+"""How well does each training world predict the real world? (``sgatwalk fidelity``)
+
+A grounded sim is only worth what it predicts about the real world. For a **panel of gaits** (θ0,
+``gaits`` gaits drawn uniformly in the optimizer's trust region of ±``box`` around θ0 in the
+normalized space CMA-ES searches, and any θ files given), this measures:
+
+* the **real fitness** of every gait over ``real_trials`` paired real trials (trial j of every gait
+  runs on the same seed: the same terrain, effects and noise);
+* each **training world's** fitness for the same gaits (the mean over ``episodes`` episodes on seeds
+  shared by the gaits; one for the deterministic sim). Worlds that learn from real data are fitted
+  ``data_seeds`` times, each on an independent draw of that data, exactly as ``sgatwalk optimize``'s
+  first grounding step fits them (the same code, :func:`experiments.grounding.fit_nao_grounding`,
+  and settings: 4 real and 4 sim walks of θ0, α = 0.5, ...).
+
+Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
+
+============  ==========================================================================
+``sim``       the plain MuJoCo sim
+``ane``       the sim with Gaussian noise on the leg targets (action-noise envelope)
+``gat``       grounded, deterministic forward model (GAT)
+``sgat``      grounded, stochastic forward model (SGAT)
+``identified``  the sim with the physics ``sgatwalk diagnose`` identified from excitation logs
+              of the real world (``sysid.identified.IdentifiedSimEnv``)
+``hybrid``    SGAT grounding on top of the identified sim: the transformer learns only what
+              the physics library could not name
+============  ==========================================================================
+
+Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
+``inverse_command`` (0/1), ``residual`` (0/1: sample only the variance the sim does not have),
+``hidden`` (e.g. ``128x128``), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
+``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
+``gaits`` - 1 gaits drawn in the box); ``method`` (sgat/gat) for ``hybrid``; of
+``ane``: ``sigma``.
+
+Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
+interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
+and the Brier score of the world's fall frequency per gait against the real falls; and the spread
+of each over the draws. The ceiling that the real trials' own noise allows is the square root of
+their split-half reliability (``experiments.stats``). Everything random is keyed by (seed, purpose,
+...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from experiments.files import atomic_write_text
+from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
+from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
+
+#: World kinds (see the module docstring).
+KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid")
+DEFAULT_WORLDS = KINDS
+#: Purposes of the seed streams (the first key after the run seed).
+_PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS = range(11, 20)
+
+
+def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
+    return [int(s) for s in np.random.SeedSequence([seed, purpose, *keys]).generate_state(n, dtype=np.uint32)]
+
+
+# ------------------------------------------------------------------------------------------ worlds
+@dataclass(frozen=True)
+class WorldSpec:
+    """One training world: its name (as given), kind, grounding settings and data per draw."""
+
+    name: str
+    kind: str
+    grounding: object = None  # sgat.grounding.GroundingConfig for gat / sgat / hybrid
+    real_walks: int = REAL_WALKS
+    sim_walks: int = SIM_WALKS
+    exploration_noise: float = EXPLORATION_NOISE
+    data_gaits: int = 1
+    sigma: float = 0.05  # ane
+
+    @property
+    def key(self) -> str:
+        """The world's cache key: its kind and a hash of every setting (a changed default is a new world)."""
+        import hashlib
+
+        d = dataclasses.asdict(self)
+        d.pop("name")
+        d["grounding"] = self.grounding.to_dict() if self.grounding else None
+        return f"{self.kind}-{hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:10]}"
+
+    @property
+    def grounded(self) -> bool:
+        return self.kind in ("gat", "sgat", "hybrid")
+
+    @property
+    def needs_identification(self) -> bool:
+        return self.kind in ("identified", "hybrid")
+
+    @property
+    def per_draw(self) -> bool:
+        """Fitted on real data: one world per draw of that data."""
+        return self.grounded or self.needs_identification
+
+
+def parse_world(text: str) -> WorldSpec:
+    """A world from ``kind[:key=value...]`` (module docstring).
+
+    Raises:
+        ValueError: unknown kind or option, or a bad value (named).
+    """
+    from sgat.grounding import GroundingConfig
+
+    parts = [p.strip() for p in str(text).split(":")]
+    kind = parts[0]
+    if kind not in KINDS:
+        raise ValueError(f"unknown world {kind!r}; choose from {', '.join(KINDS)} (options after ':')")
+    g = HYBRID_GROUNDING if kind == "hybrid" else dataclasses.replace(DEFAULT_GROUNDING, method=kind) \
+        if kind in ("sgat", "gat") else None
+    kw: dict = {}
+    gkw: dict = {}
+    for opt in parts[1:]:
+        if "=" not in opt:
+            raise ValueError(f"world {text!r}: option {opt!r} is not key=value")
+        k, v = (s.strip() for s in opt.split("=", 1))
+        try:
+            if kind == "ane" and k == "sigma":
+                kw["sigma"] = float(v)
+            elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
+                                                              "real", "sim", "noise", "residual", "method",
+                                                              "gaits"):
+                if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
+                    gkw["method"] = v
+                elif k == "method":
+                    raise ValueError(f"world {text!r}: unknown option {k!r} for {kind} (hybrid takes method=sgat|gat)")
+                elif k == "gaits":
+                    kw["data_gaits"] = int(v)
+                elif k == "residual":
+                    gkw["residual_noise"] = bool(int(v))
+                elif k == "alpha":
+                    gkw["alpha"] = float(v)
+                elif k == "ensemble":
+                    gkw["ensemble"] = int(v)
+                elif k == "inverse_command":
+                    gkw["inverse_command"] = bool(int(v))
+                elif k == "hidden":
+                    gkw["hidden"] = tuple(int(h) for h in v.split("x"))
+                elif k == "epochs":
+                    gkw["max_epochs"] = int(v)
+                elif k == "real":
+                    kw["real_walks"] = int(v)
+                elif k == "sim":
+                    kw["sim_walks"] = int(v)
+                else:
+                    kw["exploration_noise"] = float(v)
+            else:
+                raise ValueError(f"world {text!r}: unknown option {k!r} for {kind}")
+        except ValueError as exc:
+            if "unknown option" in str(exc):
+                raise
+            raise ValueError(f"world {text!r}: bad value for {k}: {v!r}") from None
+    for k in ("real_walks", "sim_walks", "data_gaits"):
+        if kw.get(k, 1) < 1:
+            raise ValueError(f"world {text!r}: {k} must be >= 1")
+    if kw.get("exploration_noise", 0) < 0 or kw.get("sigma", 0) < 0:
+        raise ValueError(f"world {text!r}: noise levels must be >= 0")
+    grounding = GroundingConfig(**{**dataclasses.asdict(g), **gkw}) if g is not None else None
+    return WorldSpec(name=str(text), kind=kind, grounding=grounding, **kw)
+
+
+# ------------------------------------------------------------------------------------------ config
+@dataclass
+class FidelityConfig:
+    """Settings of a fidelity run (written to ``config.json``)."""
+
+    worlds: tuple = DEFAULT_WORLDS
+    gaits: int = 15
+    box: float = 0.15
+    params: tuple = ()
+    real_trials: int = 10
+    data_seeds: int = 5
+    episodes: int = 4
+    seconds: float = 7.5
+    profile: str = "real"
+    identify_fixed_logs: int = 3
+    identify_floating_logs: int = 3
+    identify_seconds: float = 6.0
+    identify_budget_s: float = 90.0
+    bootstrap: int = 1000
+    seed: int = 0
+
+    def validate(self) -> list[WorldSpec]:
+        """The parsed worlds; raises ValueError naming the bad setting."""
+        for name in ("real_trials", "data_seeds", "episodes", "bootstrap"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.real_trials < 2:
+            raise ValueError("real_trials must be >= 2 (the ceiling needs a split-half reliability)")
+        if self.gaits < 0:
+            raise ValueError(f"gaits must be >= 0, got {self.gaits}")
+        if 1 + self.gaits + len(self.params) < 3:
+            raise ValueError("the panel needs at least 3 gaits for a rank correlation")
+        if not (0 < self.box <= 1):
+            raise ValueError(f"box must be in (0, 1] (normalized half-width), got {self.box}")
+        if not (self.seconds > 0 and math.isfinite(self.seconds)):
+            raise ValueError(f"seconds must be positive, got {self.seconds}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if self.identify_fixed_logs < 2 or self.identify_floating_logs < 0:
+            raise ValueError("identification needs >= 2 fixed-base logs (a held-out split) and >= 0 stepping logs")
+        specs = [parse_world(w) for w in self.worlds]
+        names = [s.name for s in specs]
+        if not specs or len(set(names)) != len(names) or len({s.key for s in specs}) != len(specs):
+            raise ValueError(f"worlds must be a non-empty list without repeats (also under other names), got {names}")
+        return specs
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["worlds"], d["params"] = list(self.worlds), list(self.params)
+        return d
+
+
+# ------------------------------------------------------------------------------------------ run
+class Fidelity:
+    """Runs (or resumes) a fidelity measurement in ``run_dir`` with ``executor``.
+
+    Files: ``config.json``, ``panel.json`` (the gaits), ``episodes.jsonl`` (one line per finished
+    episode, appended as batches finish), ``data/`` (grounding walks), ``models/`` (transformers per
+    world and draw), ``identified/`` (excitation logs and diagnoses), ``fidelity.json`` (the result),
+    ``fidelity.png``, ``table.txt``.
+    """
+
+    def __init__(self, cfg: FidelityConfig, run_dir: str, executor, *, log=None, progress: bool = False):
+        self.cfg, self.run_dir, self.ex = cfg, run_dir, executor
+        self.specs = cfg.validate()
+        self.log = log or (lambda s: None)
+        self.progress = progress
+        self.t0 = time.perf_counter()
+        os.makedirs(run_dir, exist_ok=True)
+        self._episodes: dict[str, dict] = {}
+
+    # ---------------------------------------------------------------- bookkeeping
+    def _say(self, msg: str) -> None:
+        self.log(f"[fidelity {time.perf_counter() - self.t0:7.1f} s] {msg}")
+
+    def _check_config(self) -> None:
+        path = os.path.join(self.run_dir, "config.json")
+        mine = self.cfg.to_dict()
+        if os.path.exists(path):
+            with open(path) as f:
+                old = json.load(f)
+            keep = ("worlds", "bootstrap")  # more worlds or a new bootstrap reuse what was measured
+            diff = [k for k in mine if k not in keep and old.get(k) != mine[k]]
+            if diff:
+                raise ValueError(f"{self.run_dir!r} holds a fidelity run with other settings ({', '.join(diff)}); "
+                                 "use another --out")
+        atomic_write_text(path, json.dumps(mine, indent=1))
+        jl = os.path.join(self.run_dir, "episodes.jsonl")
+        if os.path.exists(jl):
+            with open(jl) as f:
+                for line in f:
+                    try:
+                        r = json.loads(line)
+                        self._episodes[r["key"]] = r
+                    except (json.JSONDecodeError, KeyError):
+                        continue  # a line cut by a kill: that episode runs again
+
+    def _run(self, tasks: list[dict], desc: str) -> None:
+        """Run the tasks whose keys have no result yet; append results as they come, in batches."""
+        from experiments.tasks import run_episode
+
+        todo = [t for t in tasks if t["key"] not in self._episodes]
+        if not todo:
+            self._say(f"{desc}: {len(tasks)} episodes already done")
+            return
+        t0 = time.perf_counter()
+        self._say(f"{desc}: {len(todo)} episodes ({len(tasks) - len(todo)} resumed)")
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(todo), desc=desc, leave=False, disable=None)
+        jl = os.path.join(self.run_dir, "episodes.jsonl")
+        chunk = max(8, 4 * getattr(self.ex, "workers", 1))
+        last = time.perf_counter()
+        try:
+            for k in range(0, len(todo), chunk):
+                part = todo[k:k + chunk]
+                res = self.ex.map(run_episode, part, progress=(bar.update if bar else None))
+                lines = []
+                for t, r in zip(part, res):
+                    row = {"key": t["key"], "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"]),
+                           "seconds": r["steps"] * 0.01}
+                    self._episodes[t["key"]] = row
+                    lines.append(json.dumps(row))
+                with open(jl, "a") as f:
+                    f.write("\n".join(lines) + "\n")
+                    f.flush()
+                    os.fsync(f.fileno())
+                now = time.perf_counter()
+                if (bar is None or bar.disable) and now - last > 30:
+                    done = k + len(part)
+                    self._say(f"{desc}: {done}/{len(todo)}, ETA {(now - t0) / done * (len(todo) - done):.0f} s")
+                    last = now
+        finally:
+            if bar:
+                bar.close()
+        self._say(f"{desc}: done in {time.perf_counter() - t0:.0f} s")
+
+    # ---------------------------------------------------------------- panel
+    def panel(self) -> list[dict]:
+        """θ0, the drawn gaits and the given θ files: ``[{"name", "theta"}]`` (saved to panel.json)."""
+        from walk_engine import GaitParams
+
+        path = os.path.join(self.run_dir, "panel.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                return json.load(f)["gaits"]
+        cfg = self.cfg
+        th0 = GaitParams.initial()
+        u0 = th0.to_vector()
+        rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, _PANEL]))
+        gaits = [{"name": "theta0", "theta": th0.to_array().tolist()}]
+        for i in range(cfg.gaits):
+            u = np.clip(u0 + rng.uniform(-cfg.box, cfg.box, len(u0)), 0.0, 1.0)
+            gaits.append({"name": f"box{i:02d}", "theta": GaitParams.from_vector(u).to_array().tolist()})
+        for p in cfg.params:
+            gaits.append({"name": os.path.splitext(os.path.basename(p))[0], "theta": GaitParams.load(p).to_array().tolist()})
+        atomic_write_text(path, json.dumps({"gaits": gaits}, indent=1))
+        return gaits
+
+    # ---------------------------------------------------------------- grounding data and models
+    def _data_gaits(self, n: int, draw: int) -> list[list[float]]:
+        """The gaits grounding walks are made with: θ0, and ``n - 1`` gaits drawn in the box (their
+        own seed stream, not the panel's)."""
+        from walk_engine import GaitParams
+
+        u0 = GaitParams.initial().to_vector()
+        rng = np.random.default_rng(np.random.SeedSequence([self.cfg.seed, _DATA_GAITS, draw]))
+        us = [u0] + [np.clip(u0 + rng.uniform(-self.cfg.box, self.cfg.box, len(u0)), 0, 1) for _ in range(n - 1)]
+        return [GaitParams.from_vector(u).to_array().tolist() for u in us]
+
+    def _walks(self, world: str, seeds: list[int], tag: str, thetas: list, **kw) -> list[str]:
+        """Recordings in ``world`` on ``seeds`` under ``data/`` (cached), walk j with gait
+        ``thetas[j % len(thetas)]``; returns the paths."""
+        from envs import Recording
+        from experiments.tasks import run_episode
+
+        paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
+        todo = [(j, s, p) for j, (s, p) in enumerate(zip(seeds, paths)) if not os.path.exists(p)]
+        if todo:
+            tasks = [{"world": world, "theta": thetas[j % len(thetas)], "seed": s, "seconds": self.cfg.seconds,
+                      "profile": self.cfg.profile, "record": True, **kw} for j, s, _ in todo]
+            for (_, s, p), r in zip(todo, self.ex.map(run_episode, tasks)):
+                Recording(*r["recording"]).to_parquet(p)
+        return paths
+
+    def _identify(self, draw: int) -> dict:
+        from experiments.identify import identify_real
+
+        cfg = self.cfg
+        return identify_real(os.path.join(self.run_dir, "identified", f"d{draw}"),
+                             seed=_seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, profile=cfg.profile,
+                             calibration=self._calibration, n_fixed=cfg.identify_fixed_logs,
+                             n_floating=cfg.identify_floating_logs, seconds=cfg.identify_seconds,
+                             time_budget_s=cfg.identify_budget_s, progress=None)
+
+    def _model_dir(self, spec: WorldSpec, draw: int) -> str:
+        return os.path.join(self.run_dir, "models", f"{spec.key}_d{draw}")
+
+    def prepare(self) -> dict:
+        """Grounding walks, identifications and fitted transformers for every world and draw.
+
+        Returns:
+            ``{world name: {draw: {"transformer": dir or None, "identified": [reports] or None,
+            "real_walks", "real_seconds", "excitation_logs", "excitation_seconds", ...}}}``.
+        """
+        from experiments.tasks import fit_grounding_task
+
+        cfg = self.cfg
+        out: dict = {s.name: {} for s in self.specs}
+        need_id = any(s.needs_identification for s in self.specs)
+        idents: dict[int, dict] = {}
+        self._calibration = None
+        if need_id:
+            from experiments.identify import calibrate_engines
+
+            t0 = time.perf_counter()
+            self._calibration = calibrate_engines(os.path.join(self.run_dir, "identified", "calibration"),
+                                                  seed=_seeds(cfg.seed, _CAL, n=1)[0] % 1_000_000,
+                                                  floating=cfg.identify_floating_logs > 0)
+            self._say(f"engine-gap calibration ready ({time.perf_counter() - t0:.0f} s)")
+            t0 = time.perf_counter()
+            for d in range(cfg.data_seeds):  # the diagnosis runs its replays on every core itself
+                idents[d] = r = self._identify(d)
+                self._say(f"identified draw {d}: {len(r['effects'])} terms, ground Sq "
+                          f"{1000 * r['terrain_rms_height']:.2f} mm, {r['logs']} logs ({r['wall_s']:.0f} s)")
+            self._say(f"identification done ({time.perf_counter() - t0:.0f} s)")
+        fits = []
+        for d in range(cfg.data_seeds):
+            for s in self.specs:
+                info: dict = {"transformer": None, "identified": None, "real_walks": 0, "real_seconds": 0.0,
+                              "excitation_logs": 0, "excitation_seconds": 0.0}
+                if s.needs_identification:
+                    info.update(identified=idents[d]["reports"], excitation_logs=idents[d]["logs"],
+                                excitation_seconds=idents[d]["seconds"], effects=idents[d]["effects"],
+                                terrain_rms_height=idents[d]["terrain_rms_height"])
+                if s.grounded:
+                    thetas = self._data_gaits(s.data_gaits, d)
+                    g = "" if s.data_gaits == 1 else f"_g{s.data_gaits}"
+                    real = self._walks("real", _seeds(cfg.seed, _GROUND_REAL, d, n=s.real_walks), f"real_d{d}{g}", thetas)
+                    sim_kw = {"action_noise": s.exploration_noise}
+                    if s.kind == "hybrid":
+                        sim_kw["identified"] = info["identified"]
+                    base = "ident" if s.kind == "hybrid" else "sim"
+                    sim = self._walks("identified" if s.kind == "hybrid" else "sim",
+                                      _seeds(cfg.seed, _GROUND_SIM, d, n=s.sim_walks),
+                                      f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)
+                    mdir = self._model_dir(s, d)
+                    fits.append({"real": real, "sim": sim, "out": mdir, "config": s.grounding.to_dict(),
+                                 "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d})
+                    info["transformer"] = mdir
+                    info["real_walks"] = len(real)
+                    info["real_seconds"] = float(sum(_rec_seconds(p) for p in real))
+                out[s.name][d] = info
+        todo = [f for f in fits if not os.path.exists(os.path.join(f["out"], "transformer.json"))]
+        if todo:
+            t0 = time.perf_counter()
+            self._say(f"fitting {len(todo)} transformers ({len(fits) - len(todo)} resumed)")
+            for f, r in zip(todo, self.ex.map(fit_grounding_task, todo)):
+                self._say(f"  {f['world']} draw {f['draw']}: forward val {r['forward_val']:.3f}, inverse val "
+                          f"{r['inverse_val']:.3f} ({r['n_real']} real / {r['n_sim']} sim transitions, {r['wall_s']:.0f} s)")
+            self._say(f"fits done ({time.perf_counter() - t0:.0f} s)")
+        return out
+
+    # ---------------------------------------------------------------- episodes
+    def _world_tasks(self, spec: WorldSpec, draw: int, info: dict, gaits: list[dict]) -> list[dict]:
+        cfg = self.cfg
+        n = 1 if spec.kind == "sim" else cfg.episodes
+        seeds = _seeds(cfg.seed, _WORLD, n=n)  # the same episode seeds for every world, draw and gait
+        base = {"seconds": cfg.seconds, "profile": cfg.profile}
+        if spec.kind in ("sim", "ane"):
+            base["world"] = "sim"
+            if spec.kind == "ane":
+                base["action_noise"] = spec.sigma
+        elif spec.kind == "identified":
+            base.update(world="identified", identified=info["identified"])
+        else:
+            base.update(world="grounded", transformer=info["transformer"])
+            if spec.kind == "hybrid":
+                base["identified"] = info["identified"]
+        return [{**base, "theta": g["theta"], "seed": s, "key": f"w|{spec.key}|d{draw}|{g['name']}|e{e}"}
+                for g in gaits for e, s in enumerate(seeds)]
+
+    def run(self) -> dict:
+        """Measure everything not measured yet and return (and save) the result."""
+        cfg = self.cfg
+        self._check_config()
+        gaits = self.panel()
+        self._say(f"panel: {len(gaits)} gaits; {cfg.real_trials} real trials each; worlds "
+                  f"{', '.join(s.name for s in self.specs)}; {cfg.data_seeds} draws of the real data")
+        real_seeds = _seeds(cfg.seed, _REAL, n=cfg.real_trials)
+        self._run([{"world": "real", "theta": g["theta"], "seed": s, "seconds": cfg.seconds, "profile": cfg.profile,
+                    "key": f"real|{g['name']}|t{j}"} for g in gaits for j, s in enumerate(real_seeds)], "real trials")
+        prep = self.prepare()
+        tasks = []
+        for spec in self.specs:
+            for d in (range(cfg.data_seeds) if spec.per_draw else [0]):
+                tasks += self._world_tasks(spec, d, prep[spec.name][d], gaits)
+        self._run(tasks, "training-world episodes")
+        res = self.result(gaits, prep)
+        self.write(res)
+        return res
+
+    # ---------------------------------------------------------------- results
+    def _matrix(self, prefix: str, gaits, n: int, what: str) -> np.ndarray:
+        return np.array([[float(self._episodes[f"{prefix}|{g['name']}|{'t' if prefix == 'real' else 'e'}{j}"][what])
+                          for j in range(n)] for g in gaits])
+
+    def result(self, gaits, prep) -> dict:
+        cfg = self.cfg
+        R = self._matrix("real", gaits, cfg.real_trials, "fitness")
+        F = self._matrix("real", gaits, cfg.real_trials, "fell")
+        real_fit, real_fall = R.mean(1), F.mean(1)
+        rel = split_half_reliability(R, seed=cfg.seed)
+        base_rate = float(F.mean())
+        out = {"config": cfg.to_dict(), "gaits": [g["name"] for g in gaits],
+               "real": {"fitness": real_fit.tolist(), "fitness_se": (R.std(1, ddof=1) / math.sqrt(R.shape[1])).tolist(),
+                        "fall_rate": real_fall.tolist(), "speed_cm_s": self._matrix("real", gaits, cfg.real_trials,
+                                                                                    "speed_cm_s").mean(1).tolist(),
+                        "trials": cfg.real_trials, **rel,
+                        "brier_base_rate": brier_score(np.full(len(gaits), base_rate), F),
+                        "brier_own_frequency": brier_score(real_fall, F)},
+               "worlds": {}}
+        for spec in self.specs:
+            draws = []
+            n = 1 if spec.kind == "sim" else cfg.episodes
+            for d in (range(cfg.data_seeds) if spec.per_draw else [0]):
+                pre = f"w|{spec.key}|d{d}"
+                W = self._matrix(pre, gaits, n, "fitness")
+                WF = self._matrix(pre, gaits, n, "fell")
+                wf, wp = W.mean(1), WF.mean(1)
+                info = prep[spec.name][d]
+                draws.append({
+                    "draw": d, "fitness": wf.tolist(), "fall_rate": wp.tolist(),
+                    "rho": spearman(wf, real_fit),
+                    "rho_ci90": list(bootstrap_spearman(wf, R, n_boot=cfg.bootstrap, seed=cfg.seed + d)),
+                    "mae": float(np.mean(np.abs(wf - real_fit))), "bias": float(np.mean(wf - real_fit)),
+                    "brier": brier_score(wp, F),
+                    "real_walks": info["real_walks"], "real_seconds": info["real_seconds"],
+                    "excitation_logs": info["excitation_logs"], "excitation_seconds": info["excitation_seconds"],
+                    **({"effects": info.get("effects"), "terrain_rms_height": info.get("terrain_rms_height")}
+                       if spec.needs_identification else {}),
+                })
+            out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
+                                        "grounding": spec.grounding.to_dict() if spec.grounding else None}
+        return out
+
+    def write(self, res: dict) -> None:
+        atomic_write_text(os.path.join(self.run_dir, "fidelity.json"), json.dumps(_finite(res), indent=1))
+        atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(res) + "\n")
+        plot(res, os.path.join(self.run_dir, "fidelity.png"))
+
+
+def _rec_seconds(path: str) -> float:
+    from envs import Recording
+
+    rec = Recording.from_parquet(path)
+    return float(len(rec) * rec.meta["control_dt"])
+
+
+def _summary(draws: list[dict]) -> dict:
+    def agg(key):
+        v = np.array([d[key] for d in draws], dtype=float)
+        ok = v[np.isfinite(v)]
+        if not len(ok):
+            return {"median": math.nan, "min": math.nan, "max": math.nan, "spread": math.nan}
+        return {"median": float(np.median(ok)), "min": float(ok.min()), "max": float(ok.max()),
+                "spread": float(ok.max() - ok.min())}
+    s = {k: agg(k) for k in ("rho", "mae", "bias", "brier")}
+    s["abs_bias_median"] = float(np.median(np.abs([d["bias"] for d in draws])))
+    s["draws"] = len(draws)
+    return s
+
+
+def _finite(o):
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o
+
+
+def format_table(res: dict) -> str:
+    """The fidelity table: one row per world, figures as median [min, max] over the draws."""
+    r = res["real"]
+    lines = [f"{len(res['gaits'])} gaits x {r['trials']} paired real trials; real fitness "
+             f"{min(r['fitness']):.1f} .. {max(r['fitness']):.1f}, falls {100 * float(np.mean(r['fall_rate'])):.0f} %",
+             f"ceiling of rho from the real trials' noise: {r['ceiling']:.2f} (split-half reliability "
+             f"{r['reliability']:.2f}); Brier of the constant base rate {r['brier_base_rate']:.3f}, of each gait's own "
+             f"real frequency {r['brier_own_frequency']:.3f}",
+             "",
+             f"{'world':28s} {'draws':>5s} {'Spearman rho':>22s} {'worst 90% CI':>14s} {'MAE':>14s} "
+             f"{'bias (world-real)':>24s} {'Brier':>22s}",
+             "-" * 136]
+
+    def rng3(s, fmt="{:.2f}"):
+        return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
+
+    for name, w in res["worlds"].items():
+        s = w["summary"]
+        worst = min(w["draws"], key=lambda d: -np.inf if d["rho"] is None or not math.isfinite(d["rho"]) else d["rho"])
+        ci = worst["rho_ci90"]
+        ci_txt = "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:.2f}, {ci[1]:.2f}]"
+        lines.append(f"{name:28s} {s['draws']:>5d} {rng3(s['rho']):>22s} {ci_txt:>14s} {s['mae']['median']:>14.1f} "
+                     f"{s['bias']['median']:>+8.1f} (spread {s['bias']['spread']:4.1f}) {rng3(s['brier'], '{:.3f}'):>22s}")
+    return "\n".join(lines)
+
+
+def plot(res: dict, path: str) -> None:
+    """Predicted against real fitness, one panel per world, one colour per draw."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    worlds = list(res["worlds"].items())
+    n = len(worlds)
+    cols = min(3, n)
+    rows = int(math.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.8 * rows), squeeze=False)
+    real = np.array(res["real"]["fitness"])
+    se = np.array(res["real"]["fitness_se"])
+    lo = min(real.min(), min(min(d["fitness"]) for _, w in worlds for d in w["draws"])) - 2
+    hi = max(real.max(), max(max(d["fitness"]) for _, w in worlds for d in w["draws"])) + 2
+    for ax, (name, w) in zip(axes.ravel(), worlds):
+        ax.plot([lo, hi], [lo, hi], color="0.6", lw=1, ls="--")
+        for d in w["draws"]:
+            ax.errorbar(real, d["fitness"], xerr=se, fmt="o", ms=3.5, lw=0.6, alpha=0.8,
+                        label=f"draw {d['draw']}: ρ {d['rho']:.2f}" if d["rho"] is not None and math.isfinite(d["rho"])
+                        else f"draw {d['draw']}")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(lo, hi)
+        ax.set_title(name, fontsize=10)
+        ax.set_xlabel("real fitness (mean ± s.e.)")
+        ax.set_ylabel("training-world fitness")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6, loc="upper left")
+    for ax in axes.ravel()[n:]:
+        ax.axis("off")
+    fig.suptitle(f"fidelity: {len(real)} gaits, fitness = speed [cm/s] − 15 per fall; ceiling ρ "
+                 f"{res['real']['ceiling']:.2f}", fontsize=10)
+    fig.tight_layout()
+    tmp = path + ".tmp.png"
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+__all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "format_table", "parse_world", "plot"]

@@ -1,0 +1,180 @@
+"""Numbers in the README come from code: render saved results into it, and check that they agree.
+
+A README block between ``<!-- results:NAME -->`` and ``<!-- /results:NAME -->`` is generated from
+``docs/results/NAME.json``: the JSON a command printed with ``--json`` plus the command line that
+made it (``{"command": "...", "result": {...}}``, written by :func:`save`). Renderers per NAME turn
+the result into Markdown; the command is printed above the table, so every figure names its source.
+
+Usage:
+
+* ``python -m experiments.readme run NAME -- optimize --methods sgat`` runs ``sgatwalk optimize
+  --methods sgat --json`` and saves its JSON with the command line as ``docs/results/NAME.json``;
+* ``python -m experiments.readme`` rewrites README.md from the saved results;
+* ``python -m experiments.readme --check`` exits 1 (naming the blocks) when the README and the saved
+  results disagree (``tests/test_readme.py`` runs it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import re
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RESULTS = os.path.join(ROOT, "docs", "results")
+_BLOCK = re.compile(r"(<!-- results:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /results:(?P=name) -->)", re.S)
+
+
+def save(name: str, command: str, result: dict, results_dir: str = RESULTS) -> str:
+    """Write ``docs/results/NAME.json`` (atomically); returns its path."""
+    from experiments.files import atomic_write_text
+
+    path = os.path.join(results_dir, f"{name}.json")
+    atomic_write_text(path, json.dumps({"command": command, "result": result}, indent=1, allow_nan=False) + "\n")
+    return path
+
+
+def _f(x, fmt="{:.2f}") -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
+
+
+def _fidelity(res: dict) -> str:
+    r = res["real"]
+    lines = [f"{len(res['gaits'])} gaits × {r['trials']} paired real trials (real fitness {min(r['fitness']):.1f} to "
+             f"{max(r['fitness']):.1f}, {100 * sum(r['fall_rate']) / len(r['fall_rate']):.0f} % falls); ceiling of ρ "
+             f"from the trials' own noise **{_f(r['ceiling'])}** (split-half reliability {_f(r['reliability'])}); Brier "
+             f"score of a constant base rate {_f(r['brier_base_rate'], '{:.3f}')}, of each gait's own real fall "
+             f"frequency {_f(r['brier_own_frequency'], '{:.3f}')} (the floor).", "",
+             "| world | draws | Spearman ρ: median [worst, best] | worst draw's 90 % CI | MAE | bias (world − real): "
+             "median, spread | Brier: median [min, max] | real data per draw |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, w in res["worlds"].items():
+        s = w["summary"]
+        worst = min(w["draws"], key=lambda d: math.inf if d["rho"] is None else d["rho"])
+        ci = worst["rho_ci90"]
+        d0 = w["draws"][0]
+        data = []
+        if d0["real_walks"]:
+            data.append(f"{d0['real_walks']} walks ({d0['real_seconds']:.0f} s)")
+        if d0["excitation_logs"]:
+            data.append(f"{d0['excitation_logs']} excitation logs ({d0['excitation_seconds']:.0f} s)")
+        lines.append(f"| `{name}` | {s['draws']} | {_f(s['rho']['median'])} [{_f(s['rho']['min'])}, {_f(s['rho']['max'])}] "
+                     f"| [{_f(ci[0])}, {_f(ci[1])}] | {_f(s['mae']['median'], '{:.1f}')} | "
+                     f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "
+                     f"{_f(s['brier']['median'], '{:.3f}')} [{_f(s['brier']['min'], '{:.3f}')}, "
+                     f"{_f(s['brier']['max'], '{:.3f}')}] | {', '.join(data) or 'none'} |")
+    return "\n".join(lines)
+
+
+def _optimize(res: dict) -> str:
+    lines = ["```text", res["table"], "```", ""]
+    if res.get("wall_s"):
+        lines.append(f"The run took {res['wall_s'] / 60:.1f} min.")
+    rd = res.get("real_data") or {}
+    if rd:
+        lines.append("Real data per method: " + "; ".join(
+            f"{m.upper()} {d['walks']} walks ({d['walk_seconds']:.0f} s)"
+            + (f" + {d['excitation_logs']} excitation logs ({d['excitation_seconds']:.0f} s)" if d["excitation_logs"] else "")
+            for m, d in rd.items()) + ".")
+    return "\n".join(lines)
+
+
+def _table1(res: dict) -> str:
+    c = res["config"]
+    lines = [f"{c['seeds']} optimization seeds per method; every gait on the same {c['trials']} paired real trials "
+             "(mean ± s.e. over seeds × trials; falls with a Wilson 95 % interval).", "",
+             "| method | step | n | speed [cm/s] | falls | falls 95 % CI | fitness |", "|---|---|---|---|---|---|---|"]
+    for r in res["rows"]:
+        name = "θ0" if r["method"] == "theta0" else r["method"].upper()
+        step = "–" if r["method"] == "theta0" else str(r["step"])
+        lo, hi = r["falls_ci95"]
+        lines.append(f"| {name} | {step} | {r['n']} | {r['speed_mean']:.2f} ± {r['speed_se']:.2f} | {r['falls']}/{r['n']} "
+                     f"| [{lo:.2f}, {hi:.2f}] | {r['fitness_mean']:.2f} ± {r['fitness_se']:.2f} |")
+    lines += ["", "| step | comparison | fitness difference (paired permutation p) | falls: only a / only b (McNemar p) |",
+              "|---|---|---|---|"]
+    for t in res["tests"]:
+        f, x = t["fitness"], t["falls"]
+        lines.append(f"| {t['step']} | {t['a'].upper()} vs {'θ0' if t['b'] == 'theta0' else t['b'].upper()} | "
+                     f"{f['mean_diff']:+.2f} ± {f['se_diff']:.2f} (p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} "
+                     f"(p = {x['p_value']:.2g}) |")
+    lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
+    return "\n".join(lines)
+
+
+RENDERERS = {"fidelity": _fidelity, "table1": _table1, "optimize": _optimize}
+
+
+def render(text: str, results_dir: str = RESULTS) -> str:
+    """``text`` with every results block regenerated from ``results_dir``.
+
+    Raises:
+        FileNotFoundError: a block whose results file is missing. KeyError: no renderer for a block.
+    """
+    def block(m: re.Match) -> str:
+        name = m.group("name")
+        kind = name.split("-")[0]
+        if kind not in RENDERERS:
+            raise KeyError(f"README block {name!r}: no renderer (known: {', '.join(RENDERERS)})")
+        path = os.path.join(results_dir, f"{name}.json")
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"README block {name!r} needs {path}")
+        with open(path) as f:
+            doc = json.load(f)
+        body = f"```console\n$ {doc['command']}\n```\n\n{RENDERERS[kind](doc['result'])}\n"
+        return m.group(1) + body + m.group(4)
+
+    return _BLOCK.sub(block, text)
+
+
+def run_and_save(name: str, args: list[str]) -> str:
+    """Run ``sgatwalk ARGS --json`` in this process and save its result as ``docs/results/NAME.json``."""
+    import contextlib
+    import io
+
+    from experiments.cli import main as cli_main
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = cli_main([*args, "--json"])
+    if rc != 0:
+        raise SystemExit(f"sgatwalk {' '.join(args)} failed with exit status {rc}")
+    result = json.loads(buf.getvalue().strip().splitlines()[-1])
+    return save(name, "sgatwalk " + " ".join(args), result)
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["run"]:
+        if len(argv) < 3 or "--" not in argv:
+            print("usage: python -m experiments.readme run NAME -- SGATWALK_ARGS...", file=sys.stderr)
+            return 2
+        k = argv.index("--")
+        print(run_and_save(argv[1], argv[k + 1:]))
+        return 0
+    ap = argparse.ArgumentParser(description="render docs/results/*.json into README.md")
+    ap.add_argument("--check", action="store_true", help="exit 1 if README.md differs from the rendering")
+    ap.add_argument("--readme", default=os.path.join(ROOT, "README.md"))
+    args = ap.parse_args(argv)
+    with open(args.readme) as f:
+        text = f.read()
+    new = render(text)
+    if args.check:
+        if new != text:
+            names = [m.group("name") for m in _BLOCK.finditer(text)
+                     if render(m.group(0)) != m.group(0)]
+            print(f"README.md is stale in block(s): {', '.join(names) or '?'}; run python -m experiments.readme",
+                  file=sys.stderr)
+            return 1
+        return 0
+    if new != text:
+        from experiments.files import atomic_write_text
+
+        atomic_write_text(args.readme, new)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,258 @@
+"""The paper's Table I with power (``sgatwalk table1``): several optimization seeds per method,
+every resulting gait scored on the same paired real trials, and paired tests between methods.
+
+1. For each optimization seed s = 0 .. ``seeds`` - 1: one ``sgatwalk optimize`` run with all
+   ``methods`` (``experiments.optimize``, default settings; methods share the run's real grounding
+   walks, as in ``optimize --methods``), without its own real evaluation, in ``opt_seed<s>/``.
+2. Every gait -- θ0 and each (method, grounding step, seed) -- walks the same ``trials`` real trial
+   seeds (one list for the whole table: every comparison is paired by trial, and across methods also
+   by optimization seed).
+3. Per (method, step), pooled over seeds: speed mean ± s.e. [cm/s], falls with a Wilson 95 %
+   interval, fitness mean ± s.e.; per seed too. Paired tests at each step (``experiments.stats``):
+   a permutation test on fitness and McNemar's exact test on falls, pairs = (seed, trial); for
+   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, and every method vs θ0.
+
+Everything resumes: the optimization runs from their checkpoints, the evaluation from
+``episodes.jsonl``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from experiments.files import atomic_write_text
+from experiments.stats import mcnemar_test, paired_permutation_test, wilson_interval
+
+#: Comparisons tested at every grounding step (a, b): "a vs b".
+COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"))
+_EVAL = 31
+
+
+@dataclass
+class Table1Config:
+    """Settings of a Table I run (written to ``config.json``)."""
+
+    methods: tuple = ("sgat", "gat", "none", "ane", "hybrid")
+    seeds: int = 3
+    trials: int = 30
+    seed: int = 0
+    optimize: dict = dataclasses.field(default_factory=dict)  # OptimizeConfig overrides (e.g. popsize)
+
+    def validate(self) -> None:
+        from experiments.optimize import METHODS, OptimizeConfig
+
+        bad = [m for m in self.methods if m not in METHODS or m == "real"]
+        if bad or not self.methods:
+            raise ValueError(f"unknown method(s) {bad or '(none)'}; choose from "
+                             f"{', '.join(m for m in METHODS if m != 'real')}")
+        if self.seeds < 1 or self.trials < 2:
+            raise ValueError(f"need >= 1 optimization seed and >= 2 trials, got {self.seeds}, {self.trials}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
+        OptimizeConfig(**{**self.optimize, "methods": tuple(self.methods)}).validate()
+
+    def to_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["methods"] = list(self.methods)
+        return d
+
+
+class Table1:
+    """Runs (or resumes) a Table I run in ``run_dir`` with ``executor``."""
+
+    def __init__(self, cfg: Table1Config, run_dir: str, executor, *, log=None, progress: bool = False):
+        cfg.validate()
+        self.cfg, self.run_dir, self.ex = cfg, run_dir, executor
+        self.log = log or (lambda s: None)
+        self.progress = progress
+        self.t0 = time.perf_counter()
+        self._episodes: dict[str, dict] = {}
+
+    def _say(self, msg: str) -> None:
+        self.log(f"[table1 {time.perf_counter() - self.t0:7.1f} s] {msg}")
+
+    def _check_config(self) -> None:
+        os.makedirs(self.run_dir, exist_ok=True)
+        path = os.path.join(self.run_dir, "config.json")
+        mine = self.cfg.to_dict()
+        if os.path.exists(path):
+            with open(path) as f:
+                old = json.load(f)
+            if {k: v for k, v in old.items() if k != "seeds"} != {k: v for k, v in mine.items() if k != "seeds"}:
+                raise ValueError(f"{self.run_dir!r} holds a Table I run with other settings; use another --out")
+        atomic_write_text(path, json.dumps(mine, indent=1))
+        jl = os.path.join(self.run_dir, "episodes.jsonl")
+        if os.path.exists(jl):
+            with open(jl) as f:
+                for line in f:
+                    try:
+                        r = json.loads(line)
+                        self._episodes[r["key"]] = r
+                    except (json.JSONDecodeError, KeyError):
+                        continue
+
+    def _optimize(self, s: int) -> dict:
+        from experiments.optimize import OptimizeConfig, Optimizer
+
+        run = os.path.join(self.run_dir, f"opt_seed{s}")
+        cfg = OptimizeConfig(**{**self.cfg.optimize, "methods": tuple(self.cfg.methods), "seed": s, "eval_trials": 0})
+        opt = Optimizer(cfg, run, self.ex, progress=self.progress, log=lambda m: self._say(f"seed {s} {m}"))
+        t0 = time.perf_counter()
+        res = opt.run(resume=os.path.exists(opt.state_path))
+        self._say(f"optimization seed {s} done ({time.perf_counter() - t0:.0f} s)")
+        res["theta0"] = opt.state["theta0"]
+        return res
+
+    def run(self) -> dict:
+        from experiments.tasks import run_episode
+
+        cfg = self.cfg
+        self._check_config()
+        gaits: dict[str, list] = {}
+        real_data = {}
+        for s in range(cfg.seeds):
+            res = self._optimize(s)
+            real_data[s] = res["real_data"]
+            gaits.setdefault("theta0", res["theta0"])
+            for r in res["rows"]:
+                if r["method"] != "theta0":
+                    gaits[f"{r['method']}|{r['step']}|{s}"] = r["theta"]
+        seeds = [int(x) for x in np.random.SeedSequence([cfg.seed, _EVAL]).generate_state(cfg.trials, dtype=np.uint32)]
+        prof = cfg.optimize.get("profile", "real")
+        secs = cfg.optimize.get("seconds", 7.5)
+        tasks = [{"world": "real", "theta": th, "seed": sd, "seconds": secs, "profile": prof, "key": f"{g}|t{j}"}
+                 for g, th in gaits.items() for j, sd in enumerate(seeds)]
+        todo = [t for t in tasks if t["key"] not in self._episodes]
+        self._say(f"real evaluation: {len(gaits)} gaits x {cfg.trials} paired trials, {len(todo)} episodes to run")
+        jl = os.path.join(self.run_dir, "episodes.jsonl")
+        bar = None
+        if self.progress and todo:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(todo), desc="real evaluation", leave=False, disable=None)
+        chunk = max(8, 4 * getattr(self.ex, "workers", 1))
+        t0 = last = time.perf_counter()
+        for k in range(0, len(todo), chunk):
+            part = todo[k:k + chunk]
+            res = self.ex.map(run_episode, part, progress=(bar.update if bar else None))
+            rows = [{"key": t["key"], "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"])}
+                    for t, r in zip(part, res)]
+            for row in rows:
+                self._episodes[row["key"]] = row
+            with open(jl, "a") as f:
+                f.write("".join(json.dumps(row) + "\n" for row in rows))
+                f.flush()
+                os.fsync(f.fileno())
+            now = time.perf_counter()
+            if (bar is None or bar.disable) and now - last > 30:
+                done = k + len(part)
+                self._say(f"real evaluation: {done}/{len(todo)}, ETA {(now - t0) / done * (len(todo) - done):.0f} s")
+                last = now
+        if bar:
+            bar.close()
+        out = self.result(gaits, real_data)
+        atomic_write_text(os.path.join(self.run_dir, "table1.json"), json.dumps(_finite(out), indent=1))
+        atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(out) + "\n")
+        return out
+
+    def _vec(self, gait: str, what: str) -> np.ndarray:
+        return np.array([float(self._episodes[f"{gait}|t{j}"][what]) for j in range(self.cfg.trials)])
+
+    def result(self, gaits: dict, real_data: dict) -> dict:
+        cfg = self.cfg
+        steps = sorted({int(g.split("|")[1]) for g in gaits if g != "theta0"})
+
+        def pooled(keys):
+            fit = np.concatenate([self._vec(k, "fitness") for k in keys])
+            spd = np.concatenate([self._vec(k, "speed_cm_s") for k in keys])
+            fell = np.concatenate([self._vec(k, "fell") for k in keys]).astype(bool)
+            n = len(fit)
+            return {"n": n, "speed_mean": float(spd.mean()), "speed_se": float(spd.std(ddof=1) / math.sqrt(n)),
+                    "falls": int(fell.sum()), "falls_ci95": list(wilson_interval(int(fell.sum()), n)),
+                    "fitness_mean": float(fit.mean()), "fitness_se": float(fit.std(ddof=1) / math.sqrt(n))}
+
+        rows = [{"method": "theta0", "step": 0, **pooled(["theta0"]), "per_seed": []}]
+        for m in cfg.methods:
+            for st in steps:
+                keys = [f"{m}|{st}|{s}" for s in range(cfg.seeds)]
+                per = [{"seed": s, **pooled([k])} for s, k in enumerate(keys)]
+                rows.append({"method": m, "step": st, **pooled(keys), "per_seed": per})
+        tests = []
+
+        def paired(a_keys, b_keys):
+            fa = np.concatenate([self._vec(k, "fitness") for k in a_keys])
+            fb = np.concatenate([self._vec(k, "fitness") for k in b_keys])
+            xa = np.concatenate([self._vec(k, "fell") for k in a_keys])
+            xb = np.concatenate([self._vec(k, "fell") for k in b_keys])
+            return {"fitness": paired_permutation_test(fa, fb, seed=cfg.seed), "falls": mcnemar_test(xa, xb)}
+
+        for st in steps:
+            for a, b in COMPARISONS:
+                if a in cfg.methods and b in cfg.methods:
+                    tests.append({"step": st, "a": a, "b": b, **paired([f"{a}|{st}|{s}" for s in range(cfg.seeds)],
+                                                                       [f"{b}|{st}|{s}" for s in range(cfg.seeds)])})
+            for m in cfg.methods:
+                tests.append({"step": st, "a": m, "b": "theta0", **paired([f"{m}|{st}|{s}" for s in range(cfg.seeds)],
+                                                                          ["theta0"] * cfg.seeds)})
+        return {"config": cfg.to_dict(), "rows": rows, "tests": tests, "real_data": real_data,
+                "verdict": verdict(rows, tests)}
+
+
+def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:
+    """One sentence per tested comparison, in words, whichever way it falls."""
+    out = []
+    for t in tests:
+        if t["b"] == "theta0":
+            continue
+        f, x = t["fitness"], t["falls"]
+        d = f["mean_diff"]
+        if f["p_value"] < alpha:
+            word = "beats" if d > 0 else "is worse than"
+            out.append(f"step {t['step']}: {t['a'].upper()} {word} {t['b'].upper()} on fitness by {d:+.1f} "
+                       f"(paired permutation p = {f['p_value']:.3g}; falls {x['only_a']} vs {x['only_b']} discordant, "
+                       f"McNemar p = {x['p_value']:.3g})")
+        else:
+            out.append(f"step {t['step']}: no significant difference between {t['a'].upper()} and {t['b'].upper()} "
+                       f"(fitness {d:+.1f} ± {f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g})")
+    return out
+
+
+def _finite(o):
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    return o
+
+
+def format_table(res: dict) -> str:
+    """Table I: a row per method and step, pooled over the optimization seeds."""
+    c = res["config"]
+    lines = [f"Table I: {c['seeds']} optimization seed(s) per method, every gait on the same {c['trials']} paired real "
+             "trials; mean ± s.e.; falls with a Wilson 95 % interval",
+             f"{'method':10s} {'step':>4s} {'n':>4s} {'speed [cm/s]':>15s} {'falls':>8s} {'95 % CI':>14s} "
+             f"{'fitness':>14s}", "-" * 76]
+    for r in res["rows"]:
+        name = "θ0" if r["method"] == "theta0" else r["method"].upper()
+        step = "-" if r["method"] == "theta0" else str(r["step"])
+        lo, hi = r["falls_ci95"]
+        lines.append(f"{name:10s} {step:>4s} {r['n']:>4d} {r['speed_mean']:7.2f} ± {r['speed_se']:4.2f} "
+                     f"{r['falls']:>4d}/{r['n']:<3d} [{lo:.2f}, {hi:.2f}] {r['fitness_mean']:7.2f} ± {r['fitness_se']:4.2f}")
+    lines.append("")
+    lines.append("paired tests (pairs = seed x trial): fitness by permutation, falls by McNemar")
+    for t in res["tests"]:
+        f, x = t["fitness"], t["falls"]
+        lines.append(f"  step {t['step']}: {t['a']:>8s} vs {t['b']:<8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
+                     f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})")
+    lines.append("")
+    lines += [f"verdict: {v}" for v in res["verdict"]]
+    return "\n".join(lines)

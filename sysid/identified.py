@@ -1,0 +1,147 @@
+"""The identified sim: the MuJoCo sim with the physics a diagnosis found, as a walking world.
+
+``sgatwalk diagnose`` names the effects the sim leaves out and fits their values (``report.json``:
+``model`` and ``base_model``, labels like ``latency`` or ``pd_gain[LKneePitch]``, values in SI
+units; uneven ground as the RMS height of a random surface). :class:`IdentifiedSimEnv` is
+:class:`envs.NaoSimEnv` with those effects built in by the same MuJoCo augmentations the diagnosis
+replayed (:func:`sysid.candidates.apply_terms`: actuator delay buffers for latency, series play and
+spring hinges for backlash and joint compliance, ``dof_frictionloss``, gains, effort limits, link
+masses, contact friction and time constant), so that what was fitted is what is walked on:
+
+* encoder offsets (``sensor_bias``) are added to the measured angles and subtracted from the
+  targets (the servo reads the same encoder), like the real world's calibration offsets;
+* the measured angle of a joint with a play or spring hinge is the sum of its hinges (the output);
+* uneven ground (``terrain_roughness``) is a fresh Gaussian random surface of the fitted RMS height
+  at every episode, drawn from the episode seed (:func:`terrain.gaussian`, the diagnosis's surface
+  model with its 8 cm correlation radius), with the walking terrains' flat start pad.
+
+This is the "identified" training world of ``sgatwalk fidelity`` and the base of the hybrid
+grounding (SGAT on top of it, ``experiments.fidelity``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import mujoco
+import numpy as np
+
+from envs.mujoco_world import NaoSimEnv
+from sysid.candidates import FAMILIES, Term, apply_terms, series_structure
+from sysid.model import ReplayModel, Structure
+from sysid.report import terms_from_labels
+from sysid.roughness import CORRELATION_RADIUS
+from terrain import gaussian
+
+
+def load_identified(paths) -> tuple[dict[Term, float], float]:
+    """The identified physics of one or more diagnosis reports.
+
+    Args:
+        paths: ``report.json`` files (or folders holding one) of ``sgatwalk diagnose``; later reports
+            override earlier ones term by term (a stepping-log diagnosis with ``--base-report`` already
+            carries the fixed-base terms as its ``base_model``).
+
+    Returns:
+        (terms: Term -> value in SI units, the RMS height [m] of the identified uneven ground or 0).
+
+    Raises:
+        FileNotFoundError: a path without a report. ValueError: not a report of ``sgatwalk diagnose``.
+    """
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    terms: dict[Term, float] = {}
+    rms = 0.0
+    for p in paths:
+        p = os.fspath(p)
+        if os.path.isdir(p):
+            p = os.path.join(p, "report.json")
+        if not os.path.exists(p):
+            raise FileNotFoundError(f"no diagnosis report at {p!r}")
+        try:
+            with open(p) as f:
+                rep = json.load(f)
+            terms.update(terms_from_labels({**rep.get("base_model", {}), **rep["model"]}))
+        except (json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
+            raise ValueError(f"{p}: not a report.json of sgatwalk diagnose ({exc})") from None
+        for e in rep.get("effects", []):
+            if e.get("family") == "terrain_roughness":
+                rms = float(e["value"])
+    return terms, rms
+
+
+class IdentifiedSimEnv(NaoSimEnv):
+    """:class:`envs.NaoSimEnv` with identified effects (see the module docstring).
+
+    Args:
+        terms: Term -> value (SI), e.g. from :func:`load_identified`; an empty dict is the plain sim.
+        rms_height: RMS height [m] of the uneven ground (0: the sim's own ground).
+        **kwargs: :class:`envs.NaoSimEnv` arguments (robot, fixed_base, physics_dt, ...). A ``terrain``
+            given here (or as a reset option) replaces the random surfaces.
+
+    Raises:
+        ValueError: an unknown family, a stochastic family among ``terms``, or a negative height.
+    """
+
+    world = "identified"
+
+    def __init__(self, terms: dict[Term, float] | None = None, rms_height: float = 0.0, **kwargs):
+        self.terms = {Term(t.family, t.target): float(v) for t, v in (terms or {}).items()}
+        for t in self.terms:
+            if t.family not in FAMILIES or FAMILIES[t.family].stochastic:
+                raise ValueError(f"{t.label()}: not a deterministic effect family of the diagnosis")
+        if not rms_height >= 0:
+            raise ValueError(f"rms_height must be >= 0, got {rms_height}")
+        self.rms_height = float(rms_height)
+        self._fixed_terrain = kwargs.get("terrain") is not None
+        super().__init__(**kwargs)
+
+    @classmethod
+    def from_reports(cls, paths, **kwargs) -> "IdentifiedSimEnv":
+        """The world of :func:`load_identified` ``(paths)``."""
+        terms, rms = load_identified(paths)
+        return cls(terms, rms, **kwargs)
+
+    def describe(self) -> dict:
+        """Label -> value of every identified term, plus ``terrain_rms_height`` [m]."""
+        return {**{t.label(): v for t, v in sorted(self.terms.items())}, "terrain_rms_height": self.rms_height}
+
+    # ---------------------------------------------------------------- model
+    def _compile(self) -> mujoco.MjModel:
+        st = series_structure(Structure(fixed_base=self.fixed_base, physics_dt=self.physics_dt,
+                                        hang_height=self.hang_height, friction=self.friction), self.terms)
+        self._rm = rm = ReplayModel(self.robot, st, ground=self._terrain)
+        m = rm.model  # freshly compiled for this world: ours to edit
+        self._bias = apply_terms(rm, m, self.terms)
+        idx = {n: i for i, n in enumerate(self.robot.joint_names)}
+        self._series = [(idx[n], int(rm.play_qadr[n]), int(rm.play_dadr[n])) for n in rm.play_jnt]
+        self._series += [(idx[n], int(rm.spring_qadr[n]), int(rm.spring_dadr[n])) for n in rm.spring_jnt]
+        return m
+
+    def _reset_world(self, seed, options) -> None:
+        options = dict(options)
+        if self.rms_height > 0 and "terrain" not in options and not self._fixed_terrain:
+            ss = np.random.SeedSequence([0 if seed is None else int(seed), 0x7e44])
+            options["terrain"] = gaussian(np.random.default_rng(ss), self.rms_height, CORRELATION_RADIUS)
+        super()._reset_world(seed, options)
+        m, d = self.model, self.data
+        for i, (a, q) in enumerate(zip(self._rm.act, self.q0 - self._bias)):
+            d.ctrl[a] = q
+            if m.actuator_history[a, 0] > 0:  # delay buffers hold the start pose, not zeros
+                mujoco.mj_initCtrlHistory(m, d, int(a), None, np.full((int(m.actuator_history[a, 0]), 1), q))
+        mujoco.mj_forward(m, d)
+
+    def _advance(self, targets: np.ndarray) -> None:
+        super()._advance(targets - self._bias)
+
+    def _joint_state(self) -> tuple[np.ndarray, np.ndarray]:
+        q, dq = super()._joint_state()
+        d = self.data
+        for i, qa, da in self._series:
+            q[i] += d.qpos[qa]
+            dq[i] += d.qvel[da]
+        return q, dq
+
+    def _sensor_noise(self, fields: dict[str, np.ndarray]) -> None:
+        fields["q"] += self._bias

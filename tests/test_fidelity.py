@@ -1,0 +1,96 @@
+"""sgatwalk fidelity and table1: world parsing, a tiny end-to-end run with resume, bad input."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from experiments.fidelity import FidelityConfig, parse_world
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+TINY = ["--gaits", "2", "--real-trials", "2", "--data-seeds", "2", "--episodes", "2", "--seconds", "1.5",
+        "--workers", "1"]
+
+
+def test_parse_world_options():
+    w = parse_world("sgat:ensemble=3:alpha=0.7:real=6:inverse_command=1:hidden=32x32")
+    assert (w.kind, w.real_walks, w.grounding.ensemble, w.grounding.alpha, w.grounding.inverse_command,
+            w.grounding.hidden) == ("sgat", 6, 3, 0.7, True, (32, 32))
+    assert parse_world("gat").grounding.method == "gat" and parse_world("sim").grounding is None
+    assert parse_world("ane:sigma=0.02").sigma == 0.02
+    for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
+                       ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
+                       ("sgat:real=0", "real_walks")]:
+        with pytest.raises(ValueError, match=words):
+            parse_world(bad)
+    with pytest.raises(ValueError, match="repeats"):
+        FidelityConfig(worlds=("sgat", "sgat")).validate()
+    with pytest.raises(ValueError, match="real_trials"):
+        FidelityConfig(real_trials=1).validate()
+
+
+def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
+    out = tmp_path / "fid"
+    args = ["fidelity", *TINY, "--worlds", "sim", "sgat", "gat", "--out", str(out), "--json"]
+    assert main(args) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["gaits"][0] == "theta0" and len(res["gaits"]) == 3
+    assert len(res["worlds"]["sim"]["draws"]) == 1 and len(res["worlds"]["sgat"]["draws"]) == 2
+    for w in res["worlds"].values():
+        for d in w["draws"]:
+            assert len(d["fitness"]) == 3 and all(0 <= p <= 1 for p in d["fall_rate"])
+    assert res["worlds"]["sgat"]["draws"][0]["real_walks"] == 4
+    for f in ("fidelity.json", "fidelity.png", "table.txt", "panel.json", "episodes.jsonl"):
+        assert (out / f).exists(), f
+    n_lines = len((out / "episodes.jsonl").read_text().splitlines())
+    # a second run with one more world measures only that world
+    assert main([*args[:-4], "--worlds", "sim", "sgat", "gat", "ane", "--out", str(out), "--json"]) == 0
+    res2 = json.loads(capsys.readouterr().out)
+    assert len((out / "episodes.jsonl").read_text().splitlines()) == n_lines + 3 * 2
+    assert res2["worlds"]["sgat"] == res["worlds"]["sgat"]
+    # other settings in the same directory are refused
+    assert main(["fidelity", *TINY[:-2], "--real-trials", "3", "--workers", "1", "--out", str(out)]) == 2
+    assert "other settings" in capsys.readouterr().err
+
+
+def test_fidelity_bad_input(tmp_path, capsys):
+    assert main(["fidelity", "--worlds", "sgat:nope=1", "--out", str(tmp_path / "x")]) == 2
+    assert "unknown option" in capsys.readouterr().err
+    assert main(["fidelity", "--params", str(tmp_path / "missing.json"), "--out", str(tmp_path / "x")]) == 2
+    assert "no such file" in capsys.readouterr().err
+    assert main(["fidelity", "--gaits", "-1", "--out", str(tmp_path / "x")]) == 2
+    assert "gaits" in capsys.readouterr().err
+
+
+T1 = ["--methods", "sgat,none", "--seeds", "2", "--trials", "3", "--popsize", "3", "--generations", "2",
+      "--grounding-steps", "1", "--seconds", "0.8", "--workers", "1"]
+
+
+def test_table1_resumes_after_sigkill(tmp_path):
+    ref = tmp_path / "ref"
+    assert main(["table1", *T1, "--out", str(ref), "--json"]) == 0
+    a = json.loads((ref / "table1.json").read_text())
+    assert [(r["method"], r["step"]) for r in a["rows"]] == [("theta0", 0), ("sgat", 1), ("none", 1)]
+    assert a["rows"][1]["n"] == 2 * 3 and a["rows"][0]["n"] == 3
+    assert {(t["a"], t["b"]) for t in a["tests"]} == {("sgat", "none"), ("sgat", "theta0"), ("none", "theta0")}
+    run = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "experiments.cli", "table1", *T1, "--out", str(run), "--json"]
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while not (run / "opt_seed1" / "generations.csv").exists() and proc.poll() is None and time.time() - t0 < 300:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the run finished before it could be killed"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (run / "table1.json").exists()
+    assert main(["table1", *T1, "--out", str(run), "--json"]) == 0
+    b = json.loads((run / "table1.json").read_text())
+    assert a["rows"] == b["rows"] and a["tests"] == b["tests"]
+    assert np.isfinite(b["rows"][1]["fitness_mean"])

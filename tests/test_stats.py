@@ -1,0 +1,78 @@
+"""experiments.stats: intervals and tests against hand-computed values; fidelity metrics on constructed worlds."""
+
+import math
+
+import numpy as np
+import pytest
+
+from experiments import stats as S
+
+
+def test_wilson_hand_computed():
+    # k = 3, n = 10, z = 1.95996: centre (0.3 + z²/20) / (1 + z²/10) = 0.35550,
+    # half-width z sqrt(0.021 + z²/400) / (1 + z²/10) = 0.24772
+    lo, hi = S.wilson_interval(3, 10)
+    assert lo == pytest.approx(0.10779, abs=1e-4) and hi == pytest.approx(0.60322, abs=1e-4)
+    # k = 0: [0, z² / (n + z²)] = [0, 3.8415 / 23.8415]
+    lo, hi = S.wilson_interval(0, 20)
+    assert lo == 0 and hi == pytest.approx(0.16113, abs=1e-4)
+    assert math.isnan(S.wilson_interval(0, 0)[0])
+    with pytest.raises(ValueError):
+        S.wilson_interval(5, 3)
+
+
+def test_paired_permutation_exact_hand_computed():
+    # d = (1, 2, 3): of the 8 sign patterns only +-(1+2+3) reach |sum| >= 6 -> p = 2/8
+    r = S.paired_permutation_test([2, 4, 6], [1, 2, 3])
+    assert r["mean_diff"] == pytest.approx(2.0) and r["p_value"] == pytest.approx(0.25)
+    # d = (1, 2, 3, 4): 2 of 16 patterns reach |sum| >= 10
+    assert S.paired_permutation_test([1, 2, 3, 4], [0, 0, 0, 0])["p_value"] == pytest.approx(0.125)
+    assert S.paired_permutation_test([1, 2], [1, 2])["p_value"] == 1.0
+    with pytest.raises(ValueError):
+        S.paired_permutation_test([1, 2, 3], [1, 2])
+
+
+def test_mcnemar_hand_computed():
+    # 4 pairs where only the first fell, 1 where only the second: P(X <= 1 or X >= 4), X ~ B(5, 1/2)
+    # = (1 + 5 + 5 + 1) / 32
+    r = S.mcnemar_test([1, 1, 1, 1, 0, 0, 1], [0, 0, 0, 0, 0, 1, 1])
+    assert (r["only_a"], r["only_b"]) == (4, 1) and r["p_value"] == pytest.approx(12 / 32)
+    assert S.mcnemar_test([1, 0], [1, 0])["p_value"] == 1.0
+
+
+def test_brier_score():
+    assert S.brier_score([0.5, 1.0], [[1, 0], [1, 1]]) == pytest.approx((0.25 + 0.25 + 0 + 0) / 4)
+    with pytest.raises(ValueError):
+        S.brier_score([1.5], [[1]])
+
+
+def _panel(G=20, M=10, seed=0, noise=3.0):
+    rng = np.random.default_rng(seed)
+    true = np.linspace(-10, 20, G)
+    return true, true[:, None] + rng.normal(0, noise, (G, M))
+
+
+def test_a_world_that_is_the_real_world_reaches_the_ceiling():
+    true, R = _panel()
+    _, R2 = _panel(seed=1)  # the same gaits on independent trials: a perfect training world, trial noise only
+    world = R2.mean(1)
+    rho = S.spearman(world, R.mean(1))
+    rel = S.split_half_reliability(R)
+    assert rel["ceiling"] > 0.95 and rho > 0.9
+    assert abs(np.mean(world - R.mean(1))) < 1.5  # bias: zero up to the trial noise (s.e. 3/sqrt(10) per mean)
+    lo, hi = S.bootstrap_spearman(world, R, n_boot=300)
+    assert lo <= rho <= hi and hi - lo < 0.2
+
+
+def test_a_world_that_shuffles_the_gaits_ranks_at_chance():
+    true, R = _panel()
+    rng = np.random.default_rng(3)
+    rhos = [S.spearman(rng.permutation(true), R.mean(1)) for _ in range(200)]
+    assert abs(np.mean(rhos)) < 0.05 and np.std(rhos) > 0.1
+
+
+def test_noisy_trials_lower_the_ceiling():
+    _, clean = _panel(noise=1.0)
+    _, noisy = _panel(noise=30.0)
+    assert S.split_half_reliability(noisy)["ceiling"] < S.split_half_reliability(clean)["ceiling"] - 0.2
+    assert math.isnan(S.spearman([1, 1, 1], [1, 2, 3]))
