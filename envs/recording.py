@@ -180,18 +180,21 @@ class Recording:
             if col.ndim != 1 or len(col) != n:
                 raise RecordingError(f"column {name!r} has shape {col.shape}, expected ({n},)")
         jg = _joint_groups(robot)
-        for g in ("cmd", "q"):
-            missing = [c for c in jg[g] if c not in self.columns]
-            if missing:
-                raise RecordingError(f"recording lacks required column(s) {', '.join(missing[:5])}"
-                                     + (f" and {len(missing) - 5} more" if len(missing) > 5 else ""))
+        missing = [c for g in ("cmd", "q") for c in jg[g] if c not in self.columns]
+        if missing:
+            raise RecordingError(f"recording lacks required column(s) {', '.join(missing[:8])}"
+                                 + (f" and {len(missing) - 8} more" if len(missing) > 8 else ""))
         known = {"t"}
+        partial = []
+        for g, names in {**jg, **GROUPS}.items():
+            present = [c for c in names if c in self.columns]
+            if present and len(present) != len(names):
+                partial.append(f"{g!r} (missing {', '.join(c for c in names if c not in self.columns)})")
+        if partial:
+            raise RecordingError(f"column group(s) incomplete: {'; '.join(partial)}")
         for g, names in {**jg, **GROUPS}.items():
             known.update(names)
             present = [c for c in names if c in self.columns]
-            if present and len(present) != len(names):
-                missing = [c for c in names if c not in self.columns]
-                raise RecordingError(f"column group {g!r} is incomplete: missing {', '.join(missing)}")
             if present and g not in _MAY_BE_NAN:
                 for c in names:
                     bad = ~np.isfinite(self.columns[c])
@@ -210,12 +213,24 @@ class Recording:
         return table.replace_schema_metadata({META_KEY: json.dumps(self.meta, default=_json_default).encode()})
 
     def to_parquet(self, path: str | os.PathLike) -> str:
-        """Write atomically (temporary file, then rename); returns the path."""
+        """Write atomically (temporary file, then rename); returns the path.
+
+        Raises:
+            ValueError: ``path`` is a directory, or cannot be written (the message names it); nothing
+                is left behind.
+        """
         path = os.fspath(path)
-        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        if os.path.isdir(path):
+            raise ValueError(f"{path!r} is a directory; give a file name for the recording (e.g. walk.parquet)")
         tmp = f"{path}.{os.getpid()}.tmp"
-        pq.write_table(self.to_table(), tmp)
-        os.replace(tmp, path)
+        try:
+            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+            pq.write_table(self.to_table(), tmp)
+            os.replace(tmp, path)
+        except OSError as exc:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise ValueError(f"cannot write the recording to {path!r}: {exc.strerror or exc}") from None
         return path
 
     @classmethod

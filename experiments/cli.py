@@ -7,8 +7,9 @@ Each subcommand lives in its own module under ``experiments/`` that defines
 
 ``main`` prints ``run``'s result as one JSON object when ``--json`` is given; otherwise the
 subcommand prints its own human-readable output. Errors that come from bad user input
-(:class:`UsageError`, ``ValueError``, ``FileNotFoundError``) are printed as one clear line on
-stderr with exit status 2, never as a traceback.
+(:class:`UsageError`, ``ValueError``, ``KeyError``, and ``OSError`` such as a missing, unwritable or
+existing file) are printed as one clear line on stderr, naming the file, with exit status 2, never as
+a traceback.
 """
 
 from __future__ import annotations
@@ -16,10 +17,10 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
-import math
 import os
 import sys
-from typing import Any
+
+from experiments.files import jsonable
 
 # Subcommand modules, in the order ``sgatwalk --help`` lists them.
 COMMANDS: list[str] = [
@@ -39,23 +40,6 @@ COMMANDS: list[str] = [
 
 class UsageError(ValueError):
     """Bad user input: printed as one line, exit status 2."""
-
-
-def _jsonable(obj: Any) -> Any:
-    """Convert NumPy scalars/arrays and non-finite floats into strict JSON values."""
-    import numpy as np
-
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        return _jsonable(obj.item())
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -81,19 +65,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    for stream in (sys.stdout, sys.stderr):  # lines reach a pipe or file as they are printed
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(line_buffering=True)
     parser = build_parser()
     args = parser.parse_args(argv)
+    seed = getattr(args, "seed", None)
+    if seed is not None and seed < 0:  # every command's seeds feed numpy.random.SeedSequence: non-negative
+        print(f"sgatwalk {args.command}: error: --seed must be >= 0, got {seed}", file=sys.stderr)
+        return 2
     try:
         result = args._run(args)
-    except (UsageError, ValueError, FileNotFoundError, KeyError) as exc:
-        msg = exc.args[0] if exc.args else exc
-        print(f"sgatwalk {args.command}: error: {msg}", file=sys.stderr)
+    except (UsageError, ValueError, KeyError, OSError) as exc:
+        if isinstance(exc, OSError) and exc.strerror:  # e.g. [Errno 13] on an unwritable --out: name the file
+            msg = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
+        else:
+            msg = exc.args[0] if exc.args else exc
+        print(f"sgatwalk {args.command}: error: {' '.join(str(msg).split())}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"sgatwalk {args.command}: interrupted", file=sys.stderr)
         return 130
     if args.json:
-        print(json.dumps(_jsonable(result), allow_nan=False))
+        print(json.dumps(jsonable(result), allow_nan=False))
     return 0
 
 

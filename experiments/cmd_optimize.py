@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import sys
 import time
 
 from experiments.optimize import METHODS, PRESETS, OptimizeConfig
@@ -92,7 +93,9 @@ def run(args) -> dict:
     else:
         cfg = config_from_args(args)
         run_dir = args.out or os.path.join("runs", f"optimize_{'-'.join(cfg.methods)}_{time.strftime('%Y%m%d-%H%M%S')}")
-    log = (lambda *a, **k: None) if args.json else print
+
+    def log(msg: str) -> None:  # progress and stage lines on stderr (stdout: the table, or the JSON)
+        print(msg, file=sys.stderr, flush=True)
     ex = make_executor(args.workers, args.ray_address)
     t0 = time.perf_counter()
     try:
@@ -101,6 +104,6 @@ def run(args) -> dict:
         ex.close()
     res["wall_s"] = time.perf_counter() - t0
     if not args.json:
-        print(res["table"])
-        print(f"run directory: {run_dir} ({res['wall_s'] / 60:.1f} min)")
+        print(res["table"], flush=True)
+        print(f"run directory: {run_dir} ({res['wall_s'] / 60:.1f} min)", flush=True)
     return res

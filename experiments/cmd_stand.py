@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from terrain import TERRAINS, make
+from terrain import TERRAINS, check_amplitude, make
 
 
 def register(sub) -> argparse.ArgumentParser:
@@ -26,7 +26,9 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain for both worlds (default: flat sim, the profile's random lumpy field in real)")
-    p.add_argument("--amplitude", type=float, default=0.01, help="terrain amplitude [m] (default 0.01)")
+    p.add_argument("--amplitude", type=float, default=None,
+                   help="terrain amplitude with --terrain: bump/step height [m], slope grade, gaussian RMS height [m] "
+                        "(default 0.01)")
     p.add_argument("--fixed-base", action="store_true", help="hang the robot in the air (actuator tests)")
     p.add_argument("--record", metavar="PATH", help="write recordings; '{world}' in PATH is replaced "
                    "(default PATH for two worlds: PATH with _sim/_real before the suffix)")
@@ -52,10 +54,11 @@ def run(args) -> dict:
     if not (args.seconds > 0):
         raise ValueError(f"--seconds must be positive, got {args.seconds}")
     hf = None
+    if args.amplitude is not None and args.terrain is None:
+        raise ValueError("--amplitude needs --terrain (e.g. --terrain lumpy --amplitude 0.01)")
     if args.terrain is not None:
-        if args.amplitude < 0:
-            raise ValueError(f"--amplitude must be >= 0, got {args.amplitude}")
-        hf = make(args.terrain, seed=args.seed, amplitude=args.amplitude)
+        amp = check_amplitude(args.terrain, 0.01 if args.amplitude is None else args.amplitude)
+        hf = make(args.terrain, seed=args.seed, amplitude=amp)
     results = []
     for w in worlds:
         kw = {"fixed_base": args.fixed_base}

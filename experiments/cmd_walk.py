@@ -1,4 +1,6 @@
-"""``sgatwalk walk``: run the ZMP walk engine with a gait parameter file in the sim or real world.
+"""``sgatwalk walk``: run the ZMP walk engine with a gait parameter file in the sim, the real world, or
+the identified sim (``--world identified --report REPORT_JSON``: the sim with the physics a diagnosis
+found, uneven ground included).
 
 Prints the forward speed [cm/s], whether the robot fell, the lateral drift and the paper's
 fitness (speed - 15 if fallen); ``--record`` writes the rollout as a Parquet recording (with the
@@ -12,7 +14,7 @@ import math
 import time
 
 from experiments.fitness import EPISODE_SECONDS, run_walk
-from terrain import TERRAINS, make
+from terrain import TERRAINS, check_amplitude, make
 from walk_engine import GaitParams, WalkCommand
 
 
@@ -20,13 +22,18 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("walk", help="walk with a gait parameter file (ZMP engine) and report speed/fall/drift",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--params", metavar="JSON", help="gait parameters (16 names -> values); default: θ0")
-    p.add_argument("--world", default="sim", choices=("sim", "real"), help="sim (MuJoCo) or real (PyBullet)")
+    p.add_argument("--world", default="sim", choices=("sim", "real", "identified"),
+                   help="sim (MuJoCo), real (PyBullet) or identified (the sim with the physics of --report)")
+    p.add_argument("--report", nargs="+", metavar="REPORT_JSON",
+                   help="with --world identified: report.json file(s) or folders of sgatwalk diagnose")
     p.add_argument("--seconds", type=float, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
     p.add_argument("--seed", type=int, default=0, help="episode seed (terrain, effects, noise)")
     p.add_argument("--profile", default=None, help="real-world effect profile: real (default) or none")
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain (default: flat in the sim, the profile's random lumpy field in the real world)")
-    p.add_argument("--amplitude", type=float, default=0.02, help="terrain amplitude [m] with --terrain (default 0.02)")
+    p.add_argument("--amplitude", type=float, default=None,
+                   help="terrain amplitude with --terrain: bump/step height [m], slope grade, gaussian RMS height [m] "
+                        "(default 0.02)")
     p.add_argument("--vx", type=float, default=None, help="forward speed command [m/s] (default: the gait's own)")
     p.add_argument("--vy", type=float, default=0.0, help="sideways speed command [m/s], + left")
     p.add_argument("--wz", type=float, default=0.0, help="turn rate command [rad/s], + left")
@@ -38,18 +45,26 @@ def run(args) -> dict:
     if not (args.seconds > 0 and math.isfinite(args.seconds)):
         raise ValueError(f"--seconds must be a positive number, got {args.seconds}")
     params = GaitParams.load(args.params) if args.params else GaitParams()
-    if args.world == "sim" and args.profile is not None:
+    if args.world != "real" and args.profile is not None:
         raise ValueError("--profile applies to the real world only (use --world real)")
+    if (args.world == "identified") != bool(args.report):
+        raise ValueError("--world identified needs --report REPORT_JSON (and --report needs --world identified)")
     profile = args.profile or "real"
     terrain = None
+    if args.amplitude is not None and args.terrain is None:
+        raise ValueError("--amplitude needs --terrain (e.g. --terrain lumpy --amplitude 0.01)")
     if args.terrain is not None:
-        if not (args.amplitude >= 0 and math.isfinite(args.amplitude)):
-            raise ValueError(f"--amplitude must be >= 0, got {args.amplitude}")
-        terrain = "flat" if args.terrain == "flat" else make(args.terrain, seed=args.seed, amplitude=args.amplitude)
+        amp = check_amplitude(args.terrain, 0.02 if args.amplitude is None else args.amplitude)
+        terrain = "flat" if args.terrain == "flat" else make(args.terrain, seed=args.seed, amplitude=amp)
     command = WalkCommand(args.vx, args.vy, args.wz)
+    env = None
+    if args.world == "identified":
+        from sysid.identified import IdentifiedSimEnv
+
+        env = IdentifiedSimEnv.from_reports(args.report, terrain=None if terrain in (None, "flat") else terrain)
     t0 = time.perf_counter()
     rec, res = run_walk(params, world=args.world, seed=args.seed, seconds=args.seconds, profile=profile,
-                        terrain=terrain, command=command)
+                        terrain=terrain, command=command, env=env)
     wall = time.perf_counter() - t0
     out = {"world": args.world, "seed": args.seed, **res.to_dict(),
            "profile": rec.meta.get("profile"),

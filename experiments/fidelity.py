@@ -29,8 +29,10 @@ Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ens
 ``inverse_command`` (0/1), ``residual`` (0/1: sample only the variance the sim does not have),
 ``hidden`` (e.g. ``128x128``), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
-``gaits`` - 1 gaits drawn in the box); ``method`` (sgat/gat) for ``hybrid``; of
-``ane``: ``sigma``.
+``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
+``history`` (frames of state the models see); ``method`` (sgat/gat) for ``hybrid``; of ``ane``: ``sigma``;
+of ``identified``: ``terms=0`` (only the identified ground) or ``ground=0`` (only the deterministic
+effects), to see which part of the identified physics carries its fidelity.
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
@@ -51,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from experiments.files import atomic_write_text
+from experiments.files import atomic_write_text, jsonable
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
 
@@ -67,6 +69,10 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 
 
 # ------------------------------------------------------------------------------------------ worlds
+#: WorldSpec fields added after the first release, with their defaults (left out of the cache key).
+_LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1}
+
+
 @dataclass(frozen=True)
 class WorldSpec:
     """One training world: its name (as given), kind, grounding settings and data per draw."""
@@ -79,6 +85,10 @@ class WorldSpec:
     exploration_noise: float = EXPLORATION_NOISE
     data_gaits: int = 1
     sigma: float = 0.05  # ane
+    state: str = "legs"  # grounding state (experiments.grounding.nao_spec)
+    history: int = 1  # frames of state history the models see
+    identified_terms: bool = True  # identified: the deterministic effects (ablation switch)
+    identified_ground: bool = True  # identified: the uneven ground (ablation switch)
 
     @property
     def key(self) -> str:
@@ -87,6 +97,9 @@ class WorldSpec:
 
         d = dataclasses.asdict(self)
         d.pop("name")
+        for k in _LATER_OPTIONS:  # options added later hash only when set, so earlier caches stay valid
+            if d[k] == _LATER_OPTIONS[k]:
+                d.pop(k)
         d["grounding"] = self.grounding.to_dict() if self.grounding else None
         return f"{self.kind}-{hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:10]}"
 
@@ -127,15 +140,23 @@ def parse_world(text: str) -> WorldSpec:
         try:
             if kind == "ane" and k == "sigma":
                 kw["sigma"] = float(v)
+            elif kind == "identified" and k in ("terms", "ground"):
+                kw[f"identified_{k}"] = bool(int(v))
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method",
-                                                              "gaits"):
+                                                              "gaits", "state", "history"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
                 elif k == "method":
                     raise ValueError(f"world {text!r}: unknown option {k!r} for {kind} (hybrid takes method=sgat|gat)")
                 elif k == "gaits":
                     kw["data_gaits"] = int(v)
+                elif k == "state":
+                    if v not in ("legs", "legs+imu"):
+                        raise ValueError(f"world {text!r}: unknown option value state={v!r} (legs or legs+imu)")
+                    kw["state"] = v
+                elif k == "history":
+                    kw["history"] = int(v)
                 elif k == "residual":
                     gkw["residual_noise"] = bool(int(v))
                 elif k == "alpha":
@@ -160,7 +181,7 @@ def parse_world(text: str) -> WorldSpec:
             if "unknown option" in str(exc):
                 raise
             raise ValueError(f"world {text!r}: bad value for {k}: {v!r}") from None
-    for k in ("real_walks", "sim_walks", "data_gaits"):
+    for k in ("real_walks", "sim_walks", "data_gaits", "history"):
         if kw.get(k, 1) < 1:
             raise ValueError(f"world {text!r}: {k} must be >= 1")
     if kw.get("exploration_noise", 0) < 0 or kw.get("sigma", 0) < 0:
@@ -186,7 +207,7 @@ class FidelityConfig:
     identify_fixed_logs: int = 3
     identify_floating_logs: int = 3
     identify_seconds: float = 6.0
-    identify_budget_s: float = 90.0
+    identify_budget_s: float = 60.0
     bootstrap: int = 1000
     seed: int = 0
 
@@ -419,6 +440,7 @@ class Fidelity:
                                       f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)
                     mdir = self._model_dir(s, d)
                     fits.append({"real": real, "sim": sim, "out": mdir, "config": s.grounding.to_dict(),
+                                 "state": s.state, "history": s.history,
                                  "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d})
                     info["transformer"] = mdir
                     info["real_walks"] = len(real)
@@ -445,7 +467,8 @@ class Fidelity:
             if spec.kind == "ane":
                 base["action_noise"] = spec.sigma
         elif spec.kind == "identified":
-            base.update(world="identified", identified=info["identified"])
+            base.update(world="identified", identified=info["identified"], identified_terms=spec.identified_terms,
+                        identified_ground=spec.identified_ground)
         else:
             base.update(world="grounded", transformer=info["transformer"])
             if spec.kind == "hybrid":
@@ -518,7 +541,7 @@ class Fidelity:
         return out
 
     def write(self, res: dict) -> None:
-        atomic_write_text(os.path.join(self.run_dir, "fidelity.json"), json.dumps(_finite(res), indent=1))
+        atomic_write_text(os.path.join(self.run_dir, "fidelity.json"), json.dumps(jsonable(res), indent=1))
         atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(res) + "\n")
         plot(res, os.path.join(self.run_dir, "fidelity.png"))
 
@@ -542,16 +565,6 @@ def _summary(draws: list[dict]) -> dict:
     s["abs_bias_median"] = float(np.median(np.abs([d["bias"] for d in draws])))
     s["draws"] = len(draws)
     return s
-
-
-def _finite(o):
-    if isinstance(o, dict):
-        return {k: _finite(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_finite(v) for v in o]
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    return o
 
 
 def format_table(res: dict) -> str:

@@ -62,8 +62,7 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
     """
     from sysid.data import load_logs
     from sysid.diagnose import calibrate
-    from experiments.files import atomic_write_text
-    from sysid.report import _jsonable
+    from experiments.files import atomic_write_text, jsonable
 
     out = {}
     for kind in ("fixed", "floating") if floating else ("fixed",):
@@ -73,14 +72,14 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
             paths = _record(logs_dir, fixed_base=(kind == "fixed"), profile="none", n_logs=n_logs, seconds=seconds,
                             seed=seed)
             cal = calibrate(load_logs(paths))
-            atomic_write_text(path, json.dumps(_jsonable(cal), indent=1))
+            atomic_write_text(path, json.dumps(jsonable(cal), indent=1))
         out[kind] = path
     out.setdefault("floating", None)
     return out
 
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
-                  n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 120.0, rounds: int = 3,
+                  n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 60.0, rounds: int = 2,
                   progress=None) -> dict:
     """Excite the real world and diagnose it: the reports the identified sim is built from.
 
@@ -92,7 +91,10 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
         n_fixed, n_floating: excitation logs in the air and stepping on the walking ground (0 skips
             the stage).
         seconds: length of each log [s].
-        time_budget_s, rounds: of each diagnosis (``sgatwalk diagnose --time-budget --rounds``).
+        time_budget_s, rounds: of each diagnosis (``sgatwalk diagnose --time-budget --rounds``). Two
+            rounds: the first finds what walking feels most (latency in the air, uneven ground on the
+            floor); later rounds mostly add friction of the light arm joints, which the walk does not
+            feel, for another minute per diagnosis.
 
     Returns:
         ``{"reports": [report.json paths, fixed first], "logs": n, "seconds": recorded seconds,

@@ -357,9 +357,14 @@ class Optimizer:
                 self._log_generation(method, step, gen, world, kw, thetas, fit, seeds[0])
             prog["gen"] = gen + 1
             self._save()
-            if bar:
+            if bar is not None and not bar.disable:
                 bar.update(1)
                 bar.set_postfix(best=f"{fit.max():.1f}", median=f"{np.median(fit):.1f}", sigma=f"{es.sigma:.3f}")
+            else:  # no terminal: a line per generation with elapsed time and an estimate of the rest
+                done = [g["wall_s"] for g in self.state["generations"] if g["method"] == method and g["step"] == step]
+                self.log(f"[{method} step {step}] generation {gen + 1}/{cfg.generations}: best {fit.max():.1f}, median "
+                         f"{np.median(fit):.1f}, sigma {es.sigma:.3f} ({wall:.0f} s; step ETA "
+                         f"{np.mean(done) * (cfg.generations - gen - 1):.0f} s)")
         if bar:
             bar.close()
 

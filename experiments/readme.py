@@ -66,6 +66,12 @@ def _fidelity(res: dict) -> str:
                      f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "
                      f"{_f(s['brier']['median'], '{:.3f}')} [{_f(s['brier']['min'], '{:.3f}')}, "
                      f"{_f(s['brier']['max'], '{:.3f}')}] | {', '.join(data) or 'none'} |")
+    targets = fidelity_targets(res)
+    if targets:
+        lines += ["", "SGAT against the targets of the grounding issue:", ""]
+        lines += [f"* {'met' if ok else '**not met**'}: {t} — {v}" for t, ok, v in targets]
+    if res.get("wall_s") is not None:
+        lines += ["", f"The run took {res['wall_s'] / 60:.1f} min."]
     return "\n".join(lines)
 
 
@@ -80,6 +86,34 @@ def _optimize(res: dict) -> str:
             + (f" + {d['excitation_logs']} excitation logs ({d['excitation_seconds']:.0f} s)" if d["excitation_logs"] else "")
             for m, d in rd.items()) + ".")
     return "\n".join(lines)
+
+
+def fidelity_targets(res: dict, world: str = "sgat") -> list[tuple[str, bool, str]]:
+    """The issue's targets for a grounded world (default SGAT) on a fidelity result:
+    ``[(target, met, measured)]``; empty if the world is not in the result."""
+    if world not in res["worlds"]:
+        return []
+    w = res["worlds"][world]
+    draws = w["draws"]
+    ceiling = res["real"]["ceiling"]
+    worst = min(d["rho"] for d in draws)
+    out = [("worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling", worst >= 0.8 or worst >= ceiling - 0.1,
+            f"{worst:.2f} (ceiling {ceiling:.2f})"),
+           ("median |bias| ≤ 2 fitness points", w["summary"]["abs_bias_median"] <= 2,
+            f"{w['summary']['abs_bias_median']:.1f}"),
+           ("bias spread over the draws ≤ 4", w["summary"]["bias"]["spread"] <= 4, f"{w['summary']['bias']['spread']:.1f}")]
+    for other in ("sim", "gat"):
+        if other in res["worlds"]:
+            ob = res["worlds"][other]["draws"]
+            ref = [ob[min(i, len(ob) - 1)]["brier"] for i in range(len(draws))]
+            ok = all(d["brier"] < r for d, r in zip(draws, ref))
+            out.append((f"Brier below {other.upper()}'s on every draw", ok,
+                        ", ".join(f"{d['brier']:.3f} vs {r:.3f}" for d, r in zip(draws, ref))))
+    if "gat" in res["worlds"]:
+        g = res["worlds"]["gat"]["draws"]
+        ok = all(d["rho"] >= e["rho"] for d, e in zip(draws, g))
+        out.append(("ρ ≥ GAT's on every draw", ok, ", ".join(f"{d['rho']:.2f} vs {e['rho']:.2f}" for d, e in zip(draws, g))))
+    return out
 
 
 def _table1(res: dict) -> str:

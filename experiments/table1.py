@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from experiments.files import atomic_write_text
+from experiments.files import atomic_write_text, jsonable
 from experiments.stats import mcnemar_test, paired_permutation_test, wilson_interval
 
 #: Comparisons tested at every grounding step (a, b): "a vs b".
@@ -158,7 +158,7 @@ class Table1:
         if bar:
             bar.close()
         out = self.result(gaits, real_data)
-        atomic_write_text(os.path.join(self.run_dir, "table1.json"), json.dumps(_finite(out), indent=1))
+        atomic_write_text(os.path.join(self.run_dir, "table1.json"), json.dumps(jsonable(out), indent=1))
         atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(out) + "\n")
         return out
 
@@ -222,16 +222,6 @@ def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[st
             out.append(f"step {t['step']}: no significant difference between {t['a'].upper()} and {t['b'].upper()} "
                        f"(fitness {d:+.1f} ± {f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g})")
     return out
-
-
-def _finite(o):
-    if isinstance(o, dict):
-        return {k: _finite(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_finite(v) for v in o]
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    return o
 
 
 def format_table(res: dict) -> str:

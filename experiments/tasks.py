@@ -18,6 +18,8 @@ key                   meaning
 ``transformer``       directory of a saved ``sgat.ActionTransformer`` (grounded world)
 ``identified``        list of ``report.json`` paths of ``sgatwalk diagnose`` (identified world,
                       or the base of a grounded one: hybrid grounding)
+``identified_terms``  False: leave the deterministic effects out (ablation; default True)
+``identified_ground`` False: leave the identified uneven ground out (ablation; default True)
 ``record``            return the recording too (columns + metadata)
 ``meta``              extra metadata for the recording
 ====================  =====================================================================
@@ -58,7 +60,8 @@ def _world(task: dict):
     reports = tuple(task.get("identified") or ())
     if world == "identified" and not reports:
         raise ValueError("the identified world needs the diagnosis reports (task['identified'])")
-    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports)
+    parts = (bool(task.get("identified_terms", True)), bool(task.get("identified_ground", True)))
+    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports, parts)
     if key not in _WORLDS:
         if len(_WORLDS) >= 8:  # a fidelity sweep builds one identified world per draw: keep a few
             for env in _WORLDS.values():
@@ -67,9 +70,10 @@ def _world(task: dict):
         if world == "real":
             _WORLDS[key] = NaoRealEnv(profile=task.get("profile", "real"), terrain=task.get("terrain", "lumpy"))
         elif reports:
-            from sysid.identified import IdentifiedSimEnv
+            from sysid.identified import IdentifiedSimEnv, load_identified
 
-            _WORLDS[key] = IdentifiedSimEnv.from_reports(list(reports))
+            terms, rms = load_identified(list(reports))
+            _WORLDS[key] = IdentifiedSimEnv(terms if parts[0] else {}, rms if parts[1] else 0.0)
         else:
             _WORLDS[key] = NaoSimEnv()
     env = _WORLDS[key]

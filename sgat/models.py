@@ -285,7 +285,7 @@ class InverseModel(_Model):
             (under that Gaussian prior) that explains the state change. A one-step change of a PD-driven
             walking robot says little about its target (the contact forces are unobserved), so an
             inverse model without the command regresses toward the commands it saw; with it, the
-            command is the prior and Δs the evidence (``docs/grounding.md``).
+            command is the prior and Δs the evidence (README, "Grounding that holds").
 
     Input layout: ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` (+ ``a_t`` with ``command_input``), size
     k*S + S (+ A); output: action (A).

@@ -18,6 +18,7 @@ given RMS height: the diagnosis's model of uneven ground). Each keeps a flat sta
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -277,6 +278,27 @@ def slope(seed=0, amplitude: float = 0.05, size=DEFAULT_SIZE, cell_size=DEFAULT_
     X, _ = _grid(size, cell_size)
     h = amplitude * np.where(np.abs(X) > start_radius, np.sign(X) * (np.abs(X) - start_radius), 0.0)
     return Heightfield(h, cell_size, f"slope(grade={amplitude:g})")
+
+
+#: Largest amplitude per kind a command accepts: bump/step height [m], slope grade, RMS height [m].
+MAX_AMPLITUDE = {"flat": 0.0, "lumpy": 0.2, "fractal": 0.2, "steps": 0.2, "slope": 0.5, "gaussian": 0.05}
+
+
+def check_amplitude(kind: str, amplitude: float) -> float:
+    """``amplitude`` if it is a finite value within [0, MAX_AMPLITUDE[kind]] (0 for flat ground).
+
+    Raises:
+        ValueError: unknown kind, or an amplitude outside that range (named with its unit).
+    """
+    if kind not in MAX_AMPLITUDE:
+        raise ValueError(f"unknown terrain {kind!r}; choose one of {', '.join(TERRAINS)}")
+    if kind == "flat":
+        return 0.0
+    hi = MAX_AMPLITUDE[kind]
+    unit = "grade" if kind == "slope" else "m"
+    if not (math.isfinite(amplitude) and 0 <= amplitude <= hi):
+        raise ValueError(f"terrain amplitude for {kind} must be within [0, {hi:g}] {unit}, got {amplitude!r}")
+    return float(amplitude)
 
 
 def make(kind: str, seed=0, amplitude: float = 0.02, **kwargs) -> Heightfield:

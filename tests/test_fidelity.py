@@ -24,9 +24,15 @@ def test_parse_world_options():
             w.grounding.hidden) == ("sgat", 6, 3, 0.7, True, (32, 32))
     assert parse_world("gat").grounding.method == "gat" and parse_world("sim").grounding is None
     assert parse_world("ane:sigma=0.02").sigma == 0.02
+    h = parse_world("hybrid:method=gat:state=legs+imu:history=2:gaits=3")
+    assert (h.grounding.method, h.state, h.history, h.data_gaits, h.grounding.alpha) == ("gat", "legs+imu", 2, 3, 0.1)
+    assert not parse_world("identified:ground=0").identified_ground and not parse_world("identified:terms=0").identified_terms
+    # a world's cache key changes with any setting, not with its name; options at their defaults hash as before
+    assert parse_world("sgat").key == parse_world("sgat:alpha=0.5:ensemble=5").key != parse_world("sgat:alpha=0.4").key
     for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
                        ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
-                       ("sgat:real=0", "real_walks")]:
+                       ("sgat:real=0", "real_walks"), ("sgat:state=arms", "state"), ("hybrid:method=ane", "method"),
+                       ("identified:alpha=1", "unknown option")]:
         with pytest.raises(ValueError, match=words):
             parse_world(bad)
     with pytest.raises(ValueError, match="repeats"):

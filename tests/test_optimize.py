@@ -118,3 +118,19 @@ def test_grounding_data_accumulates_across_steps(tmp_path):
     opt.cfg = OptimizeConfig(aggregate=False)
     (j, th), = opt._data_thetas("gat", 2, th1_gat)
     assert j == 2 and np.array_equal(th, th1_gat)
+
+
+@pytest.mark.slow
+def test_hybrid_and_identified_run_end_to_end_with_their_identification(tmp_path, capsys):
+    """``--methods hybrid,identified``: calibration, excitation logs of the real world, two diagnoses,
+    the identified sim, SGAT grounding on top of it, CMA-ES, and the real data each method used."""
+    out = tmp_path / "run"
+    assert main(["optimize", *TINY, "--methods", "hybrid,identified", "--out", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("hybrid", 1), ("identified", 1)]
+    assert (out / "identified" / "fixed" / "report.json").exists() and (out / "identified" / "floating" / "report.json").exists()
+    assert (out / "models" / "hybrid_step1" / "transformer.json").exists()
+    rd = res["real_data"]
+    assert rd["hybrid"]["walks"] == 1 and rd["hybrid"]["excitation_logs"] == 6 and rd["hybrid"]["excitation_seconds"] > 10
+    assert rd["identified"]["walks"] == 0 and rd["identified"]["excitation_logs"] == 6
+    assert any(f.startswith("identified_") for f in os.listdir(out / "data"))  # hybrid's sim walks: identified sim

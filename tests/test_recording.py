@@ -67,7 +67,9 @@ def _write(tmp_path, rec, drop=(), meta=None, change=None):
 
 
 @pytest.mark.parametrize("drop,match", [(("q.LKneePitch",), "q.LKneePitch"), (("t",), "'t'"),
-                                        (("gyro.y",), "gyro.*incomplete.*gyro.y")])
+                                        (("gyro.y",), "incomplete.*gyro.*gyro.y"),
+                                        (("cmd.LHipRoll", "q.RKneePitch"), "cmd.LHipRoll, q.RKneePitch"),
+                                        (("gyro.y", "acc.z"), "gyro.*gyro.y.*acc.*acc.z")])
 def test_missing_columns_are_named(rec, tmp_path, drop, match):
     with pytest.raises(RecordingError, match=match):
         Recording.from_parquet(_write(tmp_path, rec, drop=drop))

@@ -66,8 +66,25 @@ def test_bad_params_file_is_a_one_line_error(tmp_path, capsys, content, words):
     (["--seconds", "-1"], "--seconds"),
     (["--profile", "real"], "real world only"),
     (["--world", "real", "--profile", "nonsense", "--seconds", "0.1"], "unknown profile"),
-    (["--terrain", "lumpy", "--amplitude", "-0.1"], "--amplitude"),
+    (["--terrain", "lumpy", "--amplitude", "-0.1"], "amplitude for lumpy must be within [0, 0.2] m"),
+    (["--terrain", "lumpy", "--amplitude", "5"], "amplitude for lumpy must be within"),
+    (["--amplitude", "0.01"], "--amplitude needs --terrain"),
+    (["--record", "/"], "is a directory"),
 ])
 def test_bad_arguments(capsys, argv, words):
     code, _, err = _run(capsys, *argv)
     assert code == 2 and words in err
+
+
+def test_walk_in_the_identified_world_and_seed_errors(tmp_path, capsys):
+    rep = tmp_path / "report.json"
+    rep.write_text(json.dumps({"model": {"latency": 0.02}, "base_model": {}, "effects": [
+        {"family": "terrain_roughness", "value": 0.002}]}))
+    code, out, err = _run(capsys, "--world", "identified", "--report", str(rep), "--seconds", "1", "--seed", "4", "--json")
+    assert code == 0, err
+    res = json.loads(out)
+    assert res["terrain"].startswith("gaussian(sq=0.002") and res["world"] == "identified"
+    for argv, words in [(["--world", "identified"], "needs --report"), (["--report", str(rep)], "needs --world identified"),
+                        (["--seed", "-5"], "--seed must be >= 0")]:
+        code, out, err = _run(capsys, *argv)
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

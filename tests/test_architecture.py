@@ -1,0 +1,39 @@
+"""The design's import arrows hold (docs/architecture.md): experiments -> sgat, sysid -> envs -> robots,
+terrain; experiments -> walk_engine -> robots. Function-level imports count too. (That the walk engine
+loads no physics engine at run time is tests/test_walk_engine.py's.)"""
+
+import ast
+import os
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ALLOWED = {
+    "robots": set(),
+    "terrain": set(),
+    "envs": {"robots", "terrain"},
+    "walk_engine": {"robots"},
+    "sgat": {"envs", "robots", "terrain"},
+    "sysid": {"envs", "robots", "terrain"},
+    "experiments": {"envs", "robots", "terrain", "walk_engine", "sgat", "sysid"},
+}
+
+
+def _imports(package: str) -> dict[str, set[str]]:
+    out: dict[str, set[str]] = {}
+    for f in sorted(os.listdir(os.path.join(ROOT, package))):
+        if not f.endswith(".py"):
+            continue
+        tree = ast.parse(open(os.path.join(ROOT, package, f)).read())
+        for node in ast.walk(tree):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module] if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 else []
+            for n in names:
+                top = n.split(".")[0]
+                if top in ALLOWED and top != package:
+                    out.setdefault(top, set()).add(f)
+    return out
+
+
+def test_import_arrows_point_one_way():
+    bad = {p: {d: sorted(fs) for d, fs in _imports(p).items() if d not in ALLOWED[p]} for p in ALLOWED}
+    assert not any(bad.values()), f"imports against the design: {bad}"
+
