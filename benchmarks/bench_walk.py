@@ -20,6 +20,7 @@ import platform
 import time
 
 import numpy as np
+from common.files import atomic_write_text
 
 
 def bench_step(n: int = 3000) -> dict:
@@ -77,10 +78,7 @@ def main(argv=None) -> dict:
            "load_avg_1min": os.getloadavg()[0], **bench_step(), **bench_rollouts(args.episodes)}
     print(json.dumps(res, indent=2))
     if args.json:
-        tmp = f"{args.json}.{os.getpid()}.tmp"
-        with open(tmp, "w") as f:
-            json.dump(res, f, indent=2)
-        os.replace(tmp, args.json)
+        atomic_write_text(args.json, json.dumps(res, indent=2))
     return res
 
 

@@ -33,11 +33,13 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 
+from common.defaults import CONTROL_DT, PHYSICS_DT
+from common.spatial import quat_to_mat, roll_pitch
 from robots import RobotModel, nao_h25
 from terrain import Heightfield
 
 GRAVITY = 9.81
-#: Fall thresholds (walk_engines.md §9): torso origin lower than this above the terrain [m] ...
+#: Fall thresholds (a project choice): torso origin lower than this above the terrain [m] ...
 FALL_TORSO_HEIGHT = 0.20
 #: ... or torso tilted more than this from upright [rad].
 FALL_TILT = math.radians(45.0)
@@ -71,24 +73,7 @@ class ObservationLayout:
         return self.slices[key]
 
 
-def quat_to_mat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two 3-vectors (``np.cross`` is ~10x slower on tiny arrays)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def roll_pitch(R: np.ndarray) -> tuple[float, float]:
-    """Torso roll and pitch [rad] (ZYX Euler convention) from a rotation matrix (3, 3)."""
-    return math.atan2(R[2, 1], R[2, 2]), math.asin(max(-1.0, min(1.0, -R[2, 0])))
 
 
 def make_terrain(terrain) -> Heightfield | None:
@@ -132,8 +117,8 @@ class NaoEnv(gym.Env):
     metadata = {"render_modes": []}
     world = "abstract"
 
-    def __init__(self, robot: RobotModel | None = None, *, fixed_base: bool = False, physics_dt: float = 0.001,
-                 control_dt: float = 0.01, initial_pose: str = "crouch", hang_height: float = 0.6,
+    def __init__(self, robot: RobotModel | None = None, *, fixed_base: bool = False, physics_dt: float = PHYSICS_DT,
+                 control_dt: float = CONTROL_DT, initial_pose: str = "crouch", hang_height: float = 0.6,
                  max_episode_seconds: float | None = None):
         self.robot = robot or nao_h25()
         n_sub = control_dt / physics_dt

@@ -1,6 +1,7 @@
 """The "real" world: the same URDF in PyBullet, randomized terrain and the effects of a profile.
 
-Engine set-up (``reference/engines.md`` §3-6):
+Engine set-up (PyBullet Quickstart Guide: ``loadURDF`` flags, ``setJointMotorControl2``,
+``createCollisionShape(GEOM_HEIGHTFIELD)``):
 
 * ``loadURDF`` with ``URDF_USE_INERTIA_FROM_FILE`` (else Bullet recomputes inertia from the
   collision shapes); self-collision off (the MuJoCo sim's rule too); link linear/angular damping
@@ -8,11 +9,12 @@ Engine set-up (``reference/engines.md`` §3-6):
   MuJoCo has none: neither engine enforces the URDF velocity limit, the effort limit bounds speed.
 * Explicit PD in Python with ``TORQUE_CONTROL`` at every physics step; the default velocity motors
   are disabled (force 0) unless Coulomb friction is drawn, in which case they hold velocity 0
-  with that maximum force (``reference/sysid.md`` §7).
+  with that maximum force (bullet3 ``examples/pybullet/examples/jointFrictionAndMotor.py``).
 * ``<mimic>`` is ignored by Bullet: both HipYawPitch joints get the same target, and a gear
   constraint (ratio -1: equal angles) couples them like MuJoCo's equality.
-* Heightfield, exact recipe of engines.md §3.1: heights transposed with x reversed,
-  ``numHeightfieldRows = ny``, ``numHeightfieldColumns = nx``, the body yawed +90° and lifted to
+* Heightfield, this project's exact recipe (checked in ``tests/test_terrain.py``): heights
+  transposed with x reversed, ``numHeightfieldRows = ny``, ``numHeightfieldColumns = nx``, the body
+  yawed +90° and lifted to
   ``(min + max) / 2`` -- the same triangles as MuJoCo, to ~1e-8 m.
 * The world is rebuilt with ``resetSimulation`` at every reset, so a seed fully determines an
   episode (terrain, effects, sensor noise).
@@ -53,7 +55,8 @@ with _quiet_fd(sys.stderr):
     import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from envs.base import NaoEnv, StepState, cross, make_terrain, quat_to_mat
+from common.spatial import cross, quat_to_mat
+from envs.base import NaoEnv, StepState, make_terrain
 from envs.effects import EffectDraw, RealProfile, get_profile
 from robots import RobotModel
 from terrain import Heightfield, lumpy

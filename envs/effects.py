@@ -17,7 +17,7 @@ backlash_rad           rad         per-joint dead band of that full width on the
                                    error (gear play: no restoring torque inside the band)
 coulomb_friction_nm    N m         per-joint PyBullet velocity motor with target 0 and max force
                                    = the friction torque, beside the PD torque
-                                   (``reference/sysid.md`` §7)
+                                   (bullet3 ``examples/pybullet/examples/jointFrictionAndMotor.py``)
 viscous_damping        N m s/rad   per-joint extra ``-b * qdot`` in the PD torque
 torque_limit_scale     --          scales the URDF effort limit the PD torque is clipped to
 mass_scale             --          per-link mass and inertia scale (``changeDynamics``)
@@ -31,8 +31,9 @@ angle_noise_rad        rad         std of white noise on the torso roll/pitch es
 terrain_amplitude      m           amplitude of the episode's lumpy heightfield
 =====================  ==========  ========================================================
 
-The values of the "real" profile are plausible for a NAO (``reference/nao_h25.md`` §8: real
-output torque 20-30 % below the URDF effort, a 10-12 ms DCM cycle; friction and backlash are
+The values of the "real" profile are plausible for a NAO (real output torque 20-30 % below the URDF
+effort: gearbox losses on the motor ratings x reduction ratios of the Aldebaran NAO6 datasheet; a
+10-12 ms DCM cycle: Aldebaran NAOqi DCM documentation, 12 ms on NAO6; friction and backlash are
 estimates). ``"none"`` draws the identity for every effect and flat ground: a real world that
 should agree with the sim up to the engine gap.
 """
@@ -57,7 +58,7 @@ _IDENTITY: dict[str, float] = {
 PER_JOINT = ("kp_scale", "kd_scale", "backlash_rad", "coulomb_friction_nm", "viscous_damping", "encoder_bias_rad")
 PER_LINK = ("mass_scale",)
 EFFECTS = tuple(_IDENTITY)
-#: Nominal foot friction coefficient, the same in the sim (nao_h25.md §4 assumes 0.7-0.8).
+#: Nominal foot friction coefficient, the same in the sim (RoboCup SPL robot-dimension code assumes 0.7).
 NOMINAL_FOOT_FRICTION = _IDENTITY["foot_friction"]
 
 

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.defaults import CONTROL_DT
 from robots import RobotModel
 
 
 def chirp_with_holds(robot: RobotModel, seconds: float = 6.0, f0: float = 0.3, f1: float = 4.0,
                      amplitude: float = 0.25, hold: float = 1.0, pose: str = "crouch",
-                     control_dt: float = 0.01, joints: list[str] | None = None) -> np.ndarray:
+                     control_dt: float = CONTROL_DT, joints: list[str] | None = None) -> np.ndarray:
     """Joint targets [rad], shape (round(seconds / control_dt), 23): hold ``pose`` for ``hold``
     seconds, a linear chirp from ``f0`` to ``f1`` Hz of ``amplitude`` rad around the pose, then hold
     again for the last ``hold`` seconds.

@@ -1,6 +1,7 @@
 """The deterministic "sim": the NAO-like robot in MuJoCo, loaded from the shared URDF.
 
-Model building (``reference/engines.md`` §1-3):
+Model building (MuJoCo documentation: Model Editing (``MjSpec``), URDF import, XML reference
+``hfield``):
 
 * ``MjSpec.from_file(urdf)`` with ``fusestatic = False``; a free joint on ``torso`` (floating
   base), or the torso placed at ``hang_height`` with no joint (fixed base).
@@ -13,7 +14,8 @@ Model building (``reference/engines.md`` §1-3):
 * Robot geoms collide with the ground only (``contype 1, conaffinity 0``); PyBullet's default
   (self-collision off) is the same rule. Friction ``NOMINAL_FOOT_FRICTION`` on every geom.
 * Heightfield: ``nrow = ny``, ``ncol = nx``, ``size = (half_x, half_y, max - min, base)``, geom at
-  ``z = min`` (engines.md §3.1), so its surface is :meth:`terrain.Heightfield.height_at`.
+  ``z = min`` (MuJoCo rescales hfield data to [0, size[2]] above the geom), so its surface is
+  :meth:`terrain.Heightfield.height_at`.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from envs.base import NaoEnv, StepState, cross, make_terrain, quat_to_mat
+from common.spatial import cross, quat_to_mat
+from envs.base import NaoEnv, StepState, make_terrain
 from envs.effects import NOMINAL_FOOT_FRICTION
 from robots import RobotModel
 from terrain import Heightfield

@@ -50,6 +50,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from robots import RobotModel, nao_h25
+from common.files import atomic_path
 
 SCHEMA_VERSION = 1
 META_KEY = b"sgatwalk"
@@ -222,14 +223,10 @@ class Recording:
         path = os.fspath(path)
         if os.path.isdir(path):
             raise ValueError(f"{path!r} is a directory; give a file name for the recording (e.g. walk.parquet)")
-        tmp = f"{path}.{os.getpid()}.tmp"
         try:
-            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-            pq.write_table(self.to_table(), tmp)
-            os.replace(tmp, path)
+            with atomic_path(path, suffix=".parquet") as tmp:
+                pq.write_table(self.to_table(), tmp)
         except OSError as exc:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
             raise ValueError(f"cannot write the recording to {path!r}: {exc.strerror or exc}") from None
         return path
 

@@ -7,6 +7,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from common.defaults import EPISODE_SECONDS
 from envs.recording import Recording
 from robots import RobotModel
 
@@ -47,7 +48,7 @@ class CommandLog:
 
 
 def rollout(env, controller: Controller | Callable[[np.ndarray], Any], seed: int | None = 0,
-            seconds: float = 7.5, options: dict | None = None, meta: dict | None = None) -> Recording:
+            seconds: float = EPISODE_SECONDS, options: dict | None = None, meta: dict | None = None) -> Recording:
     """Reset ``env`` with ``seed`` and run ``controller`` for ``seconds`` (or until the episode ends).
 
     Args:

@@ -4,7 +4,8 @@
 ``a_applied = ref + gain * (a - ref) + offset + N(0, noise_std^2)`` on selected action entries,
 clipped to the action space. It always works on a copy: the agent's (and the logger's) array is
 never modified in place -- the trap that silently turned logged actions into noisy ones in the
-GARAT code (``reference/grounding.md`` §11). The applied action is reported as
+GARAT code (Desai et al., NeurIPS 2020: ``NoisyRealEnv.action`` in ``rl_gat/gat.py`` adds the noise
+in place). The applied action is reported as
 ``info["applied_action"]``.
 """
 

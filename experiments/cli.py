@@ -20,7 +20,8 @@ import json
 import os
 import sys
 
-from experiments.files import jsonable
+from experiments.argtypes import Parser, fail
+from common.files import jsonable
 
 # Subcommand modules, in the order ``sgatwalk --help`` lists them.
 COMMANDS: list[str] = [
@@ -38,12 +39,25 @@ COMMANDS: list[str] = [
 ]
 
 
+#: Result keys that hold wall-clock measurements: dropped from ``--json`` output unless ``--timings``.
+TIMING_KEYS = frozenset({"wall_s", "elapsed_s", "realtime_factor", "log_seconds", "job_wall_s", "cpu_s"})
+
+
+def drop_timings(obj):
+    """``obj`` without :data:`TIMING_KEYS` at any depth (the result of a run, as JSON values)."""
+    if isinstance(obj, dict):
+        return {k: drop_timings(v) for k, v in obj.items() if k not in TIMING_KEYS}
+    if isinstance(obj, list):
+        return [drop_timings(v) for v in obj]
+    return obj
+
+
 class UsageError(ValueError):
     """Bad user input: printed as one line, exit status 2."""
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="sgatwalk",
         description="Sim-to-real transfer testbed for humanoid walking (SGAT, ZMP walk engine, "
         "MuJoCo sim vs PyBullet real).",
@@ -59,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
             raise
         p = mod.register(sub)
         p.add_argument("--json", action="store_true", help="print the result as one JSON object")
+        p.add_argument("--timings", action="store_true",
+                       help="keep wall-clock times (wall_s, ...) in the --json output (left out by default, so that "
+                            "two identical runs print identical JSON)")
         p.set_defaults(_run=mod.run)
     return parser
 
@@ -69,11 +86,10 @@ def main(argv: list[str] | None = None) -> int:
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(line_buffering=True)
     parser = build_parser()
-    args = parser.parse_args(argv)
-    seed = getattr(args, "seed", None)
-    if seed is not None and seed < 0:  # every command's seeds feed numpy.random.SeedSequence: non-negative
-        print(f"sgatwalk {args.command}: error: --seed must be >= 0, got {seed}", file=sys.stderr)
-        return 2
+    try:  # ranges and paths are checked here (experiments.argtypes): one line, exit 2
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a bad option (2, already printed)
+        return exc.code if isinstance(exc.code, int) else 2
     try:
         result = args._run(args)
     except (UsageError, ValueError, KeyError, OSError) as exc:
@@ -81,13 +97,13 @@ def main(argv: list[str] | None = None) -> int:
             msg = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
         else:
             msg = exc.args[0] if exc.args else exc
-        print(f"sgatwalk {args.command}: error: {' '.join(str(msg).split())}", file=sys.stderr)
-        return 2
+        return fail(f"sgatwalk {args.command}", str(msg))
     except KeyboardInterrupt:
         print(f"sgatwalk {args.command}: interrupted", file=sys.stderr)
         return 130
     if args.json:
-        print(json.dumps(jsonable(result), allow_nan=False))
+        result = jsonable(result)
+        print(json.dumps(result if args.timings else drop_timings(result), allow_nan=False))
     return 0
 
 

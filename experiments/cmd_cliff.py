@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import math
 import sys
 import time
 from pathlib import Path
@@ -24,8 +23,10 @@ from typing import Any
 
 import numpy as np
 
-from experiments.files import atomic_write_bytes as _atomic_write_bytes
+from common.files import atomic_write_bytes as _atomic_write_bytes
+from common.parse import parse_values
 from sgat import tabular as T
+import experiments.argtypes as A
 
 #: Columns of ``cliff.csv`` (the first six are the ``--json`` row keys the issue asks for).
 CSV_COLUMNS = [
@@ -42,40 +43,22 @@ CSV_COLUMNS = [
 
 
 def parse_noise(spec: str) -> list[float]:
-    """Parse ``--noise``: ``start:stop:count`` (``numpy.linspace``) or a comma list.
+    """Parse ``--noise``: ``start:stop:count`` (``numpy.linspace``) or a comma list
+    (:func:`common.parse.parse_values`).
 
     Returns:
         the noise values (probabilities), rounded to 12 decimals, in the order given.
 
     Raises:
-        ValueError: for a malformed spec, a count < 1, or a value outside [0, 1].
+        ValueError: for a malformed spec, an empty range, or a value outside [0, 1].
     """
-    text = str(spec).strip()
     hint = ("expected 'start:stop:count' (e.g. 0:1:11) or a comma-separated list of "
             "probabilities (e.g. 0,0.25,0.5)")
-
-    def num(s: str) -> float:
-        try:
-            return float(s)
-        except ValueError:
-            raise ValueError(f"--noise: malformed value {spec!r}; {hint}") from None
-
-    if ":" in text:
-        parts = text.split(":")
-        if len(parts) != 3:
-            raise ValueError(f"--noise: malformed value {spec!r}; {hint}")
-        start, stop, count = num(parts[0]), num(parts[1]), num(parts[2])
-        if not count.is_integer() or count < 1:
-            raise ValueError(f"--noise: count must be a positive integer, got {parts[2]!r}")
-        values = np.linspace(start, stop, int(count)).tolist()
-    else:
-        values = [num(v) for v in text.split(",")]
-    if not values:
-        raise ValueError(f"--noise: no values in {spec!r}; {hint}")
+    values = parse_values(str(spec), "--noise", hint)
     for v in values:
-        if not math.isfinite(v) or not 0.0 <= v <= 1.0:
+        if not 0.0 <= v <= 1.0:
             raise ValueError(f"--noise: {v:g} is not a probability in [0, 1] (from {spec!r})")
-    return [round(v, 12) for v in values]
+    return values
 
 
 def _noise_key(noise: float) -> int:
@@ -282,25 +265,25 @@ def register(subparsers) -> argparse.ArgumentParser:
     p.add_argument("--noise", default="0:1:11",
                    help="noise values: 'start:stop:count' (linspace) or a comma list of "
                         "probabilities in [0, 1] (default 0:1:11)")
-    p.add_argument("--episodes", type=int, default=10_000,
+    p.add_argument("--episodes", type=A.count(1, 10_000_000), default=10_000,
                    help="evaluation episodes per policy and noise value (default 10000, "
                         "as in the paper)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--out", default="runs/cliff",
+    p.add_argument("--seed", type=A.seed, default=0, help="random seed (default 0)")
+    p.add_argument("--out", type=A.out_dir, default="runs/cliff",
                    help="output directory for cliff.csv, cliff.png, cliff_paths.png "
                         "(default runs/cliff)")
-    p.add_argument("--real-episodes", type=int, default=10_000,
+    p.add_argument("--real-episodes", type=A.count(1, 10_000_000), default=10_000,
                    help="real episodes collected per grounding step (default 10000; the paper "
                         "does not say)")
-    p.add_argument("--explore", type=float, default=0.1,
+    p.add_argument("--explore", type=A.fraction, default=0.1,
                    help="epsilon of the epsilon-greedy policy that collects real data "
                         "(default 0.1)")
-    p.add_argument("--max-grounding-steps", type=int, default=30,
+    p.add_argument("--max-grounding-steps", type=A.count(1, 10000), default=30,
                    help="cap on grounding steps (default 30)")
-    p.add_argument("--patience", type=int, default=2,
+    p.add_argument("--patience", type=A.count(1, 10000), default=2,
                    help="stop grounding after this many steps without a policy change "
                         "(default 2)")
-    p.add_argument("--max-steps", type=int, default=1000,
+    p.add_argument("--max-steps", type=A.count(1, 1_000_000), default=1000,
                    help="step cap per episode, real data and evaluation (default 1000)")
     return p
 

@@ -17,24 +17,25 @@ FILE``) are judged against.
 from __future__ import annotations
 
 import argparse
+import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("diagnose", help="find, name and fit the physics the sim misses (system identification)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--real", required=True, nargs="+", metavar="DIR_OR_FILE",
+    p.add_argument("--real", type=A.in_path, required=True, nargs="+", metavar="DIR_OR_FILE",
                    help="recordings of the real robot: Parquet files and/or folders of them")
     p.add_argument("--sim", default="nao", choices=("nao",), help="sim model to diagnose (default nao: the NAO H25 MuJoCo sim)")
-    p.add_argument("--out", required=True, metavar="REPORT_DIR", help="folder for the report")
-    p.add_argument("--calibration", metavar="FILE", help="engine-gap calibration (from --calibrate on 'none' logs)")
+    p.add_argument("--out", type=A.out_dir, required=True, metavar="REPORT_DIR", help="folder for the report")
+    p.add_argument("--calibration", type=A.in_file, metavar="FILE", help="engine-gap calibration (from --calibrate on 'none' logs)")
     p.add_argument("--calibrate", action="store_true", help="the recordings have no injected effects: write "
                    "REPORT_DIR/calibration.json (engine-gap baseline) instead of a diagnosis")
     p.add_argument("--families", help="comma list of candidate families (default: actuator families for fixed-base "
                    "logs, contact families (foot_friction, ground_compliance) for floating-base logs)")
-    p.add_argument("--base-report", metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
+    p.add_argument("--base-report", type=A.in_file, metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
                    "(bottom-up staging: diagnose fixed-base logs first, then stepping logs with their report)")
-    p.add_argument("--rounds", type=int, default=3, help="screen/refit rounds (default 3)")
-    p.add_argument("--time-budget", type=float, default=300.0, metavar="SECONDS",
+    p.add_argument("--rounds", type=A.count(1, 100), default=3, help="screen/refit rounds (default 3)")
+    p.add_argument("--time-budget", type=A.real(0.0, 86400.0, unit='s'), default=300.0, metavar="SECONDS",
                    help="start no new search step after this long (default 300; 0 = no limit)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     return p
@@ -47,7 +48,8 @@ def run(args) -> dict:
 
     from sysid.data import load_logs
     from sysid.diagnose import calibrate, diagnose
-    from sysid.report import _atomic_write, _jsonable, format_report, write_report
+    from common.files import atomic_write_text
+    from sysid.report import format_report, public_json, write_report
 
     logs = load_logs(args.real)
     say = None if args.json else (lambda s: print(s, file=sys.stderr))
@@ -55,14 +57,14 @@ def run(args) -> dict:
     if args.calibrate:
         cal = calibrate(logs)
         p = os.path.join(args.out, "calibration.json")
-        _atomic_write(p, json.dumps(_jsonable(cal), indent=1))
+        atomic_write_text(p, json.dumps(public_json(cal), indent=1))
         if not args.json:
             worst = sorted(cal["gap_rms"].items(), key=lambda kv: -kv[1])[:3]
             print(f"engine gap from {cal['n_logs']} log(s): sensor σ {1000 * cal['sigma']['encoders']:.3f} mrad; "
                   f"largest gap {', '.join(f'{k} {1000 * v:.3f} mrad' for k, v in worst)}; "
                   "baseline model (engine gap in candidate terms): "
                   f"{', '.join(f'{k} = {v:.4g}' for k, v in cal['baseline_model'].items()) or 'none'}; wrote {p}")
-        return {"calibration": p, **_jsonable(cal)}
+        return {"calibration": p, **public_json(cal)}
     cal = None
     if args.calibration:
         if not os.path.exists(args.calibration):
@@ -100,6 +102,6 @@ def run(args) -> dict:
     if not args.json:
         print(format_report(rep))
         print(f"wrote {', '.join(v if isinstance(v, str) else ', '.join(v) for v in paths.values())}")
-    out = _jsonable(rep)
+    out = public_json(rep)
     out["files"] = paths
     return out

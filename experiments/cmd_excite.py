@@ -11,6 +11,7 @@ physical robot; sensor noise differs per log. ``sgatwalk diagnose --real OUT`` r
 from __future__ import annotations
 
 import argparse
+import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
@@ -25,11 +26,11 @@ def register(sub) -> argparse.ArgumentParser:
                    help="real-world ground for floating-base logs (default flat); lumpy: a fresh field of random "
                         "bumps per log under the feet (no flat start pad), peak height from the profile's "
                         "terrain_amplitude (e.g. --effect terrain_amplitude=0.01)")
-    p.add_argument("--out", required=True, metavar="DIR", help="folder for the recordings")
-    p.add_argument("--logs", type=int, default=4, help="number of trajectories (default 4; >= 2 for a held-out split)")
-    p.add_argument("--seconds", type=float, default=8.0, help="duration of each log [s] (default 8)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the robot's effects and of the trajectories")
-    p.add_argument("--scale", type=float, default=1.0, help="amplitude scale of the motions (default 1)")
+    p.add_argument("--out", type=A.out_dir, required=True, metavar="DIR", help="folder for the recordings")
+    p.add_argument("--logs", type=A.count(1, 1000), default=4, help="number of trajectories (default 4; >= 2 for a held-out split)")
+    p.add_argument("--seconds", type=A.seconds, default=8.0, help="duration of each log [s] (default 8)")
+    p.add_argument("--seed", type=A.seed, default=0, help="seed of the robot's effects and of the trajectories")
+    p.add_argument("--scale", type=A.real(0.0, 3.0, open_lo=True), default=1.0, help="amplitude scale of the motions (default 1)")
     return p
 
 

@@ -1,5 +1,5 @@
 """``sgatwalk gym``: Sim-to-NoisySim / Sim-to-NoisyReal on MuJoCo InvertedPendulum and HalfCheetah
-with TRPO -- sim only, GAT, SGAT, ANE and real-trained (SGAT paper §IV.B, Figs. 6-7).
+with TRPO -- sim only, GAT, SGAT, ANE and real-trained (SGAT paper §IV.B, Figs. 8-9).
 
 The grid of (noise, method, run) jobs runs through the executor (a local process pool by
 default, Ray with --ray-address); every finished job's rows are appended to
@@ -16,6 +16,7 @@ import os
 import time
 
 from experiments.gym_config import EXPERIMENTS, METHODS, PRESETS
+import experiments.argtypes as A
 
 
 def _floats(text: str, flag: str) -> tuple[float, ...]:
@@ -45,27 +46,27 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--noise", help="comma list of real action-noise σ, share of the action half-range "
                                    "(default: the preset's, quick 0,0.3; paper 0,0.1,0.2,0.3)")
     p.add_argument("--methods", default=",".join(METHODS), help=f"comma list of {', '.join(METHODS)} (default all)")
-    p.add_argument("--runs", type=int, help="independent training runs per cell (default: quick 2, paper 10)")
+    p.add_argument("--runs", type=A.count(1, 1000), help="independent training runs per cell (default: quick 2, paper 10)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="quick",
                    help="training budgets: quick (default; minutes) or paper (the GARAT/SGAT code's budgets; hours)")
-    p.add_argument("--seed", type=int, help="base seed (default 0)")
-    p.add_argument("--out", help="sweep directory (default runs/gym_<env>_<experiment>_<preset>)")
-    p.add_argument("--workers", type=int, help="worker processes (default: one per core; 1 = serial)")
+    p.add_argument("--seed", type=A.seed, help="base seed (default 0)")
+    p.add_argument("--out", type=A.out_dir, help="sweep directory (default runs/gym_<env>_<experiment>_<preset>)")
+    p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", help="run jobs on Ray (auto, local, ray://host:10001)")
-    p.add_argument("--pole-factor", type=float, help="InvertedPendulum: real pole mass/inertia factor (default 10, "
+    p.add_argument("--pole-factor", type=A.real(0.0, 1000.0, open_lo=True), help="InvertedPendulum: real pole mass/inertia factor (default 10, "
                                                     "the paper; the GARAT code's 100 kg pole is ≈20)")
-    p.add_argument("--mass-factor", type=float, help="HalfCheetah: real mass/inertia factor (default 20/14)")
+    p.add_argument("--mass-factor", type=A.real(0.0, 1000.0, open_lo=True), help="HalfCheetah: real mass/inertia factor (default 20/14)")
     p.add_argument("--ane-grid", help="ANE noise σ values tried (default: quick 0.1,0.3; paper 0.1,0.2,0.3,0.5)")
-    p.add_argument("--sim-steps", type=int, help="TRPO steps of the initial sim policy")
-    p.add_argument("--grounded-steps", type=int, help="TRPO steps per grounding step (GAT/SGAT) and for ANE")
-    p.add_argument("--real-steps", type=int, help="TRPO steps of the real-trained upper bound")
-    p.add_argument("--grounding-steps", type=int, help="grounding steps (default: IP 1, HC 5 in the paper preset)")
-    p.add_argument("--real-transitions", type=int, help="real transitions collected per grounding step")
-    p.add_argument("--sim-transitions", type=int, help="sim transitions (with exploration noise) per grounding step")
-    p.add_argument("--explore-sigma", type=float, help="exploration noise of the sim data (default 0.3)")
-    p.add_argument("--eval-episodes", type=int, help="real episodes per policy evaluation")
-    p.add_argument("--alpha", type=float, help="blend ã = (1-α)a + α g(s,a) (default 1, the paper's formula)")
-    p.add_argument("--model-epochs", type=int, help="max epochs of the forward/inverse model fits")
+    p.add_argument("--sim-steps", type=A.count(1, 100_000_000), help="TRPO steps of the initial sim policy")
+    p.add_argument("--grounded-steps", type=A.count(1, 100_000_000), help="TRPO steps per grounding step (GAT/SGAT) and for ANE")
+    p.add_argument("--real-steps", type=A.count(1, 100_000_000), help="TRPO steps of the real-trained upper bound")
+    p.add_argument("--grounding-steps", type=A.count(1, 1000), help="grounding steps (default: IP 1, HC 5 in the paper preset)")
+    p.add_argument("--real-transitions", type=A.count(1, 100_000_000), help="real transitions collected per grounding step")
+    p.add_argument("--sim-transitions", type=A.count(1, 100_000_000), help="sim transitions (with exploration noise) per grounding step")
+    p.add_argument("--explore-sigma", type=A.real(0.0, 10.0), help="exploration noise of the sim data (default 0.3)")
+    p.add_argument("--eval-episodes", type=A.count(1, 1_000_000), help="real episodes per policy evaluation")
+    p.add_argument("--alpha", type=A.fraction, help="blend ã = (1-α)a + α g(s,a) (default 1, the paper's formula)")
+    p.add_argument("--model-epochs", type=A.count(1, 100000), help="max epochs of the forward/inverse model fits")
     p.add_argument("--report", action="store_true", help="only rebuild table and figure from OUT/results.parquet")
     return p
 

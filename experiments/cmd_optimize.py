@@ -20,6 +20,7 @@ import sys
 import time
 
 from experiments.optimize import METHODS, PRESETS, OptimizeConfig
+import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
@@ -30,38 +31,38 @@ def register(sub) -> argparse.ArgumentParser:
                    "hybrid first identify the real world from excitation logs, ~4 min)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="quick",
                    help="quick (default; README: measured time) or paper (population 150, 2 grounding steps)")
-    p.add_argument("--grounding-steps", type=int, help=f"grounding steps (default {d.grounding_steps})")
-    p.add_argument("--popsize", type=int, help=f"CMA-ES population (default {d.popsize})")
-    p.add_argument("--generations", type=int, help=f"CMA-ES generations per grounding step (default {d.generations})")
-    p.add_argument("--sigma0", type=float, help=f"initial CMA-ES step size on [0,1]-normalized params (default {d.sigma0})")
-    p.add_argument("--trust-region", type=float, help=f"CMA-ES search box ±r around θ_i, normalized (default {d.trust_region}; 1 = off)")
-    p.add_argument("--episodes-per-candidate", type=int, help=f"episodes per candidate (default {d.episodes_per_candidate})")
-    p.add_argument("--seconds", type=float, help=f"episode length [s] (default {d.seconds})")
-    p.add_argument("--real-episodes", type=int, help=f"real walks per grounding step (default {d.real_episodes})")
-    p.add_argument("--sim-episodes", type=int, help=f"sim walks with exploration noise per step (default {d.sim_episodes})")
-    p.add_argument("--exploration-noise", type=float, help=f"sim data action noise [rad] (default {d.exploration_noise})")
-    p.add_argument("--select-episodes", type=int, help=f"episodes on which the CMA-ES mean, best candidate and θ_i "
+    p.add_argument("--grounding-steps", type=A.count(1, 100), help=f"grounding steps (default {d.grounding_steps})")
+    p.add_argument("--popsize", type=A.count(2, 10000), help=f"CMA-ES population (default {d.popsize})")
+    p.add_argument("--generations", type=A.count(1, 10000), help=f"CMA-ES generations per grounding step (default {d.generations})")
+    p.add_argument("--sigma0", type=A.real(0.0, 1.0, open_lo=True), help=f"initial CMA-ES step size on [0,1]-normalized params (default {d.sigma0})")
+    p.add_argument("--trust-region", type=A.real(0.0, 1.0, open_lo=True), help=f"CMA-ES search box ±r around θ_i, normalized (default {d.trust_region}; 1 = off)")
+    p.add_argument("--episodes-per-candidate", type=A.count(1, 1000), help=f"episodes per candidate (default {d.episodes_per_candidate})")
+    p.add_argument("--seconds", type=A.seconds, help=f"episode length [s] (default {d.seconds})")
+    p.add_argument("--real-episodes", type=A.count(1, 10000), help=f"real walks per grounding step (default {d.real_episodes})")
+    p.add_argument("--sim-episodes", type=A.count(1, 10000), help=f"sim walks with exploration noise per step (default {d.sim_episodes})")
+    p.add_argument("--exploration-noise", type=A.real(0.0, 1.0, unit='rad'), help=f"sim data action noise [rad] (default {d.exploration_noise})")
+    p.add_argument("--select-episodes", type=A.count(1, 1000), help=f"episodes on which the CMA-ES mean, best candidate and θ_i "
                    f"are compared to pick θ_i+1 (default {d.select_episodes})")
-    p.add_argument("--eval-trials", type=int, help=f"real trials per evaluation (default {d.eval_trials}; 0: none)")
+    p.add_argument("--eval-trials", type=A.count(0, 10000), help=f"real trials per evaluation (default {d.eval_trials}; 0: none)")
     p.add_argument("--profile", help=f"real-world effect profile (default {d.profile})")
     p.add_argument("--grounding-state", choices=["legs", "legs+imu"], help="grounding state (default legs)")
-    p.add_argument("--history", type=int, help="frames of state history in the models (default 1)")
-    p.add_argument("--alpha", type=float, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
+    p.add_argument("--history", type=A.count(1, 10), help="frames of state history in the models (default 1)")
+    p.add_argument("--alpha", type=A.fraction, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
                    "1 = the paper's formula)")
-    p.add_argument("--hybrid-alpha", type=float, help=f"blend of the hybrid method (default {d.hybrid_alpha})")
-    p.add_argument("--ensemble", type=int, help=f"forward/inverse model pairs; SGAT draws one per episode (default {d.ensemble})")
+    p.add_argument("--hybrid-alpha", type=A.fraction, help=f"blend of the hybrid method (default {d.hybrid_alpha})")
+    p.add_argument("--ensemble", type=A.count(1, 100), help=f"forward/inverse model pairs; SGAT draws one per episode (default {d.ensemble})")
     p.add_argument("--inverse-command", dest="inverse_command", action="store_true", default=None,
                    help="the inverse model also sees the commanded action (default off)")
-    p.add_argument("--model-epochs", type=int, help=f"max training epochs of each model (default {d.model_epochs})")
+    p.add_argument("--model-epochs", type=A.count(1, 100000), help=f"max training epochs of each model (default {d.model_epochs})")
     p.add_argument("--no-aggregate", dest="aggregate", action="store_false", default=None,
                    help="fit each grounding step's models on θ_i's walks only (default: on the walks of "
                         "every θ_j so far, as the GARAT code accumulates data)")
-    p.add_argument("--ane-sigma", type=float, help=f"ANE action noise [rad] (default {d.ane_sigma})")
-    p.add_argument("--params", help="initial gait parameters θ0 (JSON; default: the walk engine's θ0)")
-    p.add_argument("--seed", type=int, help="run seed (default 0)")
-    p.add_argument("--out", help="run directory (default runs/optimize_<methods>_<time>)")
-    p.add_argument("--resume", metavar="RUN_DIR", help="continue a stopped run")
-    p.add_argument("--workers", type=int, help="worker processes (default: one per core; 1 = serial)")
+    p.add_argument("--ane-sigma", type=A.real(0.0, 1.0, unit='rad'), help=f"ANE action noise [rad] (default {d.ane_sigma})")
+    p.add_argument("--params", type=A.in_file, help="initial gait parameters θ0 (JSON; default: the walk engine's θ0)")
+    p.add_argument("--seed", type=A.seed, help="run seed (default 0)")
+    p.add_argument("--out", type=A.out_dir, help="run directory (default runs/optimize_<methods>_<time>)")
+    p.add_argument("--resume", type=A.in_path, metavar="RUN_DIR", help="continue a stopped run")
+    p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", help="run episodes on a Ray cluster (e.g. auto, local, ray://host:10001)")
     p.add_argument("--rerun", action="store_true", help="log selected candidates and real trials as .rrd files")
     return p

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from terrain import TERRAINS, check_amplitude, make
+import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
@@ -21,16 +22,16 @@ def register(sub) -> argparse.ArgumentParser:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--world", default="sim,real", help="sim, real or sim,real (default: both)")
     p.add_argument("--pose", default="crouch", help="robot pose to hold (zero, stand, crouch, deep_crouch)")
-    p.add_argument("--seconds", type=float, default=10.0, help="duration [s] (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="episode seed (terrain, effects, noise)")
+    p.add_argument("--seconds", type=A.seconds, default=10.0, help="duration [s] (default 10)")
+    p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
     p.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain for both worlds (default: flat sim, the profile's random lumpy field in real)")
-    p.add_argument("--amplitude", type=float, default=None,
+    p.add_argument("--amplitude", type=A.real(0.0, 1.0), default=None,
                    help="terrain amplitude with --terrain: bump/step height [m], slope grade, gaussian RMS height [m] "
                         "(default 0.01)")
     p.add_argument("--fixed-base", action="store_true", help="hang the robot in the air (actuator tests)")
-    p.add_argument("--record", metavar="PATH", help="write recordings; '{world}' in PATH is replaced "
+    p.add_argument("--record", type=A.out_file, metavar="PATH", help="write recordings; '{world}' in PATH is replaced "
                    "(default PATH for two worlds: PATH with _sim/_real before the suffix)")
     return p
 

@@ -19,12 +19,13 @@ from __future__ import annotations
 import argparse
 
 from experiments.fitness import EPISODE_SECONDS
+import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("stress", help="terrain (or effect) stress test of gaits: fall rate and speed per level",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--params", nargs="+", metavar="JSON", default=None,
+    p.add_argument("--params", type=A.in_file, nargs="+", metavar="JSON", default=None,
                    help="gait parameter files, one policy each (label = file stem); default: θ0")
     p.add_argument("--world", default="real", choices=("real", "sim"), help="real (PyBullet, default) or sim (MuJoCo)")
     p.add_argument("--terrain", default=None, metavar="KIND",
@@ -33,15 +34,15 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--amplitude", default=None, metavar="LEVELS",
                    help="terrain levels: start:stop:count, a comma list or one value; amplitude [m] "
                         "(grade for slope); default 0:0.04:9 (with --sweep and --terrain: one value, default 0.02)")
-    p.add_argument("--trials", type=int, default=20, help="episodes per policy and level (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="run seed: terrain and episode seeds of the trials")
-    p.add_argument("--seconds", type=float, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
+    p.add_argument("--trials", type=A.count(1, 100000), default=20, help="episodes per policy and level (default 20)")
+    p.add_argument("--seed", type=A.seed, default=0, help="run seed: terrain and episode seeds of the trials")
+    p.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
     p.add_argument("--profile", default=None, help="real-world effect profile: real (default) or none")
     p.add_argument("--sweep", default=None, metavar="EFFECT=lo:hi:n",
                    help="sweep one real-world effect instead of the terrain (real world only)")
-    p.add_argument("--out", default=None, metavar="DIR", help="run directory (default runs/stress-...)")
+    p.add_argument("--out", type=A.out_dir, default=None, metavar="DIR", help="run directory (default runs/stress-...)")
     p.add_argument("--rerun", action="store_true", help="write .rrd files of the worst trial per policy and level")
-    p.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core; 1 = serial)")
+    p.add_argument("--workers", type=A.workers, default=None, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", default=None, help="run the episodes on a Ray cluster (auto, local, ray://...)")
     return p
 

@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import experiments.argtypes as A
+
+from common.defaults import EPISODE_SECONDS
 
 WORLDS = ("sim", "real", "grounded")
 
@@ -27,26 +30,26 @@ WORLDS = ("sim", "real", "grounded")
 def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("visualize", help="show rollouts in Rerun (recordings, a run directory or a live rollout)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("inputs", nargs="*", metavar="PATH",
+    p.add_argument("inputs", type=A.in_path, nargs="*", metavar="PATH",
                    help="recordings (*.parquet) and/or directories searched recursively; none: live rollout")
-    p.add_argument("--save", metavar="OUT.rrd", default=None,
+    p.add_argument("--save", type=A.out_file, metavar="OUT.rrd", default=None,
                    help="write the Rerun file here (default: sgatwalk.rrd; the default mode, headless)")
     p.add_argument("--spawn", action="store_true", help="open the Rerun viewer instead of writing a file")
-    p.add_argument("--screenshot", metavar="PNG", default=None,
+    p.add_argument("--screenshot", type=A.out_file, metavar="PNG", default=None,
                    help="also render the saved file headlessly to this PNG (needs a GPU or Mesa lavapipe)")
-    p.add_argument("--screenshot-time", type=float, default=None, metavar="S",
+    p.add_argument("--screenshot-time", type=A.real(0.0, 3600.0), default=None, metavar="S",
                    help="time cursor for --screenshot [s] (default: middle of the longest rollout)")
     live = p.add_argument_group("live rollout (when no PATH is given)")
     live.add_argument("--world", default="sim,real", help="comma-separated worlds: sim, real, grounded (default sim,real)")
-    live.add_argument("--params", metavar="THETA.json", default=None,
+    live.add_argument("--params", type=A.in_file, metavar="THETA.json", default=None,
                       help="gait parameters for the walk engine (default: the initial θ0)")
     live.add_argument("--pose", default=None, help="hold this pose instead of walking (zero, stand, crouch, deep_crouch)")
-    live.add_argument("--seed", type=int, default=0, help="episode seed (terrain, effects, noise; default 0)")
-    live.add_argument("--seconds", type=float, default=7.5, help="rollout duration [s] (default 7.5)")
+    live.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise; default 0)")
+    live.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help=f"rollout duration [s] (default {EPISODE_SECONDS:g})")
     live.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
-    live.add_argument("--transformer", metavar="PATH", default=None,
+    live.add_argument("--transformer", type=A.in_path, metavar="PATH", default=None,
                       help="action transformer for the grounded world (sgat), when available")
-    live.add_argument("--record", metavar="PATH", default=None,
+    live.add_argument("--record", type=A.out_file, metavar="PATH", default=None,
                       help="also write the live recordings as Parquet; '{world}' in PATH is replaced")
     return p
 
@@ -138,7 +141,7 @@ def run(args) -> dict:
     path = None if args.spawn else (args.save or "sgatwalk.rrd")
     res = log_rollouts_to_rrd(recs, path, terrains=terrains, spawn=args.spawn)
     out = {
-        "path": res["path"], "bytes": res["bytes"], "log_seconds": res["log_seconds"], "seconds": res["seconds"],
+        "path": res["path"], "bytes": res["bytes"], "log_seconds": res["log_seconds"], "wall_s": res["seconds"],
         "entities": len(res["rows"]), "skipped": skipped, "notes": notes,
         "recordings": [{"label": lab, "world": r.meta.get("world"), "rows": len(r), "seconds": float(r.t[-1]),
                         "fell": r.fell, "fall_reason": r.meta.get("fall_reason"), "terrain": res["notes"][lab]}

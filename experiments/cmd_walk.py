@@ -16,34 +16,33 @@ import time
 from experiments.fitness import EPISODE_SECONDS, run_walk
 from terrain import TERRAINS, check_amplitude, make
 from walk_engine import GaitParams, WalkCommand
+import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("walk", help="walk with a gait parameter file (ZMP engine) and report speed/fall/drift",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--params", metavar="JSON", help="gait parameters (16 names -> values); default: θ0")
+    p.add_argument("--params", type=A.in_file, metavar="JSON", help="gait parameters (16 names -> values); default: θ0")
     p.add_argument("--world", default="sim", choices=("sim", "real", "identified"),
                    help="sim (MuJoCo), real (PyBullet) or identified (the sim with the physics of --report)")
-    p.add_argument("--report", nargs="+", metavar="REPORT_JSON",
+    p.add_argument("--report", type=A.in_path, nargs="+", metavar="REPORT_JSON",
                    help="with --world identified: report.json file(s) or folders of sgatwalk diagnose")
-    p.add_argument("--seconds", type=float, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
-    p.add_argument("--seed", type=int, default=0, help="episode seed (terrain, effects, noise)")
+    p.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
+    p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
     p.add_argument("--profile", default=None, help="real-world effect profile: real (default) or none")
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain (default: flat in the sim, the profile's random lumpy field in the real world)")
-    p.add_argument("--amplitude", type=float, default=None,
+    p.add_argument("--amplitude", type=A.real(0.0, 1.0), default=None,
                    help="terrain amplitude with --terrain: bump/step height [m], slope grade, gaussian RMS height [m] "
                         "(default 0.02)")
-    p.add_argument("--vx", type=float, default=None, help="forward speed command [m/s] (default: the gait's own)")
-    p.add_argument("--vy", type=float, default=0.0, help="sideways speed command [m/s], + left")
-    p.add_argument("--wz", type=float, default=0.0, help="turn rate command [rad/s], + left")
-    p.add_argument("--record", metavar="PATH", help="write the rollout as a Parquet recording")
+    p.add_argument("--vx", type=A.real(-1.0, 1.0, unit='m/s'), default=None, help="forward speed command [m/s] (default: the gait's own)")
+    p.add_argument("--vy", type=A.real(-0.5, 0.5, unit='m/s'), default=0.0, help="sideways speed command [m/s], + left")
+    p.add_argument("--wz", type=A.real(-2.0, 2.0, unit='rad/s'), default=0.0, help="turn rate command [rad/s], + left")
+    p.add_argument("--record", type=A.out_file, metavar="PATH", help="write the rollout as a Parquet recording")
     return p
 
 
 def run(args) -> dict:
-    if not (args.seconds > 0 and math.isfinite(args.seconds)):
-        raise ValueError(f"--seconds must be a positive number, got {args.seconds}")
     params = GaitParams.load(args.params) if args.params else GaitParams()
     if args.world != "real" and args.profile is not None:
         raise ValueError("--profile applies to the real world only (use --world real)")
@@ -73,9 +72,14 @@ def run(args) -> dict:
     if args.record:
         out["recording"] = rec.to_parquet(args.record)
     if not args.json:
-        fall = f"fell ({res.fall_reason} at {res.fall_time_s:.2f} s)" if res.fell else "did not fall"
-        print(f"{args.world} seed {args.seed} [{out['terrain']}{', profile ' + out['profile'] if out['profile'] else ''}]: "
-              f"speed {res.speed_cm_s:.2f} cm/s, {fall}, drift {100 * res.drift_m:.1f} cm, "
-              f"distance {100 * res.distance_m:.1f} cm, fitness {res.fitness:.2f}"
-              + (f"  -> {out['recording']}" if args.record else ""))
+        print(format_walk(out))
     return out
+
+
+def format_walk(out: dict) -> str:
+    """The line ``sgatwalk walk`` prints, from its ``--json`` result."""
+    fall = f"fell ({out['fall_reason']} at {out['fall_time_s']:.2f} s)" if out["fell"] else "did not fall"
+    return (f"{out['world']} seed {out['seed']} [{out['terrain']}{', profile ' + out['profile'] if out['profile'] else ''}]: "
+            f"speed {out['speed_cm_s']:.2f} cm/s, {fall}, drift {100 * out['drift_m']:.1f} cm, "
+            f"distance {100 * out['distance_m']:.1f} cm, fitness {out['fitness']:.2f}"
+            + (f"  -> {out['recording']}" if out.get("recording") else ""))

@@ -1,7 +1,7 @@
 """Executors: run ``fn(task)`` for many tasks, serially, in a local process pool, or on Ray.
 
 Every task carries its own seed, so results never depend on the executor or on the order tasks
-finish in (``reference/ecosystem.md`` §3.3). ``map`` returns results in task order.
+finish in (docs/architecture.md, "Conventions"). ``map`` returns results in task order.
 
 * :class:`SerialExecutor` -- in this process (tests, debugging).
 * :class:`ProcessExecutor` -- the default: ``concurrent.futures.ProcessPoolExecutor`` with the

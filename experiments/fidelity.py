@@ -53,7 +53,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from experiments.files import atomic_write_text, jsonable
+from common.defaults import EPISODE_SECONDS
+from common.files import WallClock, atomic_path, atomic_write_text, jsonable
+from experiments.episodes import EpisodeLog
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
 
@@ -202,7 +204,7 @@ class FidelityConfig:
     real_trials: int = 10
     data_seeds: int = 5
     episodes: int = 4
-    seconds: float = 7.5
+    seconds: float = EPISODE_SECONDS
     profile: str = "real"
     identify_fixed_logs: int = 3
     identify_floating_logs: int = 3
@@ -266,68 +268,15 @@ class Fidelity:
         self.log(f"[fidelity {time.perf_counter() - self.t0:7.1f} s] {msg}")
 
     def _check_config(self) -> None:
-        path = os.path.join(self.run_dir, "config.json")
-        mine = self.cfg.to_dict()
-        if os.path.exists(path):
-            with open(path) as f:
-                old = json.load(f)
-            keep = ("worlds", "bootstrap")  # more worlds or a new bootstrap reuse what was measured
-            diff = [k for k in mine if k not in keep and old.get(k) != mine[k]]
-            if diff:
-                raise ValueError(f"{self.run_dir!r} holds a fidelity run with other settings ({', '.join(diff)}); "
-                                 "use another --out")
-        atomic_write_text(path, json.dumps(mine, indent=1))
-        jl = os.path.join(self.run_dir, "episodes.jsonl")
-        if os.path.exists(jl):
-            with open(jl) as f:
-                for line in f:
-                    try:
-                        r = json.loads(line)
-                        self._episodes[r["key"]] = r
-                    except (json.JSONDecodeError, KeyError):
-                        continue  # a line cut by a kill: that episode runs again
+        """Claim the run directory (``experiments.episodes.EpisodeLog``); more worlds or a new
+        bootstrap reuse what was measured."""
+        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "fidelity run", ignore=("worlds", "bootstrap"),
+                               say=self._say)
+        self._episodes = self._log.done
 
     def _run(self, tasks: list[dict], desc: str) -> None:
-        """Run the tasks whose keys have no result yet; append results as they come, in batches."""
-        from experiments.tasks import run_episode
-
-        todo = [t for t in tasks if t["key"] not in self._episodes]
-        if not todo:
-            self._say(f"{desc}: {len(tasks)} episodes already done")
-            return
-        t0 = time.perf_counter()
-        self._say(f"{desc}: {len(todo)} episodes ({len(tasks) - len(todo)} resumed)")
-        bar = None
-        if self.progress:
-            from tqdm import tqdm
-
-            bar = tqdm(total=len(todo), desc=desc, leave=False, disable=None)
-        jl = os.path.join(self.run_dir, "episodes.jsonl")
-        chunk = max(8, 4 * getattr(self.ex, "workers", 1))
-        last = time.perf_counter()
-        try:
-            for k in range(0, len(todo), chunk):
-                part = todo[k:k + chunk]
-                res = self.ex.map(run_episode, part, progress=(bar.update if bar else None))
-                lines = []
-                for t, r in zip(part, res):
-                    row = {"key": t["key"], "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"]),
-                           "seconds": r["steps"] * 0.01}
-                    self._episodes[t["key"]] = row
-                    lines.append(json.dumps(row))
-                with open(jl, "a") as f:
-                    f.write("\n".join(lines) + "\n")
-                    f.flush()
-                    os.fsync(f.fileno())
-                now = time.perf_counter()
-                if (bar is None or bar.disable) and now - last > 30:
-                    done = k + len(part)
-                    self._say(f"{desc}: {done}/{len(todo)}, ETA {(now - t0) / done * (len(todo) - done):.0f} s")
-                    last = now
-        finally:
-            if bar:
-                bar.close()
-        self._say(f"{desc}: done in {time.perf_counter() - t0:.0f} s")
+        """Run the tasks whose keys have no result yet (resumable, progress on stderr)."""
+        self._log.run(self.ex, tasks, desc, progress=self.progress)
 
     # ---------------------------------------------------------------- panel
     def panel(self) -> list[dict]:
@@ -480,6 +429,7 @@ class Fidelity:
         """Measure everything not measured yet and return (and save) the result."""
         cfg = self.cfg
         self._check_config()
+        clock = WallClock(self.run_dir, legacy=os.path.join(self.run_dir, "fidelity.json"))
         gaits = self.panel()
         self._say(f"panel: {len(gaits)} gaits; {cfg.real_trials} real trials each; worlds "
                   f"{', '.join(s.name for s in self.specs)}; {cfg.data_seeds} draws of the real data")
@@ -493,6 +443,7 @@ class Fidelity:
                 tasks += self._world_tasks(spec, d, prep[spec.name][d], gaits)
         self._run(tasks, "training-world episodes")
         res = self.result(gaits, prep)
+        res["wall_s"] = clock.save()
         self.write(res)
         return res
 
@@ -627,10 +578,9 @@ def plot(res: dict, path: str) -> None:
     fig.suptitle(f"fidelity: {len(real)} gaits, fitness = speed [cm/s] − 15 per fall; ceiling ρ "
                  f"{res['real']['ceiling']:.2f}", fontsize=10)
     fig.tight_layout()
-    tmp = path + ".tmp.png"
-    fig.savefig(tmp, dpi=110)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
-    os.replace(tmp, path)
 
 
 __all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "format_table", "parse_world", "plot"]

@@ -1,7 +1,7 @@
 """The walk rollout and its fitness: the SGAT paper's reward.
 
-Reward (Desai et al., IROS 2020, §V "the robot's forward walking speed ... with a penalty of 15
-if the robot falls"; ``shared/DESIGN.md`` "The main job, as data"):
+Reward (Desai et al., IROS 2020, §IV.C: "a sum of the forward velocity of the robot (in cm/s) and an
+early termination penalty of -15 if the robot falls down"; docs/architecture.md "The main job, as data"):
 
     fitness = forward speed [cm/s] - 15 * fell,
 
@@ -18,14 +18,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from common.defaults import EPISODE_SECONDS, FALL_PENALTY  # noqa: F401 - re-exported: experiments.fitness.FALL_PENALTY
 from envs import Recording, make_world, rollout
 from terrain import Heightfield
 from walk_engine import GaitParams, WalkCommand, WalkEngine
 
-#: Fitness penalty for a fall (paper: 15).
-FALL_PENALTY = 15.0
-#: Nominal episode length [s] (paper: 7.5 s).
-EPISODE_SECONDS = 7.5
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from sgat.transformer import GroundingSpec
 #: Real walks of θ_i per grounding step, sim walks with exploration noise, and that noise [rad]
 #: (the standard deviation of Gaussian noise on the 11 leg targets of the sim walks). 0.02 rad, not
 #: 0.05: with 0.05 the sim walks of θ0 fall after ~2.5 s, so the inverse model never sees a steady
-#: gait (``sgatwalk fidelity`` on development seeds, README "Grounding that holds").
+#: gait (``sgatwalk fidelity`` on development seeds, README "sgatwalk fidelity").
 REAL_WALKS = 4
 SIM_WALKS = 4
 EXPLORATION_NOISE = 0.02

@@ -1,4 +1,4 @@
-"""Configuration of the MuJoCo gym sim-to-real experiments (SGAT paper §IV.B, Figs. 6-7).
+"""Configuration of the MuJoCo gym sim-to-real experiments (SGAT paper §IV.B, Figs. 8-9).
 
 Everything a ``sgatwalk gym`` run depends on lives here: the two tasks and their "real"
 variants, the TRPO hyperparameters (with their source), the training budgets of the ``quick``
@@ -19,14 +19,14 @@ domains". Its modern successor is ``sb3_contrib.TRPO`` with rl-baselines3-zoo's
   ``default:`` block (MlpPolicy, 1e6 steps, i.e. sb3-contrib's constructor defaults: lr 1e-3,
   n_steps 2048, batch 128, γ 0.99, λ 0.95, cg 15 / 0.1, 10 critic updates, target_kl 0.01, no
   normalisation). Those are used here. (The GARAT/SGAT code took the SB2 zoo's *Pendulum* entry
-  for InvertedPendulum -- batch 5000, γ 0.98, λ 0.9, ... see ``reference/grounding.md`` §7; with
+  for InvertedPendulum -- batch 5000, γ 0.98, λ 0.9, ... from rl-baselines-zoo's ``trpo.yml``; with
   SB3 the defaults solve InvertedPendulum-v5 in ≈3·10⁴ steps.)
 
 The policy is SB3's ``MlpPolicy`` (2×64 tanh, separate policy and value networks), as in the
 paper's stable-baselines setup. Torch runs with one thread per process.
 
-"Real" variants (``reference/grounding.md`` §6)
------------------------------------------------
+"Real" variants (SGAT paper §IV.B; GARAT code and appendix)
+-----------------------------------------------------------
 * InvertedPendulum: the pole (body ``pole``, 5.02 kg) is ``pole_factor`` times heavier; mass
   and rotational inertia are scaled together. The SGAT paper says **10×** (the default); the
   GARAT code's XML uses 100 kg (≈20×): ``--pole-factor 20`` reproduces that.
@@ -103,7 +103,7 @@ EXPERIMENTS = ("noisyreal", "noisysim")
 #: (GAT/SGAT in the grounded sim, ANE in the noisy sim), warm-started from the sim policy;
 #: ``real_steps``: the real-trained upper bound, from scratch on the real variant;
 #: ``real_transitions`` / ``sim_transitions``: data per grounding step for f_real and f_sim^-1.
-#: ``paper`` follows the GARAT/SGAT code (reference/grounding.md §7): initial sim policy 1e6 (IP)
+#: ``paper`` follows the GARAT/SGAT code (GARAT scripts, Desai et al., NeurIPS 2020): initial sim policy 1e6 (IP)
 #: / 2e6 (HC) steps, re-training 1e5 (IP) / 1e6 (HC) per grounding step, 1 (IP) / 5 (HC)
 #: grounding steps, the real upper bound with the initial policy's budget, 10 runs, 20 evaluation
 #: episodes. The amount of real data is not stated in the paper (the appendix says 1 M steps,

@@ -4,7 +4,7 @@
   σ = ``sigma`` × half the action range, added to a **copy** of the commanded action and clipped
   to the bounds. The agent's (and any logger's) array is never modified in place -- the trap
   that silently turned logged actions into noisy ones in the GARAT code
-  (``reference/grounding.md`` §11). The noise generator is seeded by ``reset(seed=s)`` and keeps
+  (``NoisyRealEnv.action`` in ``rl_gat/gat.py``, Desai et al., NeurIPS 2020). The noise generator is seeded by ``reset(seed=s)`` and keeps
   running across later unseeded resets (a vectorised trainer resets with no seed after every
   episode; re-seeding there would replay the same noise sequence in every episode).
 * :func:`scale_body_masses` -- heavier bodies: ``model.body_mass`` and ``model.body_inertia``
@@ -12,7 +12,7 @@
   ``mujoco.mj_setConst`` recomputes the derived constants (subtree masses, inverse weights).
 * :func:`make_env` -- the sim, the noisy sim (ANE) and the "real" variants of a task.
 * :func:`set_state_from_obs` -- put an env into the state an observation describes (for the
-  one-step transition error of ``reference/grounding.md`` §4).
+  one-step transition error of the GARAT appendix, Desai et al., NeurIPS 2020).
 """
 
 from __future__ import annotations

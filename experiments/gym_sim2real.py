@@ -1,4 +1,4 @@
-"""Sim-to-NoisySim and Sim-to-NoisyReal on gymnasium MuJoCo with TRPO (SGAT paper §IV.B, Figs. 6-7).
+"""Sim-to-NoisySim and Sim-to-NoisyReal on gymnasium MuJoCo with TRPO (SGAT paper §IV.B, Figs. 8-9).
 
 One run ``r`` of the experiment, for a noise level ν of the "real" actuator:
 
@@ -51,8 +51,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from experiments.files import atomic_write_bytes as _atomic_write_bytes
-from experiments.files import atomic_write_text
+from common.files import atomic_write_bytes as _atomic_write_bytes
+from common.files import atomic_write_text
 from experiments.gym_config import METHODS, NO_REAL_DATA, GymConfig
 from experiments.gym_envs import make_env, set_state_from_obs
 
@@ -323,7 +323,7 @@ def evaluate(env, policy: NumpyPolicy, episodes: int, seed: int) -> dict:
 
 
 def one_step_errors(task: str, transformer, eps) -> dict:
-    """One-step next-state error against real transitions (``reference/grounding.md`` §4):
+    """One-step next-state error against real transitions (GARAT appendix, Desai et al., NeurIPS 2020):
     put the plain sim into each real state s_t, apply a_t (plain) or g(s_t, a_t) (grounded), and
     compare the next state with the real s_{t+1}.
 
@@ -920,7 +920,7 @@ _STYLE = {"none": ("sim only", "0.6", "//"), "ane": ("ANE (σ tuned on real)", "
 
 
 def plot_bars(summary: list[dict], cfg: GymConfig, path: Path) -> None:
-    """Bars in the style of the paper's Figs. 6-7: per noise, the real return of each method
+    """Bars in the style of the paper's Figs. 8-9: per noise, the real return of each method
     normalised to the real-trained return (red dashed line at 1); hatched bars used no real
     data; error bars = standard error over runs. Without real-trained results, raw returns."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg

@@ -62,7 +62,7 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
     """
     from sysid.data import load_logs
     from sysid.diagnose import calibrate
-    from experiments.files import atomic_write_text, jsonable
+    from common.files import atomic_write_text, jsonable
 
     out = {}
     for kind in ("fixed", "floating") if floating else ("fixed",):

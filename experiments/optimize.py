@@ -29,7 +29,7 @@ of 5 forward/inverse pairs fitted on bootstrap resamples, SGAT drawing one per e
 every gait flipped between "walks like the plain sim" and "everything falls" depending on which 4
 real walks it was fitted on, and with α between 0.3 and 0.4; with the ensemble and sim walks whose
 exploration noise does not topple the robot (0.02 rad) its fitness bias moves smoothly with α and
-stays within a point across draws (``sgatwalk fidelity``, README "Grounding that holds").
+stays within a point across draws (``sgatwalk fidelity``, README "sgatwalk fidelity").
 
 Methods: ``sgat``, ``gat``, ``none`` (CMA-ES in the plain sim), ``ane`` (action-noise envelope:
 sim with Gaussian noise of ``ane_sigma`` on the leg targets; no real data), ``identified`` (CMA-ES in
@@ -61,7 +61,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from experiments.files import atomic_write_bytes as _atomic_write
+from common.defaults import EPISODE_SECONDS
+from common.files import atomic_path
+from common.files import atomic_write_bytes as _atomic_write
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 
 METHODS = ("sgat", "gat", "none", "ane", "identified", "hybrid", "real")
@@ -85,7 +87,7 @@ class OptimizeConfig:
     trust_region: float = 0.15
     episodes_per_candidate: int = 1
     select_episodes: int = 8
-    seconds: float = 7.5
+    seconds: float = EPISODE_SECONDS
     eval_trials: int = 10
     profile: str = "real"
     grounding_state: str = "legs"
@@ -248,8 +250,8 @@ class Optimizer:
         return [Recording.from_parquet(p) for p in paths]
 
     # ---------------------------------------------------------------- the stages
-    def grounding_config(self, method: str) -> "GroundingConfig":
-        """The model settings of ``method``'s grounding steps (``experiments.grounding``)."""
+    def grounding_config(self, method: str):
+        """The model settings (``sgat.grounding.GroundingConfig``) of ``method``'s grounding steps."""
         from sgat.grounding import GroundingConfig
 
         cfg = self.cfg
@@ -287,7 +289,7 @@ class Optimizer:
     def _data_thetas(self, method: str, step: int, theta) -> list[tuple[int, np.ndarray]]:
         """(grounding step j, θ_{j-1}) pairs whose walks ground step ``step``: only θ_i's own with
         ``aggregate=False``; with ``aggregate=True`` (default) every earlier step's too, as the
-        GARAT/GAT code accumulates its data across grounding steps (``reference/grounding.md`` §3).
+        GARAT/GAT code accumulates its data across grounding steps (``rl_gat/gat.py``, Desai et al., NeurIPS 2020).
         Earlier steps' recordings are cached under ``data/``, so aggregation costs no new walks."""
         if not self.cfg.aggregate:
             return [(step, np.asarray(theta))]
@@ -538,10 +540,8 @@ class Optimizer:
             w.writerows(gens)
             _atomic_write(os.path.join(self.run_dir, "generations.csv"), buf.getvalue().encode())
         if self.state.get("evals"):
-            path = os.path.join(self.run_dir, "evals.parquet")
-            tmp = f"{path}.{os.getpid()}.tmp"
-            pq.write_table(pa.Table.from_pylist(self.state["evals"]), tmp)
-            os.replace(tmp, path)
+            with atomic_path(os.path.join(self.run_dir, "evals.parquet"), suffix=".parquet") as tmp:
+                pq.write_table(pa.Table.from_pylist(self.state["evals"]), tmp)
         if self.state.get("rows"):
             res = self.result()
             _atomic_write(os.path.join(self.run_dir, "results.json"),
@@ -573,11 +573,9 @@ class Optimizer:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()
-        path = os.path.join(self.run_dir, "fitness.png")
-        tmp = path + ".tmp.png"
-        fig.savefig(tmp, dpi=120)
+        with atomic_path(os.path.join(self.run_dir, "fitness.png"), suffix=".png") as tmp:
+            fig.savefig(tmp, dpi=120)
         plt.close(fig)
-        os.replace(tmp, path)
 
 
 def format_table(rows: list[dict]) -> str:

@@ -30,7 +30,7 @@ _BLOCK = re.compile(r"(<!-- results:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /r
 
 def save(name: str, command: str, result: dict, results_dir: str = RESULTS) -> str:
     """Write ``docs/results/NAME.json`` (atomically); returns its path."""
-    from experiments.files import atomic_write_text
+    from common.files import atomic_write_text
 
     path = os.path.join(results_dir, f"{name}.json")
     atomic_write_text(path, json.dumps({"command": command, "result": result}, indent=1, allow_nan=False) + "\n")
@@ -120,13 +120,15 @@ def _table1(res: dict) -> str:
     c = res["config"]
     lines = [f"{c['seeds']} optimization seeds per method; every gait on the same {c['trials']} paired real trials "
              "(mean ± s.e. over seeds × trials; falls with a Wilson 95 % interval).", "",
-             "| method | step | n | speed [cm/s] | falls | falls 95 % CI | fitness |", "|---|---|---|---|---|---|---|"]
+             "| method | step | n | speed [cm/s] | falls | falls 95 % CI | fitness | fitness the training world gave it |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in res["rows"]:
         name = "θ0" if r["method"] == "theta0" else r["method"].upper()
         step = "–" if r["method"] == "theta0" else str(r["step"])
         lo, hi = r["falls_ci95"]
+        said = "–" if r.get("predicted_fitness") is None else f"{r['predicted_fitness']:.1f}"
         lines.append(f"| {name} | {step} | {r['n']} | {r['speed_mean']:.2f} ± {r['speed_se']:.2f} | {r['falls']}/{r['n']} "
-                     f"| [{lo:.2f}, {hi:.2f}] | {r['fitness_mean']:.2f} ± {r['fitness_se']:.2f} |")
+                     f"| [{lo:.2f}, {hi:.2f}] | {r['fitness_mean']:.2f} ± {r['fitness_se']:.2f} | {said} |")
     lines += ["", "| step | comparison | fitness difference (paired permutation p) | falls: only a / only b (McNemar p) |",
               "|---|---|---|---|"]
     for t in res["tests"]:
@@ -138,7 +140,13 @@ def _table1(res: dict) -> str:
     return "\n".join(lines)
 
 
-RENDERERS = {"fidelity": _fidelity, "table1": _table1, "optimize": _optimize}
+def _walk(res: dict) -> str:
+    from experiments.cmd_walk import format_walk
+
+    return f"```\n{format_walk(res)}\n```"
+
+
+RENDERERS = {"fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
@@ -164,7 +172,7 @@ def render(text: str, results_dir: str = RESULTS) -> str:
 
 
 def run_and_save(name: str, args: list[str]) -> str:
-    """Run ``sgatwalk ARGS --json`` in this process and save its result as ``docs/results/NAME.json``."""
+    """Run ``sgatwalk ARGS --json --timings`` in this process and save its result as ``docs/results/NAME.json``."""
     import contextlib
     import io
 
@@ -172,7 +180,7 @@ def run_and_save(name: str, args: list[str]) -> str:
 
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        rc = cli_main([*args, "--json"])
+        rc = cli_main([*args, "--json", "--timings"])
     if rc != 0:
         raise SystemExit(f"sgatwalk {' '.join(args)} failed with exit status {rc}")
     result = json.loads(buf.getvalue().strip().splitlines()[-1])
@@ -204,7 +212,7 @@ def main(argv=None) -> int:
             return 1
         return 0
     if new != text:
-        from experiments.files import atomic_write_text
+        from common.files import atomic_write_text
 
         atomic_write_text(args.readme, new)
     return 0

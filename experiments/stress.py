@@ -57,7 +57,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from experiments.files import atomic_write_bytes as _atomic_write_bytes
+from common.defaults import EPISODE_SECONDS
+from common.files import atomic_write_bytes as _atomic_write_bytes
+from common.parse import parse_values
 from experiments.stats import wilson_interval
 
 #: Terrain kinds a stress run sweeps (``terrain.TERRAINS`` without "flat": amplitude 0 is flat).
@@ -94,54 +96,13 @@ EFFECT_UNITS = {
 
 
 def parse_levels(spec: str | float | Sequence[float], what: str = "--amplitude") -> list[float]:
-    """Parse a level list: ``start:stop:count`` (``numpy.linspace``, both ends included), a comma
-    list, a single number, or a sequence of numbers.
-
-    Returns:
-        the values rounded to 12 decimals (so 0:0.04:9 gives 0.005, not 0.005000000000000001),
-        in the order given, duplicates removed.
+    """Parse a level list (:func:`common.parse.parse_values`): ``start:stop:count``, a comma list, a
+    single number, or a sequence of numbers; rounded to 12 decimals, duplicates removed.
 
     Raises:
-        ValueError: malformed text, a count < 1 (an empty range), a non-finite value.
+        ValueError: malformed text, an empty range, a non-finite value (naming ``what``).
     """
-    hint = "expected 'start:stop:count' (e.g. 0:0.04:9), a comma list (e.g. 0,0.01,0.02) or one number"
-    if isinstance(spec, (int, float)):
-        values = [float(spec)]
-    elif isinstance(spec, str):
-        text = spec.strip()
-
-        def num(s: str) -> float:
-            try:
-                return float(s)
-            except ValueError:
-                raise ValueError(f"{what}: malformed value {spec!r}; {hint}") from None
-
-        if ":" in text:
-            parts = text.split(":")
-            if len(parts) != 3:
-                raise ValueError(f"{what}: malformed range {spec!r}; {hint}")
-            start, stop, count = num(parts[0]), num(parts[1]), num(parts[2])
-            if not count.is_integer() or count < 1:
-                raise ValueError(f"{what}: empty range {spec!r}: the count must be a positive integer, "
-                                 f"got {parts[2]!r}")
-            if count > 1 and start == stop:
-                raise ValueError(f"{what}: empty range {spec!r}: start equals stop")
-            values = np.linspace(start, stop, int(count)).tolist()
-        else:
-            values = [num(v) for v in text.split(",") if v.strip()]
-    else:
-        values = [float(v) for v in spec]
-    if not values:
-        raise ValueError(f"{what}: no values in {spec!r}; {hint}")
-    for v in values:
-        if not math.isfinite(v):
-            raise ValueError(f"{what}: {v} is not a finite number (from {spec!r})")
-    out: list[float] = []
-    for v in values:
-        v = round(v, 12) + 0.0  # + 0.0 turns -0.0 into 0.0
-        if v not in out:
-            out.append(v)
-    return out
+    return parse_values(spec, what)
 
 
 def parse_sweep(spec: str) -> tuple[str, list[float]]:
@@ -237,7 +198,7 @@ class StressConfig:
     trials: int
     seed: int
     profile: dict | None
-    seconds: float = 7.5
+    seconds: float = EPISODE_SECONDS
 
     def invariants(self) -> dict:
         return {k: getattr(self, k) for k in _INVARIANTS}
@@ -264,7 +225,7 @@ class StressConfig:
 def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, world: str = "real",
                 terrain: str | None = "lumpy", amplitude: str | float | Sequence[float] | None = None,
                 trials: int = 20, seed: int = 0, profile: str | dict | None = None, sweep: str | None = None,
-                seconds: float = 7.5) -> StressConfig:
+                seconds: float = EPISODE_SECONDS) -> StressConfig:
     """Validate the inputs of a stress run (bad input raises before any episode runs).
 
     Args:

@@ -8,9 +8,11 @@ every resulting gait scored on the same paired real trials, and paired tests bet
    seeds (one list for the whole table: every comparison is paired by trial, and across methods also
    by optimization seed).
 3. Per (method, step), pooled over seeds: speed mean ± s.e. [cm/s], falls with a Wilson 95 %
-   interval, fitness mean ± s.e.; per seed too. Paired tests at each step (``experiments.stats``):
+   interval, fitness mean ± s.e.; per seed too; and the fitness the training world itself gave the
+   gait it chose (the optimizer's selection score): how much a method's world flattered its choice. Paired tests at each step (``experiments.stats``):
    a permutation test on fitness and McNemar's exact test on falls, pairs = (seed, trial); for
-   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, and every method vs θ0.
+   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?), and every
+   method vs θ0.
 
 Everything resumes: the optimization runs from their checkpoints, the evaluation from
 ``episodes.jsonl``.
@@ -27,11 +29,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from experiments.files import atomic_write_text, jsonable
+from common.defaults import EPISODE_SECONDS
+from common.files import WallClock, atomic_write_text, jsonable
+from experiments.episodes import EpisodeLog
 from experiments.stats import mcnemar_test, paired_permutation_test, wilson_interval
 
 #: Comparisons tested at every grounding step (a, b): "a vs b".
-COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"))
+COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"), ("hybrid", "ane"))
 _EVAL = 31
 
 
@@ -79,24 +83,9 @@ class Table1:
         self.log(f"[table1 {time.perf_counter() - self.t0:7.1f} s] {msg}")
 
     def _check_config(self) -> None:
-        os.makedirs(self.run_dir, exist_ok=True)
-        path = os.path.join(self.run_dir, "config.json")
-        mine = self.cfg.to_dict()
-        if os.path.exists(path):
-            with open(path) as f:
-                old = json.load(f)
-            if {k: v for k, v in old.items() if k != "seeds"} != {k: v for k, v in mine.items() if k != "seeds"}:
-                raise ValueError(f"{self.run_dir!r} holds a Table I run with other settings; use another --out")
-        atomic_write_text(path, json.dumps(mine, indent=1))
-        jl = os.path.join(self.run_dir, "episodes.jsonl")
-        if os.path.exists(jl):
-            with open(jl) as f:
-                for line in f:
-                    try:
-                        r = json.loads(line)
-                        self._episodes[r["key"]] = r
-                    except (json.JSONDecodeError, KeyError):
-                        continue
+        """Claim the run directory (``experiments.episodes.EpisodeLog``); more seeds reuse what was done."""
+        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=("seeds",), say=self._say)
+        self._episodes = self._log.done
 
     def _optimize(self, s: int) -> dict:
         from experiments.optimize import OptimizeConfig, Optimizer
@@ -111,11 +100,11 @@ class Table1:
         return res
 
     def run(self) -> dict:
-        from experiments.tasks import run_episode
-
         cfg = self.cfg
         self._check_config()
+        clock = WallClock(self.run_dir, legacy=os.path.join(self.run_dir, "table1.json"))
         gaits: dict[str, list] = {}
+        predicted: dict[str, float] = {}  # the training world's fitness of each selected gait
         real_data = {}
         for s in range(cfg.seeds):
             res = self._optimize(s)
@@ -124,40 +113,17 @@ class Table1:
             for r in res["rows"]:
                 if r["method"] != "theta0":
                     gaits[f"{r['method']}|{r['step']}|{s}"] = r["theta"]
+                    if r.get("select_scores"):
+                        predicted[f"{r['method']}|{r['step']}|{s}"] = max(r["select_scores"].values())
         seeds = [int(x) for x in np.random.SeedSequence([cfg.seed, _EVAL]).generate_state(cfg.trials, dtype=np.uint32)]
         prof = cfg.optimize.get("profile", "real")
-        secs = cfg.optimize.get("seconds", 7.5)
+        secs = cfg.optimize.get("seconds", EPISODE_SECONDS)
         tasks = [{"world": "real", "theta": th, "seed": sd, "seconds": secs, "profile": prof, "key": f"{g}|t{j}"}
                  for g, th in gaits.items() for j, sd in enumerate(seeds)]
-        todo = [t for t in tasks if t["key"] not in self._episodes]
-        self._say(f"real evaluation: {len(gaits)} gaits x {cfg.trials} paired trials, {len(todo)} episodes to run")
-        jl = os.path.join(self.run_dir, "episodes.jsonl")
-        bar = None
-        if self.progress and todo:
-            from tqdm import tqdm
-
-            bar = tqdm(total=len(todo), desc="real evaluation", leave=False, disable=None)
-        chunk = max(8, 4 * getattr(self.ex, "workers", 1))
-        t0 = last = time.perf_counter()
-        for k in range(0, len(todo), chunk):
-            part = todo[k:k + chunk]
-            res = self.ex.map(run_episode, part, progress=(bar.update if bar else None))
-            rows = [{"key": t["key"], "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"])}
-                    for t, r in zip(part, res)]
-            for row in rows:
-                self._episodes[row["key"]] = row
-            with open(jl, "a") as f:
-                f.write("".join(json.dumps(row) + "\n" for row in rows))
-                f.flush()
-                os.fsync(f.fileno())
-            now = time.perf_counter()
-            if (bar is None or bar.disable) and now - last > 30:
-                done = k + len(part)
-                self._say(f"real evaluation: {done}/{len(todo)}, ETA {(now - t0) / done * (len(todo) - done):.0f} s")
-                last = now
-        if bar:
-            bar.close()
-        out = self.result(gaits, real_data)
+        self._say(f"real evaluation: {len(gaits)} gaits x {cfg.trials} paired trials")
+        self._log.run(self.ex, tasks, "real evaluation", progress=self.progress)
+        out = self.result(gaits, real_data, predicted)
+        out["wall_s"] = clock.save()
         atomic_write_text(os.path.join(self.run_dir, "table1.json"), json.dumps(jsonable(out), indent=1))
         atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(out) + "\n")
         return out
@@ -165,7 +131,7 @@ class Table1:
     def _vec(self, gait: str, what: str) -> np.ndarray:
         return np.array([float(self._episodes[f"{gait}|t{j}"][what]) for j in range(self.cfg.trials)])
 
-    def result(self, gaits: dict, real_data: dict) -> dict:
+    def result(self, gaits: dict, real_data: dict, predicted: dict | None = None) -> dict:
         cfg = self.cfg
         steps = sorted({int(g.split("|")[1]) for g in gaits if g != "theta0"})
 
@@ -182,8 +148,11 @@ class Table1:
         for m in cfg.methods:
             for st in steps:
                 keys = [f"{m}|{st}|{s}" for s in range(cfg.seeds)]
-                per = [{"seed": s, **pooled([k])} for s, k in enumerate(keys)]
-                rows.append({"method": m, "step": st, **pooled(keys), "per_seed": per})
+                per = [{"seed": s, **pooled([k]), "predicted_fitness": (predicted or {}).get(k)}
+                       for s, k in enumerate(keys)]
+                pred = [p["predicted_fitness"] for p in per if p["predicted_fitness"] is not None]
+                rows.append({"method": m, "step": st, **pooled(keys), "per_seed": per,
+                             "predicted_fitness": float(np.mean(pred)) if pred else None})
         tests = []
 
         def paired(a_keys, b_keys):
@@ -230,13 +199,15 @@ def format_table(res: dict) -> str:
     lines = [f"Table I: {c['seeds']} optimization seed(s) per method, every gait on the same {c['trials']} paired real "
              "trials; mean ± s.e.; falls with a Wilson 95 % interval",
              f"{'method':10s} {'step':>4s} {'n':>4s} {'speed [cm/s]':>15s} {'falls':>8s} {'95 % CI':>14s} "
-             f"{'fitness':>14s}", "-" * 76]
+             f"{'fitness':>14s} {'world said':>10s}", "-" * 88]
     for r in res["rows"]:
         name = "θ0" if r["method"] == "theta0" else r["method"].upper()
         step = "-" if r["method"] == "theta0" else str(r["step"])
         lo, hi = r["falls_ci95"]
+        said = "" if r.get("predicted_fitness") is None else f"{r['predicted_fitness']:10.1f}"
         lines.append(f"{name:10s} {step:>4s} {r['n']:>4d} {r['speed_mean']:7.2f} ± {r['speed_se']:4.2f} "
-                     f"{r['falls']:>4d}/{r['n']:<3d} [{lo:.2f}, {hi:.2f}] {r['fitness_mean']:7.2f} ± {r['fitness_se']:4.2f}")
+                     f"{r['falls']:>4d}/{r['n']:<3d} [{lo:.2f}, {hi:.2f}] {r['fitness_mean']:7.2f} ± {r['fitness_se']:4.2f} "
+                     f"{said}")
     lines.append("")
     lines.append("paired tests (pairs = seed x trial): fitness by permutation, falls by McNemar")
     for t in res["tests"]:

@@ -34,6 +34,8 @@ import os
 
 import numpy as np
 
+from common.defaults import EPISODE_SECONDS
+
 _WORLDS: dict = {}
 _TRANSFORMERS: dict = {}
 
@@ -98,7 +100,7 @@ def run_episode(task: dict) -> dict:
 
     env = _world(task)
     params = GaitParams.from_array(np.asarray(task["theta"], dtype=float))
-    rec, res = run_walk(params, seed=int(task["seed"]), seconds=float(task.get("seconds", 7.5)), env=env)
+    rec, res = run_walk(params, seed=int(task["seed"]), seconds=float(task.get("seconds", EPISODE_SECONDS)), env=env)
     rec.meta.update({"world": task["world"], **task.get("meta", {})})
     out = res.to_dict()
     out["seed"] = int(task["seed"])

@@ -54,12 +54,13 @@ world [m]), ``plan.zmp.x|y`` (ZMP reference), metadata ``footsteps``: a list of 
 Terrain heights are not stored in recordings; :func:`terrain_for` regenerates them from the
 metadata (seed, effects) and checks the result against the recorded shape and min/max.
 
-Sources: rerun-sdk 0.41 (``shared/reference/ecosystem.md`` §1), quaternion order x, y, z, w for
+Sources: rerun-sdk 0.41 (https://rerun.io/docs, https://ref.rerun.io/docs/python/), quaternion order x, y, z, w for
 Rerun and w, x, y, z in recordings.
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import re
@@ -68,6 +69,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from common.files import atomic_path
+from common.spatial import quat_from_rpy, quat_mul, quat_rotate
 from envs.recording import Recording, RecordingError
 from robots import RobotModel
 from terrain import Heightfield
@@ -81,7 +84,7 @@ PALETTE = [(52, 120, 246), (240, 120, 30), (40, 170, 80), (200, 50, 160), (120, 
            (200, 170, 20), (150, 80, 40)]
 #: Flat ground drawn when a recording has no heightfield: this size [m], centred at the origin.
 FLAT_SIZE = (6.0, 3.0)
-#: Footstep boxes: the NAO sole (robots/nao.py, nao_h25.md §4), 5 mm thick.
+#: Footstep boxes: the NAO sole (robots/nao.py), 5 mm thick.
 SOLE_BOX = (0.160, 0.0888, 0.005)
 SOLE_CENTER = (0.030, 0.00562)  # sole centre ahead of / outward of the sole frame [m]
 #: Default 3D camera: this offset [m] from the point it looks at (behind-left, above).
@@ -89,31 +92,7 @@ EYE_OFFSET = np.array([-0.75, -1.15, 0.55])
 
 
 # =============================================================================== kinematics
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (..., 4) in w, x, y, z order."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
 
-
-def _quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (..., 3) by unit quaternions q (..., 4) (w, x, y, z)."""
-    w = q[..., :1]
-    u = q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
-
-
-def _rpy_quat(rpy) -> np.ndarray:
-    """URDF roll-pitch-yaw (R = Rz(y) Ry(p) Rx(r)) as a quaternion (w, x, y, z)."""
-    r, p, y = (0.5 * float(a) for a in rpy)
-    qx = np.array([math.cos(r), math.sin(r), 0.0, 0.0])
-    qy = np.array([math.cos(p), 0.0, math.sin(p), 0.0])
-    qz = np.array([math.cos(y), 0.0, 0.0, math.sin(y)])
-    return _quat_mul(qz, _quat_mul(qy, qx))
 
 
 def forward_kinematics(robot: RobotModel, q: np.ndarray, base_pos: np.ndarray, base_quat: np.ndarray
@@ -154,12 +133,12 @@ def forward_kinematics(robot: RobotModel, q: np.ndarray, base_pos: np.ndarray, b
     for k, j in enumerate(robot.joints):
         ip, ic = index[j.parent], index[j.child]
         qp = quat[:, ip]
-        pos[:, ic] = pos[:, ip] + _quat_rotate(qp, np.broadcast_to(np.asarray(j.xyz, float), (T, 3)))
+        pos[:, ic] = pos[:, ip] + quat_rotate(qp, np.broadcast_to(np.asarray(j.xyz, float), (T, 3)))
         axis = np.asarray(j.axis, float)
         axis = axis / np.linalg.norm(axis)
         half = 0.5 * q[:, k]
         qj = np.concatenate([np.cos(half)[:, None], np.sin(half)[:, None] * axis], axis=1)
-        quat[:, ic] = _quat_mul(qp, qj)
+        quat[:, ic] = quat_mul(qp, qj)
     return links, pos, quat
 
 
@@ -170,14 +149,8 @@ def frame_positions(robot: RobotModel, links: tuple[str, ...], pos: np.ndarray, 
     fr = robot.frames[frame]
     i = links.index(fr.link)
     local = np.asarray(fr.offset, float) + np.asarray(offset, float)
-    return pos[:, i] + _quat_rotate(quat[:, i], np.broadcast_to(local, pos[:, i].shape))
+    return pos[:, i] + quat_rotate(quat[:, i], np.broadcast_to(local, pos[:, i].shape))
 
-
-def _roll_pitch_quat(roll: np.ndarray, pitch: np.ndarray) -> np.ndarray:
-    """Quaternion (w, x, y, z) of R = Ry(pitch) Rx(roll) (torso tilt without yaw)."""
-    qx = np.stack([np.cos(roll / 2), np.sin(roll / 2), 0 * roll, 0 * roll], axis=1)
-    qy = np.stack([np.cos(pitch / 2), 0 * pitch, np.sin(pitch / 2), 0 * pitch], axis=1)
-    return _quat_mul(qy, qx)
 
 
 def link_poses(rec: Recording) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, bool]:
@@ -194,7 +167,7 @@ def link_poses(rec: Recording) -> tuple[tuple[str, ...], np.ndarray, np.ndarray,
         return (*forward_kinematics(robot, q, rec.group("gt.base"), rec.group("gt.quat")), True)
     if rec.has("angle"):
         ang = rec.group("angle")
-        bq = _roll_pitch_quat(ang[:, 0], ang[:, 1])
+        bq = quat_from_rpy(ang[:, 0], ang[:, 1])
     else:
         bq = np.tile([1.0, 0.0, 0.0, 0.0], (T, 1))
     links, pos, quat = forward_kinematics(robot, q, np.zeros((T, 3)), bq)
@@ -462,8 +435,8 @@ def _measured_cop(rec: Recording, robot, links, pos, quat) -> np.ndarray:
     pl = frame_positions(robot, links, pos, quat, "l_sole")
     pr = frame_positions(robot, links, pos, quat, "r_sole")
     il, ir = links.index(robot.frames["l_sole"].link), links.index(robot.frames["r_sole"].link)
-    pl = pl + _quat_rotate(quat[:, il], np.column_stack([cop[:, 0], cop[:, 1], np.zeros(T)]))
-    pr = pr + _quat_rotate(quat[:, ir], np.column_stack([cop[:, 2], cop[:, 3], np.zeros(T)]))
+    pl = pl + quat_rotate(quat[:, il], np.column_stack([cop[:, 0], cop[:, 1], np.zeros(T)]))
+    pr = pr + quat_rotate(quat[:, ir], np.column_stack([cop[:, 2], cop[:, 3], np.zeros(T)]))
     tot = f[:, 0] + f[:, 1]
     with np.errstate(invalid="ignore", divide="ignore"):
         out = (f[:, :1] * pl + f[:, 1:] * pr) / tot[:, None]
@@ -557,13 +530,13 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
         if len(kinds) != 1:  # pragma: no cover - the NAO model has one kind per link
             raise ValueError(f"link {link!r} mixes geometry kinds {kinds}")
         kind = kinds.pop()
-        qs = [_xyzw(_rpy_quat(g.rpy)) for g in gs]
+        qs = [_xyzw(quat_from_rpy(*g.rpy)) for g in gs]
         if kind == "box":
             arch = rr.Boxes3D(centers=[g.xyz for g in gs], half_sizes=[[s / 2 for s in g.size] for g in gs],
                               quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
         elif kind == "capsule":
             # URDF capsule: centred, cylinder of `length` along local z; Rerun: from 0 to +length along z.
-            starts = [np.asarray(g.xyz) + _quat_rotate(_rpy_quat(g.rpy), np.array([0.0, 0.0, -g.size[1] / 2]))
+            starts = [np.asarray(g.xyz) + quat_rotate(quat_from_rpy(*g.rpy), np.array([0.0, 0.0, -g.size[1] / 2]))
                       for g in gs]
             arch = rr.Capsules3D(lengths=[g.size[1] for g in gs], radii=[g.size[0] for g in gs], translations=starts,
                                  quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
@@ -832,7 +805,10 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
                 b = r.group("gt.base")
                 centers[k] = (0.5 * (b[:, 0].min() + b[:, 0].max()), 0.5 * (b[:, 1].min() + b[:, 1].max()), 0.2)
         bp = build_blueprint(list(labels), robot, {k: str(r.meta.get("world", k)) for k, r in labels.items()}, centers)
-    tmp = None
+    rows: dict[str, int] = {}
+    notes: dict[str, str] = {}
+    used: dict[str, int] = {}
+    t_log = 0.0
     if spawn:
         import shutil
         import sys
@@ -840,35 +816,29 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
         venv_bin = os.path.dirname(sys.executable)  # the viewer ships with rerun-sdk, next to python
         if shutil.which("rerun") is None and os.path.exists(os.path.join(venv_bin, "rerun")):
             os.environ["PATH"] = venv_bin + os.pathsep + os.environ.get("PATH", "")
-        stream.spawn(default_blueprint=bp)
     else:
         path = os.fspath(path)
-        d = os.path.dirname(os.path.abspath(path))
-        os.makedirs(d, exist_ok=True)
-        tmp = os.path.join(d, f".{os.path.basename(path)}.{os.getpid()}.tmp")
-        stream.save(tmp, default_blueprint=bp)
-    rows: dict[str, int] = {}
-    notes: dict[str, str] = {}
-    used: dict[str, int] = {}
-    t_log = 0.0
-    try:
-        stream.log("/legend", rr.TextDocument(LEGEND_MD, media_type=rr.MediaType.MARKDOWN), static=True)
-        for lab, rec in labels.items():
-            if lab in terrains or orig[lab] in terrains:
-                hf = terrains.get(lab, terrains.get(orig[lab]))
-                note = "flat ground (plane at z = 0)" if hf is None else "the rollout's terrain"
-            else:
-                hf, note = terrain_for(rec)
-            notes[lab] = note
-            rows.update(log_recording(stream, lab, rec, hf, note, _pick_color(str(rec.meta.get("world", "")), used)))
-        t_log = time.perf_counter() - t_start
-        stream.flush()
-    finally:
-        stream.disconnect()
-    size = 0
-    if tmp is not None:
-        os.replace(tmp, path)
-        size = os.path.getsize(path)
+    # a file is written to a temporary beside it and renamed when complete (common.files.atomic_path)
+    with contextlib.nullcontext(None) if spawn else atomic_path(path, suffix=".rrd") as tmp:
+        if spawn:
+            stream.spawn(default_blueprint=bp)
+        else:
+            stream.save(tmp, default_blueprint=bp)
+        try:
+            stream.log("/legend", rr.TextDocument(LEGEND_MD, media_type=rr.MediaType.MARKDOWN), static=True)
+            for lab, rec in labels.items():
+                if lab in terrains or orig[lab] in terrains:
+                    hf = terrains.get(lab, terrains.get(orig[lab]))
+                    note = "flat ground (plane at z = 0)" if hf is None else "the rollout's terrain"
+                else:
+                    hf, note = terrain_for(rec)
+                notes[lab] = note
+                rows.update(log_recording(stream, lab, rec, hf, note, _pick_color(str(rec.meta.get("world", "")), used)))
+            t_log = time.perf_counter() - t_start
+            stream.flush()
+        finally:
+            stream.disconnect()
+    size = 0 if spawn else os.path.getsize(path)
     return {"path": None if spawn else path, "labels": list(labels), "rows": rows, "notes": notes,
             "log_seconds": t_log, "seconds": time.perf_counter() - t_start, "bytes": size}
 

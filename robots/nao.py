@@ -1,10 +1,13 @@
 """A NAO-like H25 humanoid built from primitives: one Python spec -> one URDF for both engines.
 
 Kinematics, joint limits, effort/velocity limits and CoM-based inertials are those of the
-ros-naoqi V50 URDF (``nao_description/urdf/naoV50_generated_urdf/nao.urdf``, BSD), as tabulated in
-``shared/reference/nao_h25.md`` §3, §5, §7. Collision geometry is primitive (boxes, capsules,
-spheres); only the foot sole is sourced: a 160 x 88.8 mm box whose bottom face lies 45.11 mm below
-the ankle-roll axis, centred 30 mm forward and 5.62 mm outward of the ankle (nao_h25.md §4).
+ros-naoqi V50 URDF (github.com/ros-naoqi/nao_robot,
+``nao_description/urdf/naoV50_generated_urdf/nao.urdf``, BSD; its link lengths match Aldebaran's
+"H25 - Links" documentation). Collision geometry is primitive (boxes, capsules, spheres); only
+the foot sole is sourced: a 160 x 88.8 mm box whose bottom face lies 45.11 mm below the ankle-roll
+axis, centred 30 mm forward and 5.62 mm outward of the ankle (the sole outline of
+RoboCup SPL team code's B-Human-style robot dimensions, consistent with the FSR and foot-bumper
+frames of the V50 URDF).
 
 Design choices (see README "Robot model"):
 
@@ -13,8 +16,8 @@ Design choices (see README "Robot model"):
   frames are exposed as (parent link, offset) :class:`Frame` objects instead.
 * 24 hinges: head 2, arms 2x5, legs 2x6; the hands are dropped and their mass stays in
   ``l_wrist``/``r_wrist`` (the V50 URDF's wrist link already carries it).
-* ``RHipYawPitch`` mimics ``LHipYawPitch`` (one motor, nao_h25.md §9). The action space therefore
-  has 23 actuated joints; the right HipYawPitch target always equals the left one.
+* ``RHipYawPitch`` mimics ``LHipYawPitch`` (one motor; ``<mimic>`` in the V50 URDF). The action
+  space therefore has 23 actuated joints; the right HipYawPitch target always equals the left one.
 """
 
 from __future__ import annotations
@@ -27,9 +30,10 @@ from dataclasses import dataclass, field
 from xml.sax.saxutils import escape
 
 import numpy as np
+from common.files import atomic_write_text
 
 # --------------------------------------------------------------------------------------------
-# Named lengths [m] (nao_h25.md §3)
+# Named lengths [m] (V50 URDF joint origins; Aldebaran "H25 - Links")
 NECK_OFFSET_Z = 0.1265
 SHOULDER_OFFSET_Y = 0.098
 SHOULDER_OFFSET_Z = 0.100
@@ -42,17 +46,18 @@ THIGH_LENGTH = 0.100
 TIBIA_LENGTH = 0.1029
 FOOT_HEIGHT = 0.04511
 
-# Foot sole (nao_h25.md §4), in the ankle-roll frame of the left foot.
+# Foot sole (source: module docstring), in the ankle-roll frame of the left foot.
 SOLE_LENGTH = 0.160
 SOLE_WIDTH = 0.0888
 SOLE_CENTER_X = 0.030
 SOLE_CENTER_Y_OUT = 0.00562
 SOLE_THICKNESS = 0.015  # primitive choice: a 15 mm plate
 
-# IMU in the torso frame (nao_h25.md §3).
+# IMU in the torso frame (the V50 URDF's ``ImuTorso*`` frames).
 GYRO_OFFSET = (-0.008, 0.006, 0.029)
 ACCEL_OFFSET = (-0.008, 0.00606, 0.027)
-# FSRs in the left ankle-roll frame, at the sole plane (nao_h25.md §3); right foot mirrors y.
+# FSRs in the left ankle-roll frame, at the sole plane (the V50 URDF's ``*Fsr*_frame`` frames);
+# right foot mirrors y.
 FSR_XY_LEFT = {"FL": (0.07025, 0.0299), "FR": (0.07025, -0.0231), "RL": (-0.03025, 0.0299),
                "RR": (-0.02965, -0.0191)}
 
@@ -127,7 +132,7 @@ class Frame:
 
 
 # --------------------------------------------------------------------------------------------
-# Inertials from the V50 URDF (nao_h25.md §5), left side.
+# Inertials from the V50 URDF (about the CoM, as URDF expects), left side.
 TORSO = Inertial(1.04956, (-0.00413, 0.0, 0.04342),
                  (3.08361e-3, 2.88350e-3, 1.59240e-3, 1.43e-5, -3.30e-5, -2.71e-5))
 NECK = Inertial(0.07842, (-0.00001, 0.0, -0.02742), (1.603e-5, 1.704e-5, 5.53e-6, 0, 0, 0))
@@ -145,7 +150,8 @@ FOREARM = Inertial(0.07761, (0.02556, 0.00281, 0.00076), (2.467e-5, 3.838e-5, 3.
 WRIST = Inertial(0.18533, (0.03434, -0.00088, 0.00308), (6.865e-5, 1.358e-4, 1.332e-4, 1.2e-7, -2.9e-6, 2.7e-6))
 
 # PD gains [N m/rad], [N m s/rad] per joint family. Explicit PD on armature-free links (PyBullet
-# has no armature, engines.md §6) is stable only while kd*dt/I and kp*dt^2/I stay small, where I is
+# has no joint armature: its ``changeDynamics``, PyBullet Quickstart Guide, offers none) is stable
+# only while kd*dt/I and kp*dt^2/I stay small, where I is
 # the smallest effective joint inertia 1/(M^-1)_ii (hanging robot, crouch pose): 4e-5 kg m^2 for
 # WristYaw, 1.8e-4 for AnkleRoll. At the 1 ms physics step these gains keep kd*dt/I <= 0.5 and
 # kp*dt^2/I <= 0.2, with damping ratio ~0.8 against the joint's own mass-matrix diagonal where that
@@ -259,7 +265,7 @@ class RobotModel:
         frames: named rigid frames (``l_sole``, ``r_sole``, ``gyro``, ``accel``, FSRs).
         mimic: ``{follower: leader}`` (``RHipYawPitch`` follows ``LHipYawPitch``).
 
-    Source: ros-naoqi V50 URDF via ``shared/reference/nao_h25.md``.
+    Source: ros-naoqi V50 URDF (github.com/ros-naoqi/nao_robot, ``nao_description``).
     """
 
     name: str
@@ -336,10 +342,7 @@ class RobotModel:
             if os.path.exists(path):
                 return path
         path = os.fspath(path)
-        tmp = f"{path}.{os.getpid()}.tmp"
-        with open(tmp, "w") as f:
-            f.write(text)
-        os.replace(tmp, path)
+        atomic_write_text(path, text)
         return path
 
 

@@ -2,7 +2,7 @@
 
 ``f_real`` is fitted on real transitions ``(s_t, a_t, s_{t+1})`` (SGAT: Gaussian NLL; GAT: MSE)
 and ``f_sim^-1`` on sim transitions collected with exploration noise on the actions, so that it
-covers the next states the forward model proposes (Desai et al., IROS 2020, §III-B; the GAT code
+covers the next states the forward model proposes (Desai et al., IROS 2020, §III; the GAT code
 adds noise to the sim policy for the same reason). The action of a transition is the one *applied*
 to the world (for real data with a noisy actuator this is still the commanded one: the noise is
 part of the real dynamics the forward model must learn); the commanded one rides along for an

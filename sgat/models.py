@@ -8,7 +8,8 @@
   by mean squared error.
 
 Both are MLPs with two hidden layers of 64 tanh units (the paper's size; configurable) plus a
-linear skip path from input to output (``reference/grounding.md`` §3), with input and output
+linear skip path from input to output (as ``Net`` in ``rl_gat/gat.py`` of the GARAT code, Desai et
+al., NeurIPS 2020), with input and output
 normalisation stored inside the model, so weights and statistics travel together. ``fit`` trains
 with Adam, mini-batches, a validation split and early stopping that restores the best epoch.
 ``save``/``load`` use plain tensors and a JSON-able config: ``torch.load(weights_only=True)``.
@@ -26,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 from torch import nn
+from common.files import atomic_path
 
 LOG_STD_MIN, LOG_STD_MAX = -10.0, 2.0
 
@@ -179,10 +181,8 @@ class _Model(nn.Module):
     def save(self, path: str | os.PathLike) -> str:
         """Write config + state dict atomically; loadable with ``torch.load(weights_only=True)``."""
         path = os.fspath(path)
-        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-        tmp = f"{path}.{os.getpid()}.tmp"
-        torch.save({"config": self.config(), "state_dict": self.state_dict()}, tmp)
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:
+            torch.save({"config": self.config(), "state_dict": self.state_dict()}, tmp)
         return path
 
     @classmethod
@@ -285,7 +285,7 @@ class InverseModel(_Model):
             (under that Gaussian prior) that explains the state change. A one-step change of a PD-driven
             walking robot says little about its target (the contact forces are unobserved), so an
             inverse model without the command regresses toward the commands it saw; with it, the
-            command is the prior and Δs the evidence (README, "Grounding that holds").
+            command is the prior and Δs the evidence (README, "sgatwalk fidelity").
 
     Input layout: ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` (+ ``a_t`` with ``command_input``), size
     k*S + S (+ A); output: action (A).

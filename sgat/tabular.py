@@ -1,7 +1,7 @@
 """GAT and SGAT on finite MDPs: the toy examples and Cliff Walking of the SGAT paper.
 
 Source: Desai, Karnan, Hanna, Warnell, Stone, "Stochastic Grounded Action Transformation for
-Robot Learning in Simulation", IROS 2020 (``reference/sgat_paper.tex``): §II.D "Transferring to
+Robot Learning in Simulation", IROS 2020 (arXiv:2008.01281): §II.D "Transferring to
 a Stochastic Real World" (toy MDPs, Figs. 3–4), §III "SGAT" (Fig. 5, Algorithm 1) and §IV.A
 "Cliff Walking" (Figs. 6–7). Figure numbers are those of the compiled paper, where the NAO
 photo (``fig:lumpy_field_setup``) is Fig. 1 and the GAT diagram Fig. 2; the LaTeX labels are
@@ -43,7 +43,8 @@ Decisions where the paper is silent (each one is a parameter or documented where
 * Real data are collected with the current policy made ε-greedy (``explore``, default 0.1);
   a deterministic policy alone never shows ``f_real`` the other actions (in Fig. 3 the sim's
   favourite ``a1`` would then never be compared with a real ``a2``). Data accumulate over
-  grounding steps, as in the GAT baseline of the GARAT code (``reference/grounding.md`` §3).
+  grounding steps, as in the GAT baseline of the GARAT code (Desai et al., NeurIPS 2020;
+  ``rl_gat/gat.py``).
 * ``(s, a)`` pairs with fewer than ``min_count`` real samples are not grounded: the
   transformer is the identity there (the sim's own transition), as before the first fit.
 * Ties in ``f⁻¹_sim`` (several sim actions reach ``ŝ'``, e.g. two moves into walls) keep the

@@ -24,6 +24,7 @@ import gymnasium as gym
 import numpy as np
 
 from sgat.models import ForwardModel, InverseModel, ModelFileError
+from common.files import atomic_write_text
 
 METHODS = ("sgat", "gat")
 
@@ -245,10 +246,7 @@ class ActionTransformer:
             m.save(os.path.join(directory, "sim_" + ff))
         meta = {"method": self.method, "alpha": self.alpha, "seed": self.seed, "identity": self.is_identity,
                 "members": self.n_members, "sim_forward": bool(self.sim_forwards), "spec": self.spec.to_dict()}
-        tmp = os.path.join(directory, f"transformer.json.{os.getpid()}.tmp")
-        with open(tmp, "w") as f:
-            json.dump(meta, f, indent=1)
-        os.replace(tmp, os.path.join(directory, "transformer.json"))
+        atomic_write_text(os.path.join(directory, "transformer.json"), json.dumps(meta, indent=1))
         return directory
 
     @classmethod
@@ -294,7 +292,7 @@ class GroundedEnv(gym.Wrapper):
         transformer: the :class:`ActionTransformer`.
         ctrl_cost_weight: for envs whose reward has a control cost ``-w * |a|^2`` reported as
             ``info["reward_ctrl"]`` (gymnasium MuJoCo), recompute that term on the agent's action
-            (``reference/grounding.md`` §4: control cost uses a, not ã).
+            (SGAT paper §II.B: r_{t+1} = R(a_t, s_{t+1}), so the control cost uses a, not ã).
     """
 
     def __init__(self, env: gym.Env, transformer: ActionTransformer, *, ctrl_cost_weight: float | None = None):

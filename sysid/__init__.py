@@ -1,6 +1,7 @@
 """Mismatch diagnosis: locate where sim and real differ, name the missing physics, fit it, prove it.
 
-Pipeline (``shared/reference/sysid.md``): calibrate the engine gap (:func:`calibrate`) → replay
+Pipeline (this project's; see README, "sgatwalk excite and sgatwalk diagnose"): calibrate the engine gap
+(:func:`calibrate`) → replay
 real commands in MuJoCo from the measured state (:mod:`sysid.replay`, batched through
 ``mujoco.rollout``; windowed for floating-base logs) → localisation statistics
 (:mod:`sysid.stats`) → screening with a sensitivity dictionary and OMP/BIC, bounded nonlinear

@@ -2,7 +2,7 @@
 
 A *family* is one kind of missing physics; a *term* is a family at one joint or link (or global).
 Every term has a physical value; its nominal value is what the plain sim has. Families and their
-MuJoCo handles (``reference/sysid.md`` §3, §5.2):
+MuJoCo handles (MuJoCo documentation: XML reference, ``mjModel`` fields; Modeling, "Backlash"):
 
 ==================  =========  ========  ===========================================  ============
 family              scope      unit      MuJoCo augmentation                          probe (Δ)
@@ -131,7 +131,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
 #: Families screened on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact)
 #: Families screened by default on floating-base (standing/stepping) logs: bottom-up staging
-#: (sysid.md §5.6) fixes actuator effects in the air first and passes them in as a base model.
+#: (Bjelonic et al., arXiv:2509.06342) fixes actuator effects in the air first and passes them in as a
+#: base model.
 CONTACT_FAMILIES = tuple(n for n, f in FAMILIES.items() if f.contact)
 
 

@@ -3,7 +3,8 @@
 :func:`diagnose` takes loaded logs and returns the report as a JSON-able dict (the keys of
 ``REPORT_DIR/report.json``); :func:`calibrate` turns recordings of a real world without injected
 effects (profile "none") into the engine-gap baseline that later diagnoses are judged against.
-Selection rules (``reference/sysid.md`` §5.7), with cost C = Σ_channels mean((e/floor)²) on held-out
+Selection rules (this project's; BIC after Schwarz, Ann. Statist. 6(2), 1978), with cost C = Σ_channels
+mean((e/floor)²) on held-out
 windows (C = number of channels when every channel sits at its floor):
 
 * nothing to explain: no joint's residual energy exceeds 1.5 floor² (RMS 1.22 floors) on training or
@@ -35,7 +36,8 @@ MIN_FLOOR = 1e-5
 #: Encoder noise [rad] below which recordings are taken as noise-free (simulated): NAO-like encoders
 #: are ~1 mrad, so a diagnosis without a calibration warns that any engine gap will read as physics.
 NOISE_FREE_SIGMA = 1e-4
-#: Window length of windowed replay for floating-base logs [s] (sysid.md §5.5).
+#: Window length of windowed replay for floating-base logs [s] (multiple shooting, Ribeiro et al.,
+#: Automatica 2020; 0.5 s is this project's choice).
 WINDOW_S = 0.5
 
 EXPERIMENTS = {
@@ -144,8 +146,8 @@ def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, ro
 
     For each joint-scope family picked this round, the other joint families whose stage-A column
     explained at least half as much of the residual (at most 2) are fitted in its place on the
-    same joints (grid starts + least squares); the held-out costs decide (sysid.md §5.7:
-    single-family fits ranked on held-out data).
+    same joints (grid starts + least squares); the held-out costs decide (the
+    selection rules of this module: single-family fits ranked on held-out data).
 
     Returns:
         (the winning parameter set, [rejection records for the losers]).
@@ -203,7 +205,8 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
     Two parts: (1) the engine gap expressed in candidate terms: a diagnosis of these logs (with
     ``baseline``); the terms it declares (e.g. a stiffer ground in PyBullet than in MuJoCo) become
     the *baseline model* every later diagnosis replays under, so injected effects are judged
-    relative to it (sysid.md §6); (2) the residual left by the baseline model per channel, with
+    relative to it (the null-gap calibration of ``benchmarks/sysid_blind.py``); (2) the residual left by
+    the baseline model per channel, with
     the sensor noise removed: the gap that widens every later noise floor.
 
     Returns:
@@ -256,7 +259,8 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             the contact families for floating-base logs).
         base_model: terms (Term -> value) kept fixed under every replay, e.g. the effects a
             fixed-base (in-air) diagnosis found, when stepping logs are diagnosed for contact
-            (bottom-up staging, sysid.md §5.6). "Before" then means the sim with these terms.
+            (bottom-up staging, Bjelonic et al., arXiv:2509.06342). "Before" then means the sim with
+            these terms.
         time_budget_s: no new screening round, family competition or elimination step starts
             after this many seconds (the report says so); None: no limit.
         max_rounds: screening/refit rounds (re-screening around the fitted model).

@@ -14,6 +14,7 @@ import functools
 import mujoco
 import numpy as np
 
+from common.spatial import quat_from_rpy
 from sysid.data import Log
 
 
@@ -23,12 +24,6 @@ def _kin_model(physics_dt: float):
 
     rm = replay_model(Structure(fixed_base=False, physics_dt=physics_dt))
     return rm, mujoco.MjData(rm.model)
-
-
-def _quat_rp(roll: float, pitch: float) -> np.ndarray:
-    cr, sr = np.cos(roll / 2), np.sin(roll / 2)
-    cp, sp = np.cos(pitch / 2), np.sin(pitch / 2)
-    return np.array([cr * cp, sr * cp, cr * sp, -sr * sp])
 
 
 def base_state(log: Log, k: int) -> dict:
@@ -43,7 +38,7 @@ def base_state(log: Log, k: int) -> dict:
     rm, d = _kin_model(log.physics_dt)
     m = rm.model
     roll, pitch = log.imu["angle"][k]
-    quat = _quat_rp(float(roll), float(pitch))
+    quat = quat_from_rpy(float(roll), float(pitch))
     mujoco.mj_resetData(m, d)
     d.qpos[3:7] = quat
     d.qpos[rm.qadr] = log.q[k]

@@ -1,4 +1,5 @@
-"""An excitation protocol a user can run on a robot to diagnose it (``reference/sysid.md`` §5.6).
+"""An excitation protocol a user can run on a robot to diagnose it (in the air first, then on the
+ground: the bottom-up staging of Bjelonic et al., arXiv:2509.06342).
 
 Each log is a sequence of segments, every one aimed at some family of missing physics:
 
@@ -40,6 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.defaults import CONTROL_DT
 from robots import RobotModel
 
 SEGMENTS = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
@@ -64,7 +66,7 @@ def _smooth_step(x: np.ndarray) -> np.ndarray:
     return 0.5 - 0.5 * np.cos(np.pi * x)
 
 
-def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_dt: float = 0.01,
+def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_dt: float = CONTROL_DT,
              pose: str = "crouch", segments=SEGMENTS, fixed_base: bool = True, scale: float = 1.0) -> np.ndarray:
     """Joint targets [rad] for one excitation log, shape (round(seconds / control_dt), 23).
 

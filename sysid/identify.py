@@ -1,4 +1,4 @@
-"""Screen, refit, select: which candidate effects explain the replay residual (``sysid.md`` §5.3-5.8).
+"""Screen, refit, select: which candidate effects explain the replay residual (:mod:`sysid` pipeline).
 
 * :class:`Problem` holds the logs, the training / held-out windows (split by trajectory) and the
   per-channel noise floor; it turns parameter sets into normalised residual vectors and costs.
@@ -281,8 +281,8 @@ def _columns_terms(robot, fam_names, current, J, links, probes: dict | None = No
     return cols
 
 
-#: A joint stands out when its residual energy exceeds this many floor² (sysid.md §5.7: 1.5x noise
-#: energy means nothing to explain), i.e. RMS > 1.22 floors.
+#: A joint stands out when its residual energy exceeds this many floor² (the selection rules of
+#: :mod:`sysid.diagnose`: 1.5x noise energy means nothing to explain), i.e. RMS > 1.22 floors.
 FLAG_ENERGY = 1.5
 
 
@@ -464,7 +464,9 @@ def refit(problem: Problem, start: dict, free: list | None = None, *, max_nfev: 
 
 def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.959964,
                spread: dict | None = None) -> tuple[dict, np.ndarray]:
-    """95 % intervals from the Gauss-Newton covariance s² τ_int (JᵀJ)⁻¹ (sysid.md §5.8), widened by
+    """95 % intervals from the Gauss-Newton covariance s² τ_int (JᵀJ)⁻¹ (as in
+    ``mujoco.sysid.calculate_intervals``, inflated by the autocorrelation time τ_int of
+    :func:`sysid.stats.integrated_autocorr`), widened by
     ``spread`` (term -> standard deviation of per-trajectory estimates, which carries the model-form
     and trajectory-dependent errors a Gauss-Newton interval ignores).
 

@@ -6,7 +6,8 @@ the identified model can be exported as MJCF (``MjSpec.to_xml``). On top of the 
 
 * actuator history buffers (``nsample``, ``interp="linear"``) on every actuator, so actuation
   latency is a run-time field (``MjModel.actuator_delay``) and every candidate model has the same
-  sizes (``reference/sysid.md`` §5.2 "Homogeneous models for batched rollout");
+  sizes (``mujoco.rollout.rollout`` batches a list of models only when their sizes agree: MuJoCo
+  documentation, Python bindings, "rollout");
 * a stiff dry-friction constraint (``solref_friction``, 2 physics steps) on every joint, used
   only when a Coulomb candidate sets ``dof_frictionloss``;
 * ``jointpos`` sensors for the 24 robot hinges (and the series play hinges), plus a torso
@@ -39,7 +40,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from envs.base import quat_to_mat
+from common.defaults import PHYSICS_DT
+from common.spatial import quat_to_mat
 from envs.effects import NOMINAL_FOOT_FRICTION
 from envs.mujoco_world import build_spec
 from robots import RobotModel, nao_h25
@@ -89,7 +91,7 @@ class Structure:
     """
 
     fixed_base: bool = True
-    physics_dt: float = 0.001
+    physics_dt: float = PHYSICS_DT
     play_joints: tuple[str, ...] = ()
     friction: float = NOMINAL_FOOT_FRICTION
     hang_height: float = 0.6
@@ -314,7 +316,7 @@ def set_terrain(m: mujoco.MjModel, heights: np.ndarray) -> None:
 
 
 @functools.lru_cache(maxsize=8)
-def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = 0.001, robot_name: str = "nao_h25") -> dict:
+def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT, robot_name: str = "nao_h25") -> dict:
     """Stiffest series spring [N m/rad] per robot joint that the Euler step integrates stably.
 
     The spring force is explicit: the output side needs ``k dt^2 / I_out < 2`` (I_out: the joint's

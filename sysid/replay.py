@@ -7,10 +7,11 @@ sensor values computed at the start of each step, so sensor row ``i * substeps``
 ``k0 + i`` of a replay started at row ``k0``.
 
 A :class:`Window` is a stretch of one log replayed from the measured state at its first row.
-Single shooting uses one window per log; windowed replay (multiple shooting, ``sysid.md`` §5.5)
-cuts floating-base logs into short windows, each restarted from the measured state. All
+Single shooting uses one window per log; windowed replay (multiple shooting, Ribeiro et al., "On the
+smoothness of nonlinear system identification", Automatica 2020) cuts floating-base logs into short
+windows, each restarted from the measured state. All
 (parameter set, window) pairs of one model layout and length go through one batched, threaded
-``rollout`` call (``reference/sysid.md`` §9), in chunks that bound memory.
+``rollout`` call (MuJoCo documentation, Python bindings, "rollout"), in chunks that bound memory.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
+from common.spatial import quat_roll_pitch
 from sysid.candidates import Term, apply_terms, series_structure
 from sysid.data import Log
 from sysid.model import ReplayModel, Structure, replay_model
@@ -117,13 +119,6 @@ def _base_state(log: Log, k: int) -> dict | None:
     return base_state(log, k)
 
 
-def _roll_pitch(quat: np.ndarray) -> np.ndarray:
-    w, x, y, z = (quat[..., i] for i in range(4))
-    roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = np.arcsin(np.clip(2 * (w * y - z * x), -1.0, 1.0))
-    return np.stack([roll, pitch], axis=-1)
-
-
 def build_models(values_list: list[dict[Term, float]], structure: Structure) -> list[tuple[ReplayModel, mujoco.MjModel, np.ndarray]]:
     """Compile/copy one model per parameter set: (replay model, edited MjModel copy, (24,) bias)."""
     out = []
@@ -194,7 +189,7 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
                 y = sens[j] @ rm.meas.T + bias
                 if with_imu:
                     qa, ga = rm.quat_adr, rm.gyro_adr
-                    y = np.concatenate([y, _roll_pitch(sens[j][:, qa:qa + 4]), sens[j][:, ga:ga + 3]], axis=1)
+                    y = np.concatenate([y, quat_roll_pitch(sens[j][:, qa:qa + 4]), sens[j][:, ga:ga + 3]], axis=1)
                 out[wi][s] = y
             del rm0
     for o in out:

@@ -23,27 +23,12 @@ import os
 import numpy as np
 
 from sysid.candidates import Term
+from common.files import atomic_write_text, jsonable
 
 
-def _atomic_write(path: str, text: str) -> None:
-    tmp = f"{path}.{os.getpid()}.tmp"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
-
-
-def _jsonable(o):
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items() if not str(k).startswith("_")}
-    if isinstance(o, (list, tuple)):
-        return [_jsonable(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _jsonable(o.tolist())
-    if isinstance(o, np.generic):
-        return _jsonable(o.item())
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    return o
+def public_json(o):
+    """``o`` as strict JSON values without its private (``_``-prefixed) keys (:func:`common.files.jsonable`)."""
+    return jsonable(o, private=False)
 
 
 def _ci_text(e: dict) -> str:
@@ -298,18 +283,18 @@ def write_report(rep: dict, logs, out_dir: str, plots: bool = True) -> dict:
     paths = {}
     text = format_report(rep)
     p = os.path.join(out_dir, "report.txt")
-    _atomic_write(p, text + "\n")
+    atomic_write_text(p, text + "\n")
     paths["text"] = p
     xml = export_mjcf(rep.get("_model_terms", {}), rep["fixed_base"], logs[0].physics_dt)
     p = os.path.join(out_dir, "identified_model.xml")
-    _atomic_write(p, xml)
+    atomic_write_text(p, xml)
     paths["mjcf"] = p
     if plots:
         paths["plots"] = _plots(rep, logs, out_dir)
     rep = dict(rep)
     rep["files"] = paths
     p = os.path.join(out_dir, "report.json")
-    _atomic_write(p, json.dumps(_jsonable(rep), indent=1, allow_nan=False))
+    atomic_write_text(p, json.dumps(public_json(rep), indent=1, allow_nan=False))
     paths["json"] = p
     return paths
 

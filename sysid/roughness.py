@@ -1,4 +1,4 @@
-"""Terrain roughness as a fitted *distribution* of ground surfaces (issue 8; ``sysid.md`` §3, §5.2).
+"""Terrain roughness as a fitted *distribution* of ground surfaces (issue 8; BayesSim/DROPO-style, below).
 
 Uneven ground is not a value the sim lacks but a random surface under the feet that nobody
 measured: replaying a log on flat ground leaves a residual that no deterministic term removes
@@ -50,11 +50,12 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from envs.base import FALL_TORSO_HEIGHT, quat_to_mat
+from common.spatial import quat_roll_pitch, quat_to_mat
+from envs.base import FALL_TORSO_HEIGHT
 from sysid.candidates import FAMILIES, apply_terms, series_structure
 from sysid.data import Log
-from sysid.model import TERRAIN_CELL, TERRAIN_SHAPE, TERRAIN_SIZE, Structure, replay_model, set_terrain
-from sysid.replay import (Window, _base_state, _cmd_history, _pool, _roll_pitch, _start_velocity, build_models,
+from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
+from sysid.replay import (Window, _base_state, _cmd_history, _pool, _start_velocity, build_models,
                           measured, predict)
 from terrain import gaussian
 
@@ -175,7 +176,7 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 quat = qpos[:, 3:7]
                 angvel_w = np.einsum("ijn,nj->ni", quat_to_mat(quat.T), qvel[:, 3:6])  # body -> world
                 qa, ga = rm.quat_adr, rm.gyro_adr
-                imu = {"angle": _roll_pitch(ys[:, qa:qa + 4]), "gyro": ys[:, ga:ga + 3].copy()}
+                imu = {"angle": quat_roll_pitch(ys[:, qa:qa + 4]), "gyro": ys[:, ga:ga + 3].copy()}
                 gt = {"gt.base": qpos[:, 0:3].copy(), "gt.quat": quat.copy(), "gt.vel": qvel[:, 0:3].copy(),
                       "gt.angvel": angvel_w}
                 out[s][i] = Log(name=f"{lg.name}@surface{s}", t=lg.t, cmd=lg.cmd, q=q, dq=dq,

@@ -1,4 +1,4 @@
-"""Localisation statistics on replay residuals (``reference/sysid.md`` §4, §5.1): descriptive only.
+"""Localisation statistics on replay residuals (the localisation step of the :mod:`sysid` pipeline): descriptive only.
 
 All functions take residuals ``e = y_real - y_sim`` per window, shape (L, k), and the matching
 replay outputs; row 0 of each window (the measured start state) is skipped.
@@ -12,7 +12,7 @@ import numpy as np
 from sysid.data import Log
 from sysid.replay import Window
 
-#: Time after a foot's contact onset that counts as a touchdown window [s] (sysid.md §4).
+#: Time after a foot's contact onset that counts as a touchdown window [s] (a project choice).
 TOUCHDOWN_S = 0.1
 #: Foot force that counts as contact [N].
 CONTACT_N = 2.0
@@ -60,7 +60,7 @@ def _acf(x: np.ndarray, lags: int) -> np.ndarray:
 def integrated_autocorr(residuals: list[np.ndarray], max_lag: int = 50) -> float:
     """Integrated autocorrelation time [samples] of residuals (1 for white noise): 1 + 2 Σ ρ_k up to
     the first non-positive ρ, averaged over channels with energy. Used to inflate Gauss-Newton
-    intervals (sysid.md §5.8)."""
+    intervals (:func:`sysid.identify.confidence`)."""
     taus = []
     for e in residuals:
         for j in range(e.shape[1]):
@@ -134,7 +134,7 @@ PHASE_NAMES = {0: "in air / no contact", 1: "double support", 2: "left single su
 
 def localisation(logs: list[Log], wins: list[Window], y_sim: list[np.ndarray], floor: np.ndarray,
                  names: list[str], model: mujoco.MjModel | None = None, qadr=None, dadr=None) -> dict:
-    """Per-channel statistics of the nominal replay residual (sysid.md §5.1).
+    """Per-channel statistics of the nominal replay residual (descriptive; see the module docstring).
 
     Args:
         logs, wins: the replayed windows.  y_sim: per window, (L, k) nominal predictions.

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from common.defaults import CONTROL_DT, PHYSICS_DT
 from robots import nao_h25
 from sysid.data import Log
 from sysid.excitation import protocol
@@ -35,7 +36,7 @@ def synthetic_logs(values: dict, *, n_logs: int = 3, seconds: float = 6.0, noise
         cmd = r.expand_action(protocol(r, seconds, seed=traj_seed + i, **kw))
         n = len(cmd)
         lg = Log(name=f"synthetic_{i:03d}", t=np.arange(n) * 0.01, cmd=cmd, q=np.tile(r.pose("crouch"), (n, 1)),
-                 dq=np.zeros((n, 24)), control_dt=0.01, physics_dt=0.001, fixed_base=True,
+                 dq=np.zeros((n, 24)), control_dt=CONTROL_DT, physics_dt=PHYSICS_DT, fixed_base=True,
                  meta={"robot": "nao_h25", "control_dt": 0.01})
         y = predict([lg], whole_logs([lg]), [values])[0][0]
         rng = np.random.default_rng([seed, i])

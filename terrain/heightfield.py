@@ -5,9 +5,10 @@ index = x) with square cells of ``cell_size`` [m], centred on the world origin: 
 sits at ``x = -half_x + ix * cell_size``, ``y = -half_y + iy * cell_size``.
 
 Between nodes the surface is the triangulation MuJoCo uses: each cell is split along its
-(x0, y0)-(x1, y1) diagonal (``shared/reference/engines.md`` §3). :meth:`Heightfield.height_at`
+(x0, y0)-(x1, y1) diagonal (this project's measurement, ``tests/test_terrain.py``). :meth:`Heightfield.height_at`
 evaluates exactly that surface, and the PyBullet world builds a transposed, x-reversed, 90°-yawed
-copy so that Bullet's other diagonal lands on the same one (engines.md §3.1).
+copy so that Bullet's other diagonal lands on the same one (ray casts in both engines agree:
+``tests/test_terrain.py``).
 
 Generators (all seeded through a :class:`numpy.random.Generator` or an int seed):
 ``flat``, ``lumpy`` (Gaussian bumps like foam under turf), ``fractal`` (spectral fBm noise),

@@ -9,9 +9,7 @@ from experiments.cli import build_parser, main
 
 
 def test_help_lists_commands(capsys):
-    with pytest.raises(SystemExit) as e:
-        main(["--help"])
-    assert e.value.code == 0
+    assert main(["--help"]) == 0
     assert "stand" in capsys.readouterr().out
 
 
@@ -35,7 +33,7 @@ def test_stand_table_output(capsys):
 @pytest.mark.parametrize("argv,msg", [
     (["stand", "--world", "moon"], "unknown world 'moon'"),
     (["stand", "--world", "real", "--profile", "nope"], "unknown profile 'nope'"),
-    (["stand", "--seconds", "-1"], "--seconds must be positive"),
+    (["stand", "--seconds", "-1"], "argument --seconds: must be in (0, 3600] s"),
     (["stand", "--pose", "yoga"], "unknown pose 'yoga'"),
 ])
 def test_bad_input_exits_2(capsys, argv, msg):
@@ -49,3 +47,13 @@ def test_every_command_has_json_flag():
     sub = next(a for a in parser._actions if a.dest == "command")
     for name, p in sub.choices.items():
         assert any("--json" in a.option_strings for a in p._actions), name
+
+
+def test_json_output_is_reproducible_and_timings_are_opt_in(capsys):
+    argv = ["walk", "--seconds", "0.5", "--json"]
+    assert main(argv) == 0
+    first = capsys.readouterr().out
+    assert main(argv) == 0
+    assert capsys.readouterr().out == first and "wall_s" not in first  # identical runs print identical JSON
+    assert main([*argv, "--timings"]) == 0
+    assert json.loads(capsys.readouterr().out)["wall_s"] > 0

@@ -43,7 +43,7 @@ def test_parse_world_options():
 
 def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     out = tmp_path / "fid"
-    args = ["fidelity", *TINY, "--worlds", "sim", "sgat", "gat", "--out", str(out), "--json"]
+    args = ["fidelity", *TINY, "--worlds", "sim", "sgat", "gat", "--out", str(out), "--timings", "--json"]
     assert main(args) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["gaits"][0] == "theta0" and len(res["gaits"]) == 3
@@ -56,10 +56,11 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
         assert (out / f).exists(), f
     n_lines = len((out / "episodes.jsonl").read_text().splitlines())
     # a second run with one more world measures only that world
-    assert main([*args[:-4], "--worlds", "sim", "sgat", "gat", "ane", "--out", str(out), "--json"]) == 0
+    assert main([*args[:-5], "--worlds", "sim", "sgat", "gat", "ane", "--out", str(out), "--timings", "--json"]) == 0
     res2 = json.loads(capsys.readouterr().out)
     assert len((out / "episodes.jsonl").read_text().splitlines()) == n_lines + 3 * 2
     assert res2["worlds"]["sgat"] == res["worlds"]["sgat"]
+    assert res2["wall_s"] > res["wall_s"] > 0  # the run's time accumulates over its invocations (timing.json)
     # other settings in the same directory are refused
     assert main(["fidelity", *TINY[:-2], "--real-trials", "3", "--workers", "1", "--out", str(out)]) == 2
     assert "other settings" in capsys.readouterr().err

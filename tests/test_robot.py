@@ -66,7 +66,7 @@ def test_both_engines_same_mass_and_com(robot):
     # same standing pose, same base placement rule: CoM within 2 mm
     assert np.linalg.norm(info_s["com"] - info_r["com"]) < 2e-3
     assert np.linalg.norm(info_s["base_pos"] - info_r["base_pos"]) < 2e-3
-    # torso origin of the crouch ~0.313 m above the soles (nao_h25.md §2)
+    # torso origin of the crouch ~0.313 m above the soles (forward kinematics of the V50 URDF lengths)
     assert info_s["base_pos"][2] == pytest.approx(0.313, abs=0.003)
     real.close()
 

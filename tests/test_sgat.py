@@ -194,3 +194,23 @@ def test_ensemble_draws_a_member_per_episode(fitted, tmp_path):
         ActionTransformer(_spec(), [sgat, sgat2], [inv], alpha=1.0)
     with pytest.raises(ValueError, match="alpha"):
         ActionTransformer(_spec(), sgat, inv)
+
+
+def test_gat_transformer_recovers_a_known_action_gain(fitted):
+    """A real world whose actuators deliver 0.7× and 1.3× of the command (ds = (g ⊙ a) Mᵀ) and a sim
+    that delivers 1× (ds = a Mᵀ): the grounded action ã = f_sim⁻¹(s, f_real(s, a)) must be g ⊙ a
+    (paper eq. 2 with α = 1), and α = 0.5 goes half way."""
+    _, _, inv = fitted  # the sim's inverse model
+    g = np.array([0.7, 1.3])
+    rng = np.random.default_rng(11)
+    s = rng.normal(0, 1, (4000, 3))
+    a = rng.uniform(-0.7, 0.7, (4000, 2))
+    real = ForwardModel(3, 2, stochastic=False)
+    real.fit(np.hstack([s, a]), (a * g) @ M.T, seed=0, lr=3e-3)
+    t = ActionTransformer(_spec(), real, inv, method="gat", alpha=1.0)
+    half = ActionTransformer(_spec(), real, inv, method="gat", alpha=0.5)
+    for k in range(20):
+        ak = rng.uniform(-0.7, 0.7, 2)
+        sk = rng.normal(0, 1, 3)
+        assert np.abs(t.transform(sk, ak) - g * ak).max() < 0.06, (ak, t.transform(sk, ak))
+        assert np.abs(half.transform(sk, ak) - (1 + g) / 2 * ak).max() < 0.04

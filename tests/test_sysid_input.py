@@ -67,7 +67,7 @@ def test_inconsistent_logs_and_missing_paths(tmp_path, capsys):
     a = _rec().to_parquet(tmp_path / "a.parquet")
     b = _rec(n=150, control_dt=0.02).to_parquet(tmp_path / "b.parquet")
     assert "control_dt" in _diagnose_error(capsys, a, b)
-    assert "no recording" in _diagnose_error(capsys, str(tmp_path / "nope.parquet"))
+    assert "argument --real: no such file or directory" in _diagnose_error(capsys, str(tmp_path / "nope.parquet"))
     os.makedirs(tmp_path / "empty")
     assert "no .parquet" in _diagnose_error(capsys, str(tmp_path / "empty"))
     with pytest.raises(RecordingError):

@@ -1,6 +1,7 @@
 """``sgatwalk visualize`` and experiments.viz: .rrd files read back without a viewer.
 
-Each written file is read with ``rerun.chunk.RrdReader`` (rerun-sdk 0.41, ecosystem.md §1.6) and
+Each written file is read with ``rerun.chunk.RrdReader`` (rerun-sdk 0.41, Python API reference
+https://ref.rerun.io/docs/python/) and
 compared with the recording it came from: entity paths, time points per entity, sample values.
 """
 
@@ -311,7 +312,7 @@ def _write_bad(tmp_path, recs):
 @pytest.mark.parametrize("case,msg", [
     ("other", "recording is of robot 'talos'"),
     ("empty", "empty (0 rows)"),
-    ("missing", "no recording at"),
+    ("missing", "no such file or directory"),
 ])
 def test_cli_bad_input_exits_2(recs, tmp_path, capsys, case, msg):
     other, empty = _write_bad(tmp_path, recs)
@@ -326,15 +327,17 @@ def test_cli_bad_input_exits_2(recs, tmp_path, capsys, case, msg):
 
 @pytest.mark.parametrize("argv,msg", [
     (["--world", "grounded"], "needs --transformer"),
-    (["--world", "grounded", "--transformer", "/nonexistent/model"], "no action transformer"),
+    (["--world", "grounded", "--transformer", "/nonexistent/model"], "argument --transformer: no such file or directory"),
     (["--world", "moon"], "unknown world 'moon'"),
-    (["--world", "sim", "--seconds", "0"], "--seconds must be positive"),
-    (["--world", "sim", "--params", "/nonexistent/theta.json"], "no gait parameter file"),
+    (["--world", "sim", "--seconds", "0"], "argument --seconds: must be in (0, 3600] s"),
+    (["--world", "sim", "--params", "/nonexistent/theta.json"], "argument --params: no such file"),
     (["x.parquet", "--params", "theta.json"], "--params is for a live rollout"),
     (["--spawn", "--save", "a.rrd"], "not both"),
 ])
 def test_cli_bad_options_exit_2(tmp_path, capsys, monkeypatch, argv, msg):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.parquet").write_bytes(b"")  # inputs exist: the checks under test come after the path checks
+    (tmp_path / "theta.json").write_text("{}")
     assert main(["visualize", *argv]) == 2
     err = capsys.readouterr().err
     assert msg in err and "Traceback" not in err

@@ -34,8 +34,15 @@ def test_walk_json_and_record(tmp_path, capsys):
 
 
 def test_walk_human_output_defaults_to_theta0(capsys):
+    """The printed line is the --json result of the same (deterministic) walk of θ0, in words."""
+    from experiments.cmd_walk import format_walk
+    from walk_engine import GaitParams
+
     code, out, _ = _run(capsys, "--seconds", "1")
-    assert code == 0 and "speed" in out and "drift" in out and "fitness" in out
+    code2, js, _ = _run(capsys, "--seconds", "1", "--json")
+    res = json.loads(js)
+    assert code == code2 == 0 and res["params"] == GaitParams().to_dict()
+    assert out.strip() == format_walk(res) and f"speed {res['speed_cm_s']:.2f} cm/s" in out
 
 
 def test_walk_real_world_terrain(capsys):
@@ -62,12 +69,12 @@ def test_bad_params_file_is_a_one_line_error(tmp_path, capsys, content, words):
 
 
 @pytest.mark.parametrize("argv, words", [
-    (["--params", "/nonexistent/theta.json"], "no gait parameter file"),
+    (["--params", "/nonexistent/theta.json"], "argument --params: no such file"),
     (["--seconds", "-1"], "--seconds"),
     (["--profile", "real"], "real world only"),
     (["--world", "real", "--profile", "nonsense", "--seconds", "0.1"], "unknown profile"),
-    (["--terrain", "lumpy", "--amplitude", "-0.1"], "amplitude for lumpy must be within [0, 0.2] m"),
-    (["--terrain", "lumpy", "--amplitude", "5"], "amplitude for lumpy must be within"),
+    (["--terrain", "lumpy", "--amplitude", "-0.1"], "argument --amplitude: must be in [0, 1]"),
+    (["--terrain", "lumpy", "--amplitude", "0.5"], "amplitude for lumpy must be within [0, 0.2] m"),
     (["--amplitude", "0.01"], "--amplitude needs --terrain"),
     (["--record", "/"], "is a directory"),
 ])
@@ -85,6 +92,6 @@ def test_walk_in_the_identified_world_and_seed_errors(tmp_path, capsys):
     res = json.loads(out)
     assert res["terrain"].startswith("gaussian(sq=0.002") and res["world"] == "identified"
     for argv, words in [(["--world", "identified"], "needs --report"), (["--report", str(rep)], "needs --world identified"),
-                        (["--seed", "-5"], "--seed must be >= 0")]:
+                        (["--seed", "-5"], "argument --seed: must be in [0, 4294967295]")]:
         code, out, err = _run(capsys, *argv)
         assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -2,7 +2,6 @@
 
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -148,21 +147,6 @@ def test_load_compensation_straightens_the_support_knee():
 def test_rejects_bad_params_type():
     with pytest.raises(ValueError, match="GaitParams"):
         WalkEngine(ROBOT, params={"step_period": 0.3})
-
-
-def test_step_is_fast():
-    """step() must be cheap (target ~70 µs median; the benchmark reports the exact figure)."""
-    eng = WalkEngine(ROBOT)
-    eng.reset()
-    o = _obs()
-    for _ in range(50):
-        eng.step(o)
-    ts = []
-    for _ in range(500):
-        t = time.perf_counter()
-        eng.step(o)
-        ts.append(time.perf_counter() - t)
-    assert np.median(ts) < 500e-6  # generous: shared CI machines
 
 
 def test_long_walk_keeps_reference_continuous():

@@ -52,6 +52,20 @@ def test_json_round_trip_is_atomic(tmp_path):
     assert os.listdir(tmp_path / "sub") == ["theta.json"]  # no temporary file left behind
     doc = json.loads((tmp_path / "sub" / "theta.json").read_text())
     assert set(doc["params"]) == set(NAMES) and doc["units"]["step_period"] == "s"
+    # a write that dies before the rename leaves the old file whole and no temporary behind
+    import common.files
+
+    def crash(fd):
+        raise OSError(28, "No space left on device")
+
+    orig = common.files.os.fsync
+    common.files.os.fsync = crash
+    try:
+        with pytest.raises(OSError, match="No space"):
+            GaitParams(step_length=0.05).save(path)
+    finally:
+        common.files.os.fsync = orig
+    assert GaitParams.load(path) == p and os.listdir(tmp_path / "sub") == ["theta.json"]
     # a plain {name: value} object loads too
     plain = tmp_path / "plain.json"
     plain.write_text(json.dumps(p.to_dict()))

@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pytest
 
+from common.spatial import quat_yaw
 from experiments.fitness import FALL_PENALTY, run_walk, walk_fitness
 from walk_engine import GaitParams, WalkCommand
 
 
 def _yaw(quat_wxyz):
-    w, x, y, z = quat_wxyz.T
-    return np.unwrap(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    return np.unwrap(quat_yaw(quat_wxyz))
 
 
 def test_theta0_walks_20s_in_sim():
@@ -91,21 +91,19 @@ def test_fitness_uses_nominal_duration():
     assert walk_fitness(rec, 4.0).speed_cm_s == pytest.approx(res.speed_cm_s / 2)
 
 
-def test_theta0_walks_on_flat_real_world_without_effects():
+def test_theta0_walks_on_flat_real_world_without_effects_as_fast_as_in_the_sim():
+    """Without the real world's effects and bumps the two engines agree on the walk: θ0's speed in
+    PyBullet is within 1 cm/s of MuJoCo's (measured 14.30 vs 14.45 cm/s)."""
     rec, res = run_walk(world="real", profile="none", terrain="flat", seconds=7.5)
     assert not res.fell and res.speed_cm_s >= 8.0 and res.drift_m < 0.1 * res.distance_m, res
+    _, sim = run_walk(world="sim", seconds=7.5)
+    assert abs(res.speed_cm_s - sim.speed_cm_s) < 1.0, (res.speed_cm_s, sim.speed_cm_s)
 
 
 @pytest.mark.slow
 def test_theta0_walks_20s_on_flat_real_world_without_effects():
     rec, res = run_walk(world="real", profile="none", terrain="flat", seconds=20.0)
     assert not res.fell and res.speed_cm_s >= 8.0 and res.drift_m < 0.1 * res.distance_m, res
-
-
-@pytest.mark.slow
-def test_theta0_walks_on_most_real_profile_seeds():
-    falls = [run_walk(world="real", seed=s)[1].fell for s in range(5)]
-    assert sum(falls) <= 2, falls
 
 
 @pytest.mark.slow

@@ -2,7 +2,7 @@
 
 GaitParams (the 16) -> FootstepPlanner -> ZmpPreview (Kajita 2003) -> swing trajectory -> analytic
 leg IK with the shared HipYawPitch -> gyro feedback -> 23 joint targets at 100 Hz (WalkEngine).
-See ``shared/reference/walk_engines.md``.
+See walk_engine/README.md.
 """
 
 from walk_engine.engine import WalkEngine, observation_slices

@@ -1,6 +1,7 @@
 """The ZMP walk engine: (time, observation) -> 23 joint targets at 100 Hz.
 
-Pipeline per control tick (``shared/reference/walk_engines.md`` §3, stages 1-7, plus 8):
+Pipeline per control tick (module split after Rhoban placo's humanoid walk, github.com/Rhoban/placo,
+with Kajita's preview control for the CoM):
 
 1. footsteps from the velocity command (:class:`walk_engine.footsteps.FootstepPlanner`);
 2. ZMP reference under the support foot, linear across double support;
@@ -13,11 +14,12 @@ Pipeline per control tick (``shared/reference/walk_engines.md`` §3, stages 1-7,
 6. analytic leg IK with the shared HipYawPitch (support-leg weighted,
    :func:`walk_engine.kinematics.legs_ik`);
 7. feedback: low-passed gyro (first order, :data:`GYRO_CUTOFF_HZ`) pitch rate -> support ankle
-   pitch, roll rate -> support ankle roll and hip roll (rUNSWift Walk2014 / UPenn, walk_engines.md
-   §8); optional (constructor ``torso_angle_gain``, off by default, not one of the 16): measured
+   pitch, roll rate -> support ankle roll and hip roll (rUNSWift Walk2014: Hengst, UNSW
+   report, 2014, §5.2; UPenn's DARwIn-OP walk); optional (constructor ``torso_angle_gain``, off by
+   default, not one of the 16): measured
    torso roll/pitch error (IMU ``angle`` minus the planned attitude) -> support ankle roll/pitch;
    feed-forward support hip-roll compensation in single support; support weights follow the
-   planned ZMP (time-based support switch, walk_engines.md §3 "Support switch");
+   planned ZMP (time-based support switch, see walk_engine/README.md; rUNSWift switches on FSR events);
 8. load compensation (fixed, not a gait parameter): the joint servos are soft PD loops
    (``robots.nao.GAINS``: a 0.1 rad error saturates a leg motor), so a support leg sags by
    τ/kp under the body weight -- a stance knee by ≈0.08 rad, which tilts the torso back by as
@@ -38,6 +40,7 @@ import math
 
 import numpy as np
 
+from common.defaults import CONTROL_DT
 from robots import RobotModel, nao_h25
 from walk_engine.footsteps import FootstepPlanner, Phase, SupportPolygon, WalkCommand, zmp_reference
 from walk_engine.kinematics import (LEG_JOINTS, BodyModel, _fixed_scalar, _fixed_t, _free_hyp, _free_hyp_t,
@@ -46,11 +49,11 @@ from walk_engine.params import GaitParams
 from walk_engine.preview import ZmpPreview
 from walk_engine.swing import min_jerk, swing_pose
 
-#: Control period of the engine [s] (the worlds' ``control_dt``).
-CONTROL_DT = 0.01
-#: Preview horizon [s] (walk_engines.md §2: 1 s is ample for z_c ≈ 0.25 m).
+#: Preview horizon [s] (1 s is ample for z_c ≈ 0.25 m: the preview gains decay below 1 % of the first
+#: one, tests/test_walk_preview.py).
 PREVIEW_HORIZON = 1.0
-#: First-order low-pass cut-off of the gyro feedback [Hz] (walk_engines.md §9 fixed settings).
+#: First-order low-pass cut-off of the gyro feedback [Hz] (a project setting; rUNSWift Walk2014 filters
+#: its gyro at ≈3.5 Hz).
 GYRO_CUTOFF_HZ = 5.0
 #: Time [s] over which the targets blend from the measured pose at reset into the walking stance.
 BLEND_TIME = 0.2
@@ -81,8 +84,8 @@ def nominal_stance(robot_name: str, com_height: float, feet_spacing: float, tors
     """Where the torso must be for the whole-body CoM to sit at (0, 0, ``com_height``) above feet
     at (0, ±spacing/2, 0), torso pitched by ``torso_pitch``, arms in the crouch pose.
 
-    Fixed-point iteration on the torso position with the NumPy body model (walk_engines.md §3 stage
-    5, "fixed-point iterations with the full-model CoM").
+    Fixed-point iteration on the torso position with the NumPy body model (stage 5 of the module
+    docstring: fixed-point iterations with the full-model CoM).
 
     Returns:
         (c_off (3,): whole-body CoM minus torso origin in the yaw-aligned walk frame [m],
@@ -328,7 +331,7 @@ class WalkEngine:
         qR = _fixed_t("R", tR, hyp)
         if self.load_compensation:
             self._compensate(qL, qR, wL, x, fL, fR, tx, ty, tz, cy, sy, cp, sp)
-        # feedback (walk_engines.md §8): + pitch rate -> + ankle pitch, + roll rate -> + rolls
+        # feedback (as in rUNSWift Walk2014 and the B-Human walk): + pitch rate -> + ankle pitch, + roll rate -> + rolls
         gx, gy = gf[0], gf[1]
         wR = 1.0 - wL
         if self.torso_angle_gain:

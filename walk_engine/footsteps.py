@@ -1,7 +1,7 @@
 """Velocity command -> footsteps -> support phases with their ZMP reference.
 
-Stage 1 and 2 of ``shared/reference/walk_engines.md`` §3 (structure after Rhoban placo's
-``FootstepsPlanner`` / ``make_supports``, §4):
+Stage 1 and 2 of :mod:`walk_engine.engine` (structure after Rhoban placo's
+``FootstepsPlanner`` / ``make_supports``, github.com/Rhoban/placo, ``src/placo/humanoid``):
 
 * A *centre* frame (x, y, yaw) between the feet moves by (dx, dy, dθ) per step in its own frame;
   the swing foot lands at the new centre ± ``feet_spacing``/2. Sideways and turning motion is done
@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from common.defaults import EPISODE_SECONDS
 from walk_engine.params import GaitParams
 
 #: Semi-axes of the per-step displacement ellipsoid: backward dx [m], sideways dy [m] (average per
@@ -290,7 +291,7 @@ def zmp_reference(phase: Phase, t: np.ndarray) -> np.ndarray:
     return z0[None, :] + s[:, None] * (z1 - z0)[None, :]
 
 
-def plan_phases(params: GaitParams, command: WalkCommand | None = None, seconds: float = 7.5,
+def plan_phases(params: GaitParams, command: WalkCommand | None = None, seconds: float = EPISODE_SECONDS,
                 stop_after: float | None = None) -> list[Phase]:
     """All phases that start before ``seconds`` [s]; with ``stop_after`` [s], a stop is requested
     at the first step starting after that time (a fixed plan for tests and plots)."""
@@ -307,7 +308,7 @@ def plan_phases(params: GaitParams, command: WalkCommand | None = None, seconds:
 
 @dataclass
 class SupportPolygon:
-    """Sole rectangle of the robot's foot in the foot frame (nao_h25.md §4): x from ``back`` to
+    """Sole rectangle of the robot's foot in the foot frame (as in ``robots.nao``): x from ``back`` to
     ``front`` [m] of the ankle projection, y from ``-inner``..``outer`` (left foot; mirrored)."""
 
     front: float = 0.110

