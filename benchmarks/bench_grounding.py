@@ -35,11 +35,12 @@ def main(argv=None):
     from envs import NaoSimEnv
     from experiments.fitness import run_walk
     from sgat.models import ForwardModel, InverseModel
-    from sgat.transformer import ActionTransformer, GroundedEnv, GroundingSpec
+    from experiments.grounding import grounding_spec
+    from sgat.transformer import ActionTransformer, GroundedEnv
     from walk_engine import GaitParams
 
     sim = NaoSimEnv()
-    spec = GroundingSpec.for_nao(sim)
+    spec = grounding_spec(sim)
     rng = np.random.default_rng(0)
     # a transformer with random-but-fitted weights (fit on synthetic data: the cost is what matters)
     fwd, inv = ForwardModel(spec.state_dim, spec.action_dim), InverseModel(spec.state_dim, spec.action_dim)

@@ -38,7 +38,8 @@ def main(argv=None):
     from sgat.grounding import fit_transformer, recording_transitions
     from walk_engine import GaitParams
 
-    from sgat.transformer import ActionTransformer, GroundingSpec
+    from experiments.grounding import grounding_spec
+    from sgat.transformer import ActionTransformer
 
     theta = GaitParams.initial().to_array().tolist()
     base = {"theta": theta, "seconds": 7.5, "profile": "real"}
@@ -55,7 +56,7 @@ def main(argv=None):
         print(f"{'grounding state':22s} {'method':6s} {'forward nMSE':>12s} {'inverse RMS [mrad]':>19s}")
         fits = {}
         for variant, k in (("legs", 1), ("legs+imu", 1), ("legs", 2)):
-            spec = GroundingSpec.for_nao(env, variant, k)
+            spec = grounding_spec(env, variant, k)
             R, Rh = recording_transitions(real[:-1], env.layout, spec), recording_transitions(real[-1:], env.layout, spec)
             S, Sh = recording_transitions(sim[:-1], env.layout, spec), recording_transitions(sim[-1:], env.layout, spec)
             for m in ("gat", "sgat"):

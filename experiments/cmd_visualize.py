@@ -13,7 +13,7 @@ Inputs, one of:
 Writes one ``.rrd`` (``--save``, default ``sgatwalk.rrd``; headless, no viewer needed; open it
 with ``rerun sgatwalk.rrd``) or streams to a viewer (``--spawn``). ``--screenshot out.png`` also
 renders the default layout headlessly (needs a GPU or Mesa's lavapipe Vulkan driver). The layout
-and entity paths are described in ``experiments/viz.py``.
+and entity paths are described in ``experiments/viz/__init__.py``.
 """
 
 from __future__ import annotations

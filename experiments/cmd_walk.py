@@ -10,7 +10,6 @@ parameters in its metadata). Without ``--params`` the initial parameter set θ0 
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 from experiments.fitness import EPISODE_SECONDS, run_walk

@@ -32,14 +32,41 @@ DEFAULT_GROUNDING = GroundingConfig(alpha=0.5, method="sgat", ensemble=5)
 HYBRID_GROUNDING = GroundingConfig(alpha=0.1, method="sgat", ensemble=5)
 
 
+#: Grounding states of the NAO: what it measures of its legs (encoder angles and joint velocities),
+#: optionally with the inertial unit (gyro and torso roll/pitch).
+GROUNDING_STATES = ("legs", "legs+imu")
+
+
+def grounding_spec(env, state: str = "legs", history: int = 1) -> GroundingSpec:
+    """The NAO's grounding spec for a NAO env (``envs.NaoEnv`` or a wrapper of one): the state is
+    ``q.*`` and ``dq.*`` of the 12 leg joints (``"legs+imu"``: plus ``gyro.*``, ``angle.roll``,
+    ``angle.pitch``), the grounded actions are the 11 actuated leg targets (the shared HipYawPitch
+    counts once); arms and head pass through.
+
+    Raises:
+        ValueError: unknown state variant, or history < 1.
+    """
+    if state not in GROUNDING_STATES:
+        raise ValueError(f"unknown grounding state {state!r}; choose one of {', '.join(GROUNDING_STATES)}")
+    base = env.unwrapped
+    robot = base.robot
+    legs = robot.groups["legs"]
+    names = [f"q.{j}" for j in legs] + [f"dq.{j}" for j in legs]
+    if state == "legs+imu":
+        names += ["gyro.x", "gyro.y", "gyro.z", "angle.roll", "angle.pitch"]
+    acts = list(robot.actuated_joint_names)
+    return GroundingSpec.from_names(base.layout.names, names, acts, [j for j in acts if j in legs],
+                                    base.action_space.low, base.action_space.high, history, f"nao-{state}")
+
+
 @functools.lru_cache(maxsize=8)
 def nao_spec(state: str = "legs", history: int = 1) -> GroundingSpec:
-    """The NAO grounding spec (:meth:`sgat.transformer.GroundingSpec.for_nao`) of the MuJoCo sim."""
+    """The NAO grounding spec (:func:`grounding_spec`) of the MuJoCo sim."""
     from envs import NaoSimEnv
 
     env = NaoSimEnv()
     try:
-        return GroundingSpec.for_nao(env, state, history)
+        return grounding_spec(env, state, history)
     finally:
         env.close()
 

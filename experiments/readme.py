@@ -28,12 +28,14 @@ RESULTS = os.path.join(ROOT, "docs", "results")
 _BLOCK = re.compile(r"(<!-- results:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /results:(?P=name) -->)", re.S)
 
 
-def save(name: str, command: str, result: dict, results_dir: str = RESULTS) -> str:
-    """Write ``docs/results/NAME.json`` (atomically); returns its path."""
+def save(name: str, command: str, result: dict, results_dir: str = RESULTS, machine: dict | None = None) -> str:
+    """Write ``docs/results/NAME.json`` (atomically); returns its path. ``machine``: where and under
+    what load it ran (cores, 1-minute load average before and after)."""
     from common.files import atomic_write_text
 
     path = os.path.join(results_dir, f"{name}.json")
-    atomic_write_text(path, json.dumps({"command": command, "result": result}, indent=1, allow_nan=False) + "\n")
+    doc = {"command": command, "result": result, **({"machine": machine} if machine else {})}
+    atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return path
 
 
@@ -166,6 +168,10 @@ def render(text: str, results_dir: str = RESULTS) -> str:
         with open(path) as f:
             doc = json.load(f)
         body = f"```console\n$ {doc['command']}\n```\n\n{RENDERERS[kind](doc['result'])}\n"
+        mach = doc.get("machine")
+        if mach:
+            body += (f"\n<sub>Run on {mach['cpus']} cores; 1-minute load average {mach['load_before']:.1f} at the start, "
+                     f"{mach['load_after']:.1f} at the end.</sub>\n")
         return m.group(1) + body + m.group(4)
 
     return _BLOCK.sub(block, text)
@@ -178,13 +184,15 @@ def run_and_save(name: str, args: list[str]) -> str:
 
     from experiments.cli import main as cli_main
 
+    machine = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         rc = cli_main([*args, "--json", "--timings"])
     if rc != 0:
         raise SystemExit(f"sgatwalk {' '.join(args)} failed with exit status {rc}")
     result = json.loads(buf.getvalue().strip().splitlines()[-1])
-    return save(name, "sgatwalk " + " ".join(args), result)
+    machine["load_after"] = os.getloadavg()[0]
+    return save(name, "sgatwalk " + " ".join(args), result, machine=machine)
 
 
 def main(argv=None) -> int:

@@ -60,29 +60,24 @@ class GroundingSpec:
         return len(self.action_index)
 
     @classmethod
-    def for_nao(cls, env, variant: str = "legs", history: int = 1) -> "GroundingSpec":
-        """Default NAO grounding: ``"legs"`` (leg q, dq; leg targets) or ``"legs+imu"`` (plus gyro,
-        roll, pitch). ``env`` is an ``envs.NaoEnv`` (or wrapper).
+    def from_names(cls, obs_names, state_names, action_names, grounded, low, high, history: int = 1,
+                   name: str = "custom") -> "GroundingSpec":
+        """A spec from names: ``state_names`` picked out of the observation's ``obs_names``, and the
+        ``grounded`` actions out of ``action_names`` (``low``/``high``: bounds of the whole action).
 
         Raises:
-            ValueError: unknown variant or history < 1.
+            ValueError: a name that is not in the observation or action, or history < 1.
         """
-        base = env.unwrapped
-        robot, layout = base.robot, base.layout
-        if variant not in ("legs", "legs+imu"):
-            raise ValueError(f"unknown grounding state {variant!r}; choose 'legs' or 'legs+imu'")
         if history < 1:
             raise ValueError(f"history must be >= 1, got {history}")
-        legs = robot.groups["legs"]
-        names = [f"q.{j}" for j in legs] + [f"dq.{j}" for j in legs]
-        if variant == "legs+imu":
-            names += ["gyro.x", "gyro.y", "gyro.z", "angle.roll", "angle.pitch"]
-        state_index = np.array([layout.names.index(n) for n in names])
-        act_names = [j for j in robot.actuated_joint_names if j in legs]
-        action_index = np.array([robot.actuated_joint_names.index(j) for j in act_names])
-        lo = base.action_space.low[action_index]
-        hi = base.action_space.high[action_index]
-        return cls(state_index, action_index, lo, hi, history, tuple(names), tuple(act_names), f"nao-{variant}")
+        obs_names, action_names = list(obs_names), list(action_names)
+        missing = [n for n in state_names if n not in obs_names] + [n for n in grounded if n not in action_names]
+        if missing:
+            raise ValueError(f"not in the observation/action: {', '.join(missing)}")
+        state_index = np.array([obs_names.index(n) for n in state_names])
+        action_index = np.array([action_names.index(n) for n in grounded])
+        return cls(state_index, action_index, np.asarray(low, dtype=float)[action_index],
+                   np.asarray(high, dtype=float)[action_index], history, tuple(state_names), tuple(grounded), name)
 
     @classmethod
     def full(cls, env, history: int = 1) -> "GroundingSpec":

@@ -20,15 +20,17 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from sysid.candidates import (CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above, term_allowed,
                               term_probe)
 from sysid.data import Log, split_by_trajectory
-from sysid.identify import FLAG_ENERGY, Problem, confidence, flagged_joints, refit, screen
+from sysid.identify import FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen
 from sysid.replay import Window, predict, whole_logs, windows
-from sysid.roughness import CORRELATION_RADIUS
+from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
 from sysid.stats import integrated_autocorr, localisation, noise_sigma
 
 #: Minimum noise floor [rad] (noise-free logs would otherwise divide by ~0).
@@ -251,6 +253,14 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
              progress=None, robot=None, base_model: dict | None = None, time_budget_s: float | None = 300.0) -> dict:
     """Diagnose the sim against ``logs``; returns the report dict (see module docstring).
 
+    The stages, in order: :func:`_prepare` (split into training and held-out windows, base
+    model), :func:`_baseline` (nominal replay, noise floor), :func:`_localise` (where the nominal
+    residual sits), :func:`_before` (held-out cost and RMS of the sim as it is), :func:`_select`
+    (screening rounds, refit, family competition, pruning, backward elimination),
+    :func:`_drop_negligible`, :func:`_roughness` (terrain roughness, a distribution fit),
+    :func:`_intervals` (final refit, confidence intervals, identifiability), :func:`_check_roughness`
+    and :func:`_roughness_effect`, :func:`_after` (residual left), :func:`_verdict`, :func:`_report`.
+
     Args:
         logs: recordings of the real robot (>= 2 for a held-out split by trajectory).
         calibration: output of :func:`calibrate` on "none" logs (engine gap: its baseline model
@@ -271,16 +281,176 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         [rad], ``effects`` (list of {family, joints, links, value, unit, ci95, ...}),
         ``rejected``, ``indistinguishable``, ``residual``, ``localisation``, ``split``,
         ``model`` (term label -> value), ``runtime_s``, ``rollouts``.
+
+    Raises:
+        ValueError: a name in ``families`` is not a candidate family.
     """
     from robots import nao_h25
 
-    t_start = time.perf_counter()
+    clock = _Clock(time.perf_counter(), time_budget_s)
     say = progress or (lambda s: None)
-    budget_hit = False
-
-    def over_budget() -> bool:
-        return time_budget_s is not None and time.perf_counter() - t_start > time_budget_s
     robot = robot or nao_h25()
+    setup = _prepare(logs, families, calibration, base_model, say)
+    base = _baseline(logs, setup, calibration, robot)
+    loc = _localise(logs, setup, base)
+    problem = Problem(logs, setup.train, setup.heldout, base.floor, setup.with_imu, base=setup.base_model)
+    before = _before(problem, base)
+    sel = _select(problem, setup, before, base.names, robot, max_rounds, clock, say)
+    final = _drop_negligible(problem, sel.model, sel.cost, before.c0)
+    rough = _roughness(problem, setup, before.nothing, clock, say)
+    iv = _intervals(problem, final.model, final.cost, base.floor, robot, len(logs))
+    indist = _identifiability(sel.confusable, iv.indistinguishable, iv.model)
+    rough_rejected = _check_roughness(rough.fit, problem, iv.model, say)
+    effects, indist = _roughness_effect(rough.fit, iv.model, iv.effects, indist)
+    after = _after(logs, problem, setup, base, before, iv.model)
+    verdict = _verdict(before, after, effects, base, rough.fit, calibration)
+    rejected = sel.rejected + final.rejected + rough.rejected + rough_rejected
+    return _report(logs, setup, base, loc, problem, before, sel, iv, effects, indist, rejected, rough, after,
+                   verdict, calibration, robot, clock)
+
+
+# ------------------------------------------------------------------------------------------ stages
+@dataclass
+class _Clock:
+    """Wall clock of one diagnosis and its time budget."""
+
+    t_start: float  # time.perf_counter() when the diagnosis started [s]
+    budget_s: float | None  # time budget [s]; None: no limit
+
+    def over(self) -> bool:
+        """Whether the time budget is spent (no new screening round, competition or elimination step)."""
+        return self.budget_s is not None and time.perf_counter() - self.t_start > self.budget_s
+
+    def elapsed(self) -> float:
+        """Seconds since the start [s]."""
+        return time.perf_counter() - self.t_start
+
+
+@dataclass
+class _Setup:
+    """What :func:`_prepare` settles: replay mode, families, the train / held-out split, the base model."""
+
+    fixed: bool  # fixed-base logs (single shooting) or floating-base (windowed replay)
+    with_imu: bool  # torso roll/pitch [rad] and gyro [rad/s] compared too (floating base with an IMU)
+    families: Sequence[str]  # candidate family names considered, as given (or the default tuple)
+    train_idx: list[int]  # indices into ``logs`` of the training logs
+    heldout_idx: list[int]  # indices into ``logs`` of the held-out logs
+    split_note: str  # how the split was made, for the report
+    train: list[Window]  # training windows (whole logs for fixed base, WINDOW_S windows otherwise)
+    heldout: list[Window]  # held-out windows
+    all_windows: list[Window]  # train + heldout, in that order
+    base_model: dict  # Term -> value replayed under everything (calibration's baseline model, then ``base_model``)
+
+
+@dataclass
+class _Baseline:
+    """The nominal replay (the sim under the base model) and the noise floor derived from it."""
+
+    nominal: list[np.ndarray]  # per window of ``all_windows``: (1, L, k) predictions [rad, rad/s]
+    floor: np.ndarray  # (k,) noise floor per channel [rad or rad/s], engine gap included when calibrated
+    sigma: dict  # noise levels: encoders [rad], angle [rad], gyro [rad/s] (the latter two with an IMU)
+    names: list[str]  # k channel names: 24 joints, then the IMU channels if any
+    noise_floor: float  # RMS of the 24 joint floors [rad]
+    floor_sq: float  # mean squared joint floor [rad²] (the gap-closed reference)
+
+
+@dataclass
+class _Before:
+    """Fit quality of the sim before any candidate term (base model only)."""
+
+    c0: float  # held-out cost C (dimensionless; = k when every channel sits at its floor)
+    energy_train: np.ndarray  # (k,) training residual energy per channel [floor²]
+    energy_heldout: np.ndarray  # (k,) held-out residual energy per channel [floor²]
+    rms: float  # held-out joint RMS [rad]
+    per_joint: np.ndarray  # (24,) held-out RMS per joint [rad]
+    bic0: float  # training BIC of the empty model
+    nothing: bool  # no joint's energy exceeds FLAG_ENERGY on training or held-out logs: nothing to explain
+
+
+@dataclass
+class _Step:
+    """A model after one selection step."""
+
+    model: dict  # Term -> value (each family's unit)
+    cost: float  # held-out cost C of ``model`` (dimensionless)
+    rejected: list[dict] = field(default_factory=list)  # rejection records made on the way, in report order
+    budget_hit: bool = False  # the time budget stopped the step
+
+
+@dataclass
+class _Round:
+    """One screening/refit round (:func:`_refit_round`)."""
+
+    model: dict  # Term -> value: the round's candidate model (previous model + what it added)
+    cost: float  # held-out cost C of ``model`` (dimensionless)
+    kept: bool  # whether the round passed the held-out margin and the BIC test
+    record: dict  # the round's entry of ``report["rounds"]``
+    rejected: list[dict]  # rejection records (competition losers, pruned terms, the round's picks if not kept)
+
+
+@dataclass
+class _Selection:
+    """Outcome of :func:`_select`: the model picked by screening, refit and elimination."""
+
+    model: dict  # Term -> value
+    cost: float  # held-out cost C of ``model`` (dimensionless)
+    rounds: list[dict] = field(default_factory=list)  # ``report["rounds"]``
+    screened: dict = field(default_factory=dict)  # column label -> first round it was screened in
+    confusable: list = field(default_factory=list)  # (label a, label b, |corr|) from screening
+    rejected: list[dict] = field(default_factory=list)  # rejection records, in report order
+    budget_hit: bool = False  # the time budget stopped a round or an elimination step
+
+
+@dataclass
+class _RoughnessStage:
+    """Outcome of :func:`_roughness`."""
+
+    fit: RoughnessFit | None  # None: not attempted (nothing to explain, no IMU, not a family, or budget)
+    rejected: list[dict] = field(default_factory=list)  # the roughness record when the fit does not declare it
+    budget_hit: bool = False  # the time budget stopped the fit
+
+
+@dataclass
+class _Intervals:
+    """Outcome of :func:`_intervals`: the final model with intervals and identifiability."""
+
+    model: dict  # Term -> value after the final refit (kept only if it does not raise the held-out cost)
+    cost: float  # held-out cost C of ``model`` (dimensionless)
+    effects: list[dict]  # report entries (:func:`_entry` + ``heldout_cost_without``), most needed first
+    indistinguishable: list[dict]  # pairs of fitted terms with |correlation| > 0.9
+
+
+@dataclass
+class _After:
+    """The residual left by the final model."""
+
+    rms: float  # held-out joint RMS [rad]
+    per_joint: np.ndarray  # (24,) held-out RMS per joint [rad]
+    energy: np.ndarray  # (k,) held-out residual energy per channel [floor²]
+    gap_closed: float | None  # share of the excess mean-square over the floor removed; None at the floor
+    localisation: dict  # :func:`sysid.stats.localisation` of all windows under base + model (no gravity)
+    unexplained: list[str]  # joints whose RMS is still above sqrt(FLAG_ENERGY) floors
+
+
+@dataclass
+class _Verdict:
+    """The verdict sentence and its warnings."""
+
+    text: str
+    warnings: list[str]
+
+
+def _prepare(logs: list[Log], families, calibration: dict | None, base_model: dict | None,
+             say: Callable[[str], None]) -> _Setup:
+    """Check the families, split the logs into training and held-out windows, merge the base model.
+
+    Fixed-base logs are replayed whole (single shooting), floating-base logs in WINDOW_S windows;
+    a single log is cut at 60 % (train before, held-out after). The calibration's baseline model
+    goes under ``base_model`` (``base_model`` wins on a shared term).
+
+    Raises:
+        ValueError: a name in ``families`` is not a candidate family.
+    """
     fixed = logs[0].fixed_base
     with_imu = (not fixed) and all("angle" in lg.imu and "gyro" in lg.imu for lg in logs)
     if families is None:
@@ -301,121 +471,205 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         train, held = whole_logs(logs, tr_idx), whole_logs(logs, ho_idx)
     else:
         train, held = windows(logs, tr_idx, WINDOW_S), windows(logs, ho_idx, WINDOW_S)
-    all_w = train + held
     say(f"{len(logs)} log(s): {split_note}; {'fixed base, single shooting' if fixed else f'floating base, {WINDOW_S} s windows'}")
-    base_model = dict(base_model or {})
+    base = dict(base_model or {})
     if calibration and calibration.get("baseline_model"):
         from sysid.report import terms_from_labels
 
-        base_model = {**terms_from_labels(calibration["baseline_model"]), **base_model}
-    nominal = predict(logs, all_w, [base_model], with_imu=with_imu)
-    floor, finfo = _floor(logs, all_w, nominal, with_imu, calibration, robot)
-    names = _channel_names(robot, with_imu)
+        base = {**terms_from_labels(calibration["baseline_model"]), **base}
+    return _Setup(fixed=fixed, with_imu=with_imu, families=families, train_idx=tr_idx, heldout_idx=ho_idx,
+                  split_note=split_note, train=train, heldout=held, all_windows=train + held, base_model=base)
+
+
+def _baseline(logs: list[Log], setup: _Setup, calibration: dict | None, robot) -> _Baseline:
+    """Replay all windows under the base model and estimate the noise floor from the residual.
+
+    The floor (:func:`_floor`) is the encoder / IMU noise estimated from the nominal residual,
+    widened by the calibrated engine gap where a calibration is given; never below MIN_FLOOR.
+    """
+    nominal = predict(logs, setup.all_windows, [setup.base_model], with_imu=setup.with_imu)
+    floor, finfo = _floor(logs, setup.all_windows, nominal, setup.with_imu, calibration, robot)
+    return _Baseline(nominal=nominal, floor=floor, sigma=finfo["sigma"], names=_channel_names(robot, setup.with_imu),
+                     noise_floor=float(np.sqrt(np.mean(floor[:24] ** 2))), floor_sq=float(np.mean(floor[:24] ** 2)))
+
+
+def _localise(logs: list[Log], setup: _Setup, base: _Baseline) -> dict:
+    """Where the nominal residual sits: per-channel statistics, groups and gait phases
+    (:func:`sysid.stats.localisation`, with gravity torques from a replay model), for the report."""
     from sysid.model import Structure, replay_model
 
-    rm = replay_model(Structure(fixed_base=fixed, physics_dt=logs[0].physics_dt))
-    loc = localisation(logs, all_w, [p[0] for p in nominal], floor, names, rm.model, rm.qadr, rm.dadr)
-    problem = Problem(logs, train, held, floor, with_imu, base=base_model)
-    k = problem.k
+    rm = replay_model(Structure(fixed_base=setup.fixed, physics_dt=logs[0].physics_dt))
+    return localisation(logs, setup.all_windows, [p[0] for p in base.nominal], base.floor, base.names, rm.model,
+                        rm.qadr, rm.dadr)
+
+
+def _before(problem: Problem, base: _Baseline) -> _Before:
+    """Held-out cost, residual energies, RMS and BIC of the empty model; whether anything needs explaining
+    (a joint above FLAG_ENERGY floor² on training or held-out logs)."""
     c0 = float(problem.cost([{}], "heldout")[0])
     e_tr = problem.channel_energy(problem.predict([{}], "train"), "train")[0]
     e_ho = problem.channel_energy(problem.predict([{}], "heldout"), "heldout")[0]
     rms_before, per_before = problem.rms({}, "heldout")
-    noise_floor = float(np.sqrt(np.mean(floor[:24] ** 2)))
-    model: dict = {}
-    rejected: list[dict] = []
-    screened: dict = {}
-    confusable: list = []
-    rounds = []
     bic0 = _bic(problem, {}, 0)
-    nothing = not flagged_joints(np.maximum(e_tr, e_ho), names)
-    cost = c0
-    if nothing:
+    nothing = not flagged_joints(np.maximum(e_tr, e_ho), base.names)
+    return _Before(c0=c0, energy_train=e_tr, energy_heldout=e_ho, rms=rms_before, per_joint=per_before, bic0=bic0,
+                   nothing=nothing)
+
+
+def _select(problem: Problem, setup: _Setup, before: _Before, names: list[str], robot, max_rounds: int,
+            clock: _Clock, say: Callable[[str], None]) -> _Selection:
+    """Screening rounds then family-level backward elimination (the selection rules of this module).
+
+    Each round screens the residual around the current model (:func:`sysid.identify.screen`) and
+    hands the picks to :func:`_refit_round`; rounds stop when screening picks nothing, a round is
+    not kept, no joint is flagged any more, ``max_rounds`` is reached or the time budget is spent.
+    With nothing to explain, returns the empty model at the cost ``before.c0``.
+    """
+    sel = _Selection(model={}, cost=before.c0)
+    if before.nothing:
         say("no joint's residual energy exceeds 1.5x the noise floor's: nothing to explain")
-    else:
-        for rnd in range(max_rounds):
-            if over_budget():
-                say("time budget reached: no further screening round")
-                budget_hit = True
-                break
-            sr = screen(problem, robot, model, families, floating=not fixed)
-            say(f"round {rnd + 1}: flagged {', '.join(sr.flagged) or '-'}; screening picked "
-                f"{', '.join(t.label() for t in sr.selected) or 'nothing'}")
-            for lbl in sr.columns:
-                screened.setdefault(lbl, rnd + 1)
-            confusable.extend(sr.confusable)
-            if not sr.selected:
-                break
-            start = {**model, **sr.selected}
-            fit = refit(problem, start)
-            cand = dict(fit.values)
-            cand, swaps = _compete(problem, model, cand, sr, families, k, robot) if not over_budget() else (cand, [])
-            for sw in swaps:
-                say(f"round {rnd + 1}: {sw['reason']}")
-                rejected.append(sw)
-            # term-level pruning on held-out data (no refit; one batched replay)
-            terms = list(cand)
-            sets = [cand] + [{u: v for u, v in cand.items() if u != t} for t in terms]
-            costs = problem.cost(sets, "heldout")
-            c_with = float(costs[0])
-            drop = [t for t, c in zip(terms, costs[1:]) if c - c_with < _margin(c_with, k) and t not in model]
-            for t in drop:
+        return sel
+    for rnd in range(max_rounds):
+        if clock.over():
+            say("time budget reached: no further screening round")
+            sel.budget_hit = True
+            break
+        sr = screen(problem, robot, sel.model, setup.families, floating=not setup.fixed)
+        say(f"round {rnd + 1}: flagged {', '.join(sr.flagged) or '-'}; screening picked "
+            f"{', '.join(t.label() for t in sr.selected) or 'nothing'}")
+        for lbl in sr.columns:
+            sel.screened.setdefault(lbl, rnd + 1)
+        sel.confusable.extend(sr.confusable)
+        if not sr.selected:
+            break
+        rd = _refit_round(problem, sel.model, sel.cost, sr, setup.families, before.bic0, rnd + 1, robot, clock, say)
+        sel.rejected.extend(rd.rejected)
+        sel.rounds.append(rd.record)
+        if not rd.kept:
+            break
+        sel.model, sel.cost = rd.model, rd.cost
+        if not flagged_joints(problem.channel_energy(problem.predict([sel.model], "train"), "train")[0], names):
+            break
+    elim = _eliminate_families(problem, sel.model, sel.cost, clock)
+    sel.model, sel.cost = elim.model, elim.cost
+    sel.rejected.extend(elim.rejected)
+    sel.budget_hit = sel.budget_hit or elim.budget_hit
+    return sel
+
+
+def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, families, bic0: float, rnd: int,
+                 robot, clock: _Clock, say: Callable[[str], None]) -> _Round:
+    """Refit the screening picks with the current model, let rival families compete on the same
+    joints (:func:`_compete`, skipped once the budget is spent), prune terms on held-out data
+    (:func:`_prune_terms`), and decide: the round is kept if it lowers the held-out cost by the
+    margin and the training BIC by more than 10.
+
+    Args:
+        model, cost: the current model (Term -> value) and its held-out cost.
+        sr: this round's screening.  bic0: training BIC of the empty model.  rnd: round number (1-based).
+    """
+    k = problem.k
+    fit = refit(problem, {**model, **sr.selected})
+    cand = dict(fit.values)
+    cand, swaps = _compete(problem, model, cand, sr, families, k, robot) if not clock.over() else (cand, [])
+    for sw in swaps:
+        say(f"round {rnd}: {sw['reason']}")
+    cand, pruned = _prune_terms(problem, model, cand)
+    rejected = list(swaps) + pruned
+    c_new = float(problem.cost([cand], "heldout")[0]) if cand else cost
+    bic_new = _bic(problem, cand, len(cand))
+    bic_old = _bic(problem, model, len(model)) if model else bic0
+    kept = bool(cand) and (cost - c_new >= _margin(cost, k)) and (bic_old - bic_new > 10)
+    record = {"round": rnd, "flagged": sr.flagged, "picked": [t.label() for t in sr.selected],
+              "heldout_cost_before": cost, "heldout_cost_after": c_new, "kept": kept}
+    say(f"round {rnd}: held-out cost {cost:.1f} -> {c_new:.1f} (floor {k}); {'kept' if kept else 'rejected'}")
+    if not kept:
+        for t in sr.selected:
+            if t in cand and t not in model:
                 rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
-                                 "reason": f"removing it changes the held-out cost by {float(costs[1 + terms.index(t)] - c_with):+.2f} "
-                                           f"(< {_margin(c_with, k):.2f}): not needed"})
-                cand.pop(t)
-            small = _below_min_effect(cand)
-            for t in small:
-                rejected.append(_small_entry(t, cand.pop(t)))
-            drop += small
-            if drop and cand:
-                fit = refit(problem, cand, grid=False, max_nfev=6)
-                cand = dict(fit.values)
-            c_new = float(problem.cost([cand], "heldout")[0]) if cand else cost
-            bic_new = _bic(problem, cand, len(cand))
-            bic_old = _bic(problem, model, len(model)) if model else bic0
-            kept = bool(cand) and (cost - c_new >= _margin(cost, k)) and (bic_old - bic_new > 10)
-            rounds.append({"round": rnd + 1, "flagged": sr.flagged, "picked": [t.label() for t in sr.selected],
-                           "heldout_cost_before": cost, "heldout_cost_after": c_new, "kept": kept})
-            say(f"round {rnd + 1}: held-out cost {cost:.1f} -> {c_new:.1f} (floor {k}); {'kept' if kept else 'rejected'}")
-            if not kept:
-                for t in sr.selected:
-                    if t in cand and t not in model:
-                        rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
-                                         "reason": "the round did not improve held-out trajectories enough"})
+                                 "reason": "the round did not improve held-out trajectories enough"})
+    return _Round(model=cand, cost=c_new, kept=kept, record=record, rejected=rejected)
+
+
+def _prune_terms(problem: Problem, model: dict, cand: dict) -> tuple[dict, list[dict]]:
+    """Term-level pruning of a round's candidate on held-out data (one batched replay, no refit):
+    new terms whose removal raises the held-out cost by less than the margin go, then terms within
+    their family's smallest reported effect; the rest is refitted briefly if anything went.
+
+    Returns:
+        (the pruned candidate Term -> value, rejection records in that order).
+    """
+    k = problem.k
+    rejected = []
+    terms = list(cand)
+    sets = [cand] + [{u: v for u, v in cand.items() if u != t} for t in terms]
+    costs = problem.cost(sets, "heldout")
+    c_with = float(costs[0])
+    drop = [t for t, c in zip(terms, costs[1:]) if c - c_with < _margin(c_with, k) and t not in model]
+    for t in drop:
+        rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
+                         "reason": f"removing it changes the held-out cost by {float(costs[1 + terms.index(t)] - c_with):+.2f} "
+                                   f"(< {_margin(c_with, k):.2f}): not needed"})
+        cand.pop(t)
+    small = _below_min_effect(cand)
+    for t in small:
+        rejected.append(_small_entry(t, cand.pop(t)))
+    drop += small
+    if drop and cand:
+        fit = refit(problem, cand, grid=False, max_nfev=6)
+        cand = dict(fit.values)
+    return cand, rejected
+
+
+def _eliminate_families(problem: Problem, model: dict, cost: float, clock: _Clock) -> _Step:
+    """Family-level backward elimination: with more than one family in ``model``, each family in
+    name order is removed and the rest refitted; it goes if the held-out cost rises by less than
+    the margin. Stops when the time budget is spent (``budget_hit`` in the returned step)."""
+    k = problem.k
+    step = _Step(model=model, cost=cost)
+    fams = sorted({t.family for t in model})
+    if len(fams) > 1:
+        for f in fams:
+            if clock.over():
+                step.budget_hit = True
                 break
-            model, cost = cand, c_new
-            if not flagged_joints(problem.channel_energy(problem.predict([model], "train"), "train")[0], names):
-                break
-        # family-level backward elimination (refit the rest)
-        fams = sorted({t.family for t in model})
-        if len(fams) > 1:
-            for f in fams:
-                if over_budget():
-                    budget_hit = True
-                    break
-                rest = {t: v for t, v in model.items() if t.family != f}
-                fit = refit(problem, rest, grid=False, max_nfev=6)
-                c_wo = float(problem.cost([fit.values], "heldout")[0])
-                if c_wo - cost < _margin(cost, k):
-                    for t in model:
-                        if t.family == f:
-                            rejected.append({"term": t.label(), "family": f, "value": model[t],
-                                             "reason": f"backward elimination: without {f} (rest refitted) the held-out "
-                                                       f"cost changes by {c_wo - cost:+.2f}"})
-                    model, cost = dict(fit.values), c_wo
-    small = _below_min_effect(model)
+            rest = {t: v for t, v in step.model.items() if t.family != f}
+            fit = refit(problem, rest, grid=False, max_nfev=6)
+            c_wo = float(problem.cost([fit.values], "heldout")[0])
+            if c_wo - step.cost < _margin(step.cost, k):
+                for t in step.model:
+                    if t.family == f:
+                        step.rejected.append({"term": t.label(), "family": f, "value": step.model[t],
+                                              "reason": f"backward elimination: without {f} (rest refitted) the "
+                                                        f"held-out cost changes by {c_wo - step.cost:+.2f}"})
+                step.model, step.cost = dict(fit.values), c_wo
+    return step
+
+
+def _drop_negligible(problem: Problem, model: dict, cost: float, c0: float) -> _Step:
+    """Drop terms a later refit moved to within their family's smallest reported effect of nominal,
+    refit the rest briefly and recompute the held-out cost (``c0`` when nothing is left)."""
+    step = _Step(model=model, cost=cost)
+    small = _below_min_effect(step.model)
     if small:  # a refit can move an earlier term to within the smallest reported effect of nominal
         for t in small:
-            rejected.append(_small_entry(t, model.pop(t)))
-        if model:
-            model = dict(refit(problem, model, grid=False, max_nfev=6).values)
-        cost = float(problem.cost([model], "heldout")[0]) if model else c0
-    # terrain roughness: a distribution fitted to what the deterministic model leaves (sysid.roughness)
-    rough = None
-    if not nothing and with_imu and "terrain_roughness" in families:
-        if over_budget():
-            budget_hit = True
+            step.rejected.append(_small_entry(t, step.model.pop(t)))
+        if step.model:
+            step.model = dict(refit(problem, step.model, grid=False, max_nfev=6).values)
+        step.cost = float(problem.cost([step.model], "heldout")[0]) if step.model else c0
+    return step
+
+
+def _roughness(problem: Problem, setup: _Setup, nothing: bool, clock: _Clock,
+               say: Callable[[str], None]) -> _RoughnessStage:
+    """Terrain roughness: a distribution of surfaces fitted to what the deterministic model leaves
+    (:func:`sysid.roughness.fit_roughness`), on floating-base logs with an IMU when
+    ``terrain_roughness`` is a considered family and there is something to explain. Adds the fit's
+    rollouts to ``problem.n_rollouts``."""
+    out = _RoughnessStage(fit=None)
+    if not nothing and setup.with_imu and "terrain_roughness" in setup.families:
+        if clock.over():
+            out.budget_hit = True
         else:
             from sysid.roughness import fit_roughness
 
@@ -428,9 +682,21 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             say(f"terrain roughness: RMS height {1000 * rough.rms_height:.2f} mm; "
                 f"{'declared' if rough.declared else 'rejected'}: {rough.reason}")
             if not rough.declared:
-                rejected.append({"term": "terrain_roughness", "family": "terrain_roughness",
-                                 "value": rough.rms_height, "reason": rough.reason})
-    # final fit quality, intervals, identifiability
+                out.rejected.append({"term": "terrain_roughness", "family": "terrain_roughness",
+                                     "value": rough.rms_height, "reason": rough.reason})
+            out.fit = rough
+    return out
+
+
+def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, robot, n_logs: int) -> _Intervals:
+    """Final refit, 95 % intervals and identifiability of the selected model.
+
+    The final refit is kept only if it does not raise the held-out cost. Intervals come from
+    :func:`sysid.identify.confidence` with the training residual's integrated autocorrelation and,
+    with more than one log, the spread of per-log refits (:func:`_trajectory_spread`). Each effect
+    records how much worse the held-out cost gets without it; effects are sorted by that, and
+    term pairs with |correlation| > 0.9 are listed as indistinguishable. An empty model returns empty lists.
+    """
     effects, indist = [], []
     if model:
         fit = refit(problem, model, grid=False, max_nfev=4)
@@ -440,7 +706,7 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         preds = problem.predict([model], "train")
         res = [(m - p[0]) / floor for m, p in zip(problem.meas["train"], preds)]
         tau = integrated_autocorr(res)
-        spread = _trajectory_spread(problem, model) if len(logs) > 1 else {}
+        spread = _trajectory_spread(problem, model) if n_logs > 1 else {}
         ci, corr = confidence(fit, problem, tau, spread=spread)
         order = sorted(model, key=lambda u: (u.family, u.target or ""))
         c_drop = problem.cost([model] + [{u: v for u, v in model.items() if u != t} for t in order], "heldout")
@@ -455,6 +721,13 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                 if abs(corr[i, j]) > 0.9:
                     indist.append({"a": terms[i].label(), "b": terms[j].label(), "corr": float(corr[i, j]),
                                    "experiment": _experiment(terms[i].family, terms[j].family)})
+    return _Intervals(model=model, cost=cost, effects=effects, indistinguishable=indist)
+
+
+def _identifiability(confusable: list, indist: list[dict], model: dict) -> list[dict]:
+    """``indist`` plus the screening's confusable column pairs whose first member is in ``model``
+    (not already listed), each with the experiment that would tell them apart. Returns a new list."""
+    indist = list(indist)
     for a, b, c in confusable:
         fa, fb = a.split("[")[0], b.split("[")[0]
         if any(e["a"] == a and e["b"] == b for e in indist):
@@ -462,6 +735,16 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         if any(t.label() == a.replace("(-)", "") for t in model):
             indist.append({"a": a.replace("(-)", ""), "b": b.replace("(-)", ""), "corr": c,
                            "experiment": _experiment(fa, fb.split("(")[0])})
+    return indist
+
+
+def _check_roughness(rough: RoughnessFit | None, problem: Problem, model: dict,
+                     say: Callable[[str], None]) -> list[dict]:
+    """Withdraw a declared roughness the deterministic model explains: if what ``model`` leaves
+    corresponds to less than the smallest reported RMS height (or held-out excess), ``rough`` is
+    updated in place (``declared`` False, ``reason``; ``excess_heldout_left`` always set) and its
+    rejection record returned."""
+    rejected = []
     if rough is not None and rough.declared and model:
         from sysid.roughness import MIN_HELDOUT_EXCESS, MIN_RMS_HEIGHT, excess_left
 
@@ -475,6 +758,18 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             say(f"terrain roughness: rejected: {rough.reason}")
             rejected.append({"term": "terrain_roughness", "family": "terrain_roughness", "value": rough.rms_height,
                              "reason": rough.reason})
+    return rejected
+
+
+def _roughness_effect(rough: RoughnessFit | None, model: dict, effects: list[dict],
+                      indist: list[dict]) -> tuple[list[dict], list[dict]]:
+    """A declared roughness as an effect (RMS height [m], stochastic), effects re-sorted by held-out
+    need, and each contact term of ``model`` marked indistinguishable from it.
+
+    Returns:
+        (effects, indistinguishable), new lists.
+    """
+    effects, indist = list(effects), list(indist)
     if rough is not None and rough.declared:
         fam = FAMILIES["terrain_roughness"]
         effects.append({"family": "terrain_roughness", "joints": [], "links": [], "value": rough.rms_height,
@@ -494,84 +789,116 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                 indist.append({"a": t.label(), "b": "terrain_roughness", "corr": float("nan"),
                                "experiment": "the same stepping logs on a flat, hard floor: a contact parameter "
                                              "stays, the signature of uneven ground goes"})
+    return effects, indist
+
+
+def _after(logs: list[Log], problem: Problem, setup: _Setup, base: _Baseline, before: _Before,
+           model: dict) -> _After:
+    """The residual the final model leaves: held-out RMS and energy, share of the gap closed, and a
+    localisation of all windows replayed under base model + ``model`` (whiteness, phases,
+    joints still above FLAG_ENERGY floor²)."""
     rms_after, per_after = problem.rms(model, "heldout")
     e_after = problem.channel_energy(problem.predict([model], "heldout"), "heldout")[0]
     gap_closed = None
-    fl2 = float(np.mean(floor[:24] ** 2))
-    if rms_before ** 2 > fl2 * 1.0001:
-        gap_closed = float((rms_before ** 2 - rms_after ** 2) / (rms_before ** 2 - fl2))
+    fl2 = base.floor_sq
+    if before.rms ** 2 > fl2 * 1.0001:
+        gap_closed = float((before.rms ** 2 - rms_after ** 2) / (before.rms ** 2 - fl2))
     # residual after the fit: per joint, whiteness, phases
-    preds_all = predict(logs, all_w, [{**base_model, **model}], with_imu=with_imu)
-    loc_after = localisation(logs, all_w, [p[0] for p in preds_all], floor, names)
-    unexplained = [nm for nm in names[:24] if loc_after["channels"][nm]["rms_over_floor"] ** 2 > FLAG_ENERGY]
+    preds_all = predict(logs, setup.all_windows, [{**setup.base_model, **model}], with_imu=setup.with_imu)
+    loc_after = localisation(logs, setup.all_windows, [p[0] for p in preds_all], base.floor, base.names)
+    unexplained = [nm for nm in base.names[:24] if loc_after["channels"][nm]["rms_over_floor"] ** 2 > FLAG_ENERGY]
+    return _After(rms=rms_after, per_joint=per_after, energy=e_after, gap_closed=gap_closed, localisation=loc_after,
+                  unexplained=unexplained)
+
+
+def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baseline, rough: RoughnessFit | None,
+             calibration: dict | None) -> _Verdict:
+    """The one-paragraph verdict (nothing to explain / nothing explains it / what was found), the
+    roughness note, and the caution for noise-free recordings without an engine-gap calibration."""
+    noise_floor = base.noise_floor
+    rms_before, rms_after = before.rms, after.rms
     words = "; ".join(f"{e['words']} {e['display']} at {e['where']}" for e in effects)
-    if nothing:
+    if before.nothing:
         verdict = (f"no missing physics: held-out RMS {1000 * rms_before:.2f} mrad is at the noise floor "
                    f"({1000 * noise_floor:.2f} mrad); no joint's residual energy exceeds 1.5x its floor's")
     elif not effects:
-        worst = flagged_joints(e_ho, names)[:3] or flagged_joints(e_tr, names)[:3]
+        worst = (flagged_joints(before.energy_heldout, base.names)[:3]
+                 or flagged_joints(before.energy_train, base.names)[:3])
         verdict = (f"no candidate effect explains the residual: held-out RMS {1000 * rms_before:.2f} mrad vs noise "
                    f"floor {1000 * noise_floor:.2f} mrad, largest at {', '.join(worst) or '-'} (an effect outside the "
                    "library, or an engine gap larger than calibrated)")
     else:
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
-                   f"{1000 * noise_floor:.2f} mrad), {100 * (gap_closed or 0):.0f} % of the gap closed. Found: {words}")
-        if unexplained:
-            verdict += f". Still above 1.5x floor energy: {', '.join(unexplained)}"
+                   f"{1000 * noise_floor:.2f} mrad), {100 * (after.gap_closed or 0):.0f} % of the gap closed. "
+                   f"Found: {words}")
+        if after.unexplained:
+            verdict += f". Still above 1.5x floor energy: {', '.join(after.unexplained)}"
     if rough is not None and rough.declared:
         verdict += (f". The residual left is what uneven ground of {1000 * rough.rms_height:.2f} mm RMS height gives "
                     f"(held-out excess {rough.excess_heldout_obs:.1f} floor², simulated logs on such ground "
                     f"{rough.sim_log_excess[0]:.1f}-{rough.sim_log_excess[2]:.1f}); a random surface is not the one "
                     "that was there, so it does not lower the RMS")
     warnings = []
-    if calibration is None and finfo["sigma"]["encoders"] < NOISE_FREE_SIGMA and not nothing:
+    if calibration is None and base.sigma["encoders"] < NOISE_FREE_SIGMA and not before.nothing:
         # noise-free recordings (a simulator) judged against their own numerical noise: an engine gap
         # between the recording simulator and this sim is hundreds of floors and is read as physics
-        warnings.append(f"the recordings' encoder noise is {1000 * finfo['sigma']['encoders']:.3f} mrad and no engine-gap "
+        warnings.append(f"the recordings' encoder noise is {1000 * base.sigma['encoders']:.3f} mrad and no engine-gap "
                         "calibration was given: every difference between the recording's simulator (or robot) and "
                         "this sim counts as missing physics; record logs without injected effects, run "
                         "'sgatwalk diagnose --calibrate' on them and pass --calibration")
         verdict += ". CAUTION: " + warnings[-1]
-    considered = sorted({lbl.split("[")[0].replace("(-)", "") for lbl in screened})
-    if rough is not None:
+    return _Verdict(text=verdict, warnings=warnings)
+
+
+def _report(logs: list[Log], setup: _Setup, base: _Baseline, loc: dict, problem: Problem, before: _Before,
+            sel: _Selection, iv: _Intervals, effects: list[dict], indist: list[dict], rejected: list[dict],
+            rough: _RoughnessStage, after: _After, verdict: _Verdict, calibration: dict | None, robot,
+            clock: _Clock) -> dict:
+    """The report dict (key order as written to ``report.json``), plus the private ``_base_terms``
+    and ``_model_terms`` (Term -> value, for the MJCF export and plots; not in the JSON)."""
+    names, model, rough_fit = base.names, iv.model, rough.fit
+    considered = sorted({lbl.split("[")[0].replace("(-)", "") for lbl in sel.screened})
+    if rough_fit is not None:
         considered = sorted(set(considered) | {"terrain_roughness"})
     report = {
-        "verdict": verdict,
-        "warnings": warnings,
-        "noise_floor": noise_floor,
-        "heldout_rms_before": rms_before,
-        "heldout_rms_after": rms_after,
-        "gap_closed": gap_closed,
+        "verdict": verdict.text,
+        "warnings": verdict.warnings,
+        "noise_floor": base.noise_floor,
+        "heldout_rms_before": before.rms,
+        "heldout_rms_after": after.rms,
+        "gap_closed": after.gap_closed,
         "effects": effects,
         "rejected": rejected,
-        "families_considered": list(families),
+        "families_considered": list(setup.families),
         "families_screened": considered,
         "indistinguishable": indist,
-        "rounds": rounds,
+        "rounds": sel.rounds,
         "residual": {
-            "per_joint_rms_before": {nm: float(v) for nm, v in zip(robot.joint_names, per_before)},
-            "per_joint_rms_after": {nm: float(v) for nm, v in zip(robot.joint_names, per_after)},
-            "per_joint_rms_over_floor_after": {nm: loc_after["channels"][nm]["rms_over_floor"] for nm in names},
-            "whiteness_after": {nm: loc_after["channels"][nm]["whiteness"] for nm in names[:24]},
-            "phases_after": loc_after["phases"],
-            "groups_after": loc_after["groups"],
-            "heldout_energy_after": {nm: float(v) for nm, v in zip(names, e_after)},
-            "unexplained_joints": unexplained,
+            "per_joint_rms_before": {nm: float(v) for nm, v in zip(robot.joint_names, before.per_joint)},
+            "per_joint_rms_after": {nm: float(v) for nm, v in zip(robot.joint_names, after.per_joint)},
+            "per_joint_rms_over_floor_after": {nm: after.localisation["channels"][nm]["rms_over_floor"]
+                                               for nm in names},
+            "whiteness_after": {nm: after.localisation["channels"][nm]["whiteness"] for nm in names[:24]},
+            "phases_after": after.localisation["phases"],
+            "groups_after": after.localisation["groups"],
+            "heldout_energy_after": {nm: float(v) for nm, v in zip(names, after.energy)},
+            "unexplained_joints": after.unexplained,
         },
         "localisation": loc,
-        "noise": {"sigma": finfo["sigma"], "floor_per_channel": {nm: float(v) for nm, v in zip(names, floor)},
+        "noise": {"sigma": base.sigma, "floor_per_channel": {nm: float(v) for nm, v in zip(names, base.floor)},
                   "engine_gap_calibrated": calibration is not None},
-        "split": {"train": [logs[i].name for i in tr_idx], "heldout": [logs[i].name for i in ho_idx],
-                  "note": split_note, "mode": "single shooting" if fixed else f"windowed replay ({WINDOW_S} s)"},
-        "heldout_cost_before": c0, "heldout_cost_after": cost, "channels": k,
+        "split": {"train": [logs[i].name for i in setup.train_idx], "heldout": [logs[i].name for i in setup.heldout_idx],
+                  "note": setup.split_note,
+                  "mode": "single shooting" if setup.fixed else f"windowed replay ({WINDOW_S} s)"},
+        "heldout_cost_before": before.c0, "heldout_cost_after": iv.cost, "channels": problem.k,
         "model": {t.label(): float(v) for t, v in model.items()},
-        "base_model": {t.label(): float(v) for t, v in base_model.items()},
-        "runtime_s": time.perf_counter() - t_start,
-        "time_budget_reached": budget_hit,
+        "base_model": {t.label(): float(v) for t, v in setup.base_model.items()},
+        "runtime_s": clock.elapsed(),
+        "time_budget_reached": sel.budget_hit or rough.budget_hit,
         "rollouts": problem.n_rollouts,
-        "fixed_base": fixed,
-        "terrain_roughness": None if rough is None else dataclasses.asdict(rough),
+        "fixed_base": setup.fixed,
+        "terrain_roughness": None if rough_fit is None else dataclasses.asdict(rough_fit),
     }
-    report["_base_terms"] = base_model
-    report["_model_terms"] = {**base_model, **model}  # for the MJCF export and plots; not in the JSON
+    report["_base_terms"] = setup.base_model
+    report["_model_terms"] = {**setup.base_model, **model}  # for the MJCF export and plots; not in the JSON
     return report

@@ -10,16 +10,36 @@ evaluates exactly that surface, and the PyBullet world builds a transposed, x-re
 copy so that Bullet's other diagonal lands on the same one (ray casts in both engines agree:
 ``tests/test_terrain.py``).
 
-Generators (all seeded through a :class:`numpy.random.Generator` or an int seed):
-``flat``, ``lumpy`` (Gaussian bumps like foam under turf), ``fractal`` (spectral fBm noise),
-``steps`` (stairs along +x), ``slope`` (incline along +x), ``gaussian`` (a Gaussian random field of a
-given RMS height: the diagnosis's model of uneven ground). Each keeps a flat start pad of radius
-``start_radius`` [m] around the origin so the robot can be placed; the pad blends smoothly.
+Generators (all seeded through an int seed, a :class:`numpy.random.SeedSequence` or a
+:class:`numpy.random.Generator`): ``flat``, ``lumpy`` (Gaussian bumps like foam under turf),
+``fractal`` (spectral fBm noise), ``steps`` (stairs along +x), ``slope`` (incline along +x),
+``gaussian`` (a Gaussian random field of a given RMS height: the diagnosis's model of uneven
+ground). Each keeps a flat start pad of radius ``start_radius`` [m] around the origin so the robot
+can be placed; the pad blends smoothly.
+
+Generator spec: every generator stores how it was called in :attr:`Heightfield.spec`, a JSON-plain
+dict that :func:`from_spec` turns back into the same heights (bit for bit)::
+
+    {"generator": "lumpy",                       # one of TERRAINS: the function that built it
+     "seed": 3,                                  # int seed, or the stream's seed sequence:
+     # "seed": {"entropy": 3, "spawn_key": [1]}  #   SeedSequence(entropy, spawn_key=(1,)) (+ "pool_size"
+     #                                           #   when not 4); absent for flat and slope (no randomness)
+     "amplitude": 0.02, "bump_radius": 0.08, "density": 40.0,   # the generator's other arguments,
+     "size": [6.0, 3.0], "cell_size": 0.04, "start_radius": 0.25}  # all of them, by name
+
+A :class:`numpy.random.Generator` passed as the seed is recorded by its seed sequence when it is a
+fresh ``PCG64`` one (``np.random.default_rng(seed_or_seed_sequence)``, nothing drawn yet): that is how
+the real world and the diagnosis build their fields. Any other generator (already drawn from, another
+bit generator) cannot be replayed: the field's ``spec`` is then None. :meth:`Heightfield.to_dict`
+(the recording metadata ``terrain``) carries the spec under ``"spec"``.
 """
 
 from __future__ import annotations
 
+import copy
+import inspect
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,14 +58,18 @@ class Heightfield:
         heights: array of shape (ny, nx), ny, nx >= 2, finite values [m].
         cell_size: grid spacing [m] (> 0), the same along x and y.
         name: a label for reports (e.g. ``"lumpy(a=0.02)"``).
+        spec: how a generator built it (see the module docstring; :func:`from_spec` rebuilds it),
+            or None (heights from elsewhere, or a generator stream that cannot be replayed).
 
     Raises:
-        ValueError: wrong shape, non-finite heights or non-positive cell size.
+        ValueError: wrong shape, non-finite heights, non-positive cell size, or a spec that is not
+            a dict naming its ``generator``.
     """
 
     heights: np.ndarray
     cell_size: float
     name: str = "custom"
+    spec: dict | None = None
 
     def __post_init__(self) -> None:
         h = np.ascontiguousarray(self.heights, dtype=np.float64)
@@ -55,6 +79,10 @@ class Heightfield:
             raise ValueError("heights contain NaN or infinite values")
         if not (np.isfinite(self.cell_size) and self.cell_size > 0):
             raise ValueError(f"cell_size must be a positive number of metres, got {self.cell_size!r}")
+        if self.spec is not None:
+            if not (isinstance(self.spec, Mapping) and isinstance(self.spec.get("generator"), str)):
+                raise ValueError(f"spec must be a dict with a 'generator' name, got {self.spec!r}")
+            object.__setattr__(self, "spec", _plain(dict(self.spec)))
         h.setflags(write=False)
         object.__setattr__(self, "heights", h)
         object.__setattr__(self, "cell_size", float(self.cell_size))
@@ -120,14 +148,72 @@ class Heightfield:
         return float(self.heights.std())
 
     def to_dict(self) -> dict:
-        """Metadata (no heights): name, shape, cell size, min/max [m]."""
-        return {"name": self.name, "shape": list(self.shape), "cell_size": self.cell_size,
-                "min": self.min_height, "max": self.max_height}
+        """Metadata (no heights): name, shape, cell size, min/max [m], and ``spec`` (a copy of
+        :attr:`spec`) when the field has one."""
+        out = {"name": self.name, "shape": list(self.shape), "cell_size": self.cell_size,
+               "min": self.min_height, "max": self.max_height}
+        if self.spec is not None:
+            out["spec"] = copy.deepcopy(self.spec)
+        return out
 
 
 # ---------------------------------------------------------------------------- generators
 def _rng(seed) -> np.random.Generator:
     return seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+
+
+def _plain(v):
+    """``v`` with NumPy scalars/arrays and tuples turned into JSON-plain Python values."""
+    if isinstance(v, Mapping):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _seed_spec(seed, rng: np.random.Generator):
+    """The spec's ``seed``: what rebuilds ``rng``'s stream (call before drawing from it), or None
+    when it cannot be recorded (a generator already drawn from, or not ``PCG64``)."""
+    if isinstance(seed, (int, np.integer)):
+        return int(seed)
+    bg = rng.bit_generator
+    ss = getattr(bg, "seed_seq", None)
+    if type(bg) is not np.random.PCG64 or not isinstance(ss, np.random.SeedSequence):
+        return None
+    if np.random.PCG64(ss).state != bg.state:  # numbers already drawn: the stream has moved on
+        return None
+    out = {"entropy": _plain(ss.entropy), "spawn_key": [int(k) for k in ss.spawn_key]}
+    if ss.pool_size != 4:
+        out["pool_size"] = int(ss.pool_size)
+    return out
+
+
+def _seed_from_spec(s):
+    """Inverse of :func:`_seed_spec`: an int, or the :class:`numpy.random.SeedSequence`."""
+    if isinstance(s, bool) or s is None:
+        raise ValueError(f"terrain spec seed must be an int or {{entropy, spawn_key}}, got {s!r}")
+    if isinstance(s, (int, np.integer)):
+        return int(s)
+    if isinstance(s, Mapping) and "entropy" in s:
+        try:
+            return np.random.SeedSequence(s["entropy"], spawn_key=tuple(int(k) for k in s.get("spawn_key", ())),
+                                          pool_size=int(s.get("pool_size", 4)))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"terrain spec seed {s!r} is not a seed sequence: {exc}") from None
+    raise ValueError(f"terrain spec seed must be an int or {{entropy, spawn_key}}, got {s!r}")
+
+
+def _spec(generator: str, seed=None, *, seeded: bool = True, **args) -> dict | None:
+    """A generator's spec (module docstring); None when its seed could not be recorded."""
+    if seeded and seed is None:
+        return None
+    out = {"generator": generator}
+    if seeded:
+        out["seed"] = seed
+    out.update(args)
+    return _plain(out)
 
 
 def _grid(size, cell_size):
@@ -153,7 +239,8 @@ def _start_pad(X, Y, start_radius: float) -> np.ndarray:
 def flat(size=DEFAULT_SIZE, cell_size=DEFAULT_CELL, height: float = 0.0) -> Heightfield:
     """A flat field at ``height`` [m]."""
     X, _ = _grid(size, cell_size)
-    return Heightfield(np.full(X.shape, float(height)), cell_size, "flat")
+    return Heightfield(np.full(X.shape, float(height)), cell_size, "flat",
+                       _spec("flat", seeded=False, size=size, cell_size=cell_size, height=height))
 
 
 def lumpy(seed=0, amplitude: float = 0.02, bump_radius: float = 0.08, density: float = 40.0,
@@ -171,6 +258,8 @@ def lumpy(seed=0, amplitude: float = 0.02, bump_radius: float = 0.08, density: f
         raise ValueError(f"lumpy terrain needs amplitude >= 0, bump_radius > 0, density > 0; got "
                          f"{amplitude}, {bump_radius}, {density}")
     rng = _rng(seed)
+    spec = _spec("lumpy", _seed_spec(seed, rng), amplitude=amplitude, bump_radius=bump_radius, density=density,
+                 size=size, cell_size=cell_size, start_radius=start_radius)
     X, Y = _grid(size, cell_size)
     n = max(1, int(density * size[0] * size[1]))
     cx = rng.uniform(X.min(), X.max(), n)
@@ -191,7 +280,7 @@ def lumpy(seed=0, amplitude: float = 0.02, bump_radius: float = 0.08, density: f
     peak = np.abs(h).max()
     if peak > 0:
         h *= amplitude / peak
-    return Heightfield(h, cell_size, f"lumpy(a={amplitude:g},r={bump_radius:g})")
+    return Heightfield(h, cell_size, f"lumpy(a={amplitude:g},r={bump_radius:g})", spec)
 
 
 def fractal(seed=0, amplitude: float = 0.02, hurst: float = 0.8, min_wavelength: float = 0.1,
@@ -204,6 +293,8 @@ def fractal(seed=0, amplitude: float = 0.02, hurst: float = 0.8, min_wavelength:
     if amplitude < 0 or not (0 < hurst < 1) or min_wavelength <= 0:
         raise ValueError("fractal terrain needs amplitude >= 0, 0 < hurst < 1, min_wavelength > 0")
     rng = _rng(seed)
+    spec = _spec("fractal", _seed_spec(seed, rng), amplitude=amplitude, hurst=hurst, min_wavelength=min_wavelength,
+                 size=size, cell_size=cell_size, start_radius=start_radius)
     X, Y = _grid(size, cell_size)
     ny, nx = X.shape
     fx = np.fft.fftfreq(nx, cell_size)
@@ -219,7 +310,7 @@ def fractal(seed=0, amplitude: float = 0.02, hurst: float = 0.8, min_wavelength:
     peak = np.abs(h).max()
     if peak > 0:
         h *= amplitude / peak
-    return Heightfield(h, cell_size, f"fractal(a={amplitude:g},H={hurst:g})")
+    return Heightfield(h, cell_size, f"fractal(a={amplitude:g},H={hurst:g})", spec)
 
 
 def gaussian(seed=0, rms_height: float = 0.003, correlation_radius: float = 0.08, size=DEFAULT_SIZE,
@@ -240,14 +331,16 @@ def gaussian(seed=0, rms_height: float = 0.003, correlation_radius: float = 0.08
         raise ValueError(f"gaussian terrain needs rms_height >= 0 and correlation_radius > 0, got {rms_height}, "
                          f"{correlation_radius}")
     rng = _rng(seed)
+    spec = _spec("gaussian", _seed_spec(seed, rng), rms_height=rms_height, correlation_radius=correlation_radius,
+                 size=size, cell_size=cell_size, start_radius=start_radius)
     X, Y = _grid(size, cell_size)
     if rms_height == 0:
-        return Heightfield(np.zeros_like(X), cell_size, "gaussian(sq=0)")
+        return Heightfield(np.zeros_like(X), cell_size, "gaussian(sq=0)", spec)
     h = gaussian_filter(rng.standard_normal(X.shape), correlation_radius / cell_size, mode="wrap")
     h -= h.mean()
     h *= rms_height / h.std()
     h *= _start_pad(X, Y, start_radius)
-    return Heightfield(h, cell_size, f"gaussian(sq={rms_height:g},r={correlation_radius:g})")
+    return Heightfield(h, cell_size, f"gaussian(sq={rms_height:g},r={correlation_radius:g})", spec)
 
 
 def steps(seed=0, amplitude: float = 0.02, step_length: float = 0.3, size=DEFAULT_SIZE,
@@ -257,6 +350,8 @@ def steps(seed=0, amplitude: float = 0.02, step_length: float = 0.3, size=DEFAUL
     if amplitude < 0 or step_length <= 0:
         raise ValueError("steps terrain needs amplitude >= 0 and step_length > 0")
     rng = _rng(seed)
+    spec = _spec("steps", _seed_spec(seed, rng), amplitude=amplitude, step_length=step_length, size=size,
+                 cell_size=cell_size, start_radius=start_radius)
     X, Y = _grid(size, cell_size)
     x = X[0]
     edges = np.arange(start_radius, x.max() + step_length, step_length)
@@ -268,7 +363,7 @@ def steps(seed=0, amplitude: float = 0.02, step_length: float = 0.3, size=DEFAUL
     back = np.arange(-start_radius, x.min() - step_length, -step_length)
     for e, dh in zip(back, rng.uniform(-amplitude, amplitude, len(back))):
         level[x <= e] += dh
-    return Heightfield(np.broadcast_to(level, X.shape).copy(), cell_size, f"steps(a={amplitude:g})")
+    return Heightfield(np.broadcast_to(level, X.shape).copy(), cell_size, f"steps(a={amplitude:g})", spec)
 
 
 def slope(seed=0, amplitude: float = 0.05, size=DEFAULT_SIZE, cell_size=DEFAULT_CELL,
@@ -278,7 +373,9 @@ def slope(seed=0, amplitude: float = 0.05, size=DEFAULT_SIZE, cell_size=DEFAULT_
     del seed
     X, _ = _grid(size, cell_size)
     h = amplitude * np.where(np.abs(X) > start_radius, np.sign(X) * (np.abs(X) - start_radius), 0.0)
-    return Heightfield(h, cell_size, f"slope(grade={amplitude:g})")
+    return Heightfield(h, cell_size, f"slope(grade={amplitude:g})",
+                       _spec("slope", seeded=False, amplitude=amplitude, size=size, cell_size=cell_size,
+                             start_radius=start_radius))
 
 
 #: Largest amplitude per kind a command accepts: bump/step height [m], slope grade, RMS height [m].
@@ -317,3 +414,34 @@ def make(kind: str, seed=0, amplitude: float = 0.02, **kwargs) -> Heightfield:
     if kind not in gens:
         raise ValueError(f"unknown terrain {kind!r}; choose one of {', '.join(TERRAINS)}")
     return gens[kind](seed=seed, amplitude=amplitude, **kwargs)
+
+
+#: Generator functions by spec name (:data:`TERRAINS`).
+GENERATORS = {"flat": flat, "lumpy": lumpy, "fractal": fractal, "steps": steps, "slope": slope, "gaussian": gaussian}
+
+
+def from_spec(spec: Mapping) -> Heightfield:
+    """Rebuild the heightfield a generator made from its :attr:`Heightfield.spec` (heights identical
+    bit for bit; see the module docstring for the format).
+
+    Raises:
+        ValueError: not a spec, an unknown generator, arguments the generator does not take, a seed
+            that is neither an int nor ``{entropy, spawn_key}``, or values the generator refuses
+            (a value of the wrong type may raise the generator's TypeError).
+    """
+    if not isinstance(spec, Mapping) or "generator" not in spec:
+        raise ValueError(f"a terrain spec is a dict with a 'generator' name, got {spec!r}")
+    name = spec["generator"]
+    gen = GENERATORS.get(name) if isinstance(name, str) else None
+    if gen is None:
+        raise ValueError(f"unknown terrain generator {name!r} in spec; choose one of {', '.join(TERRAINS)}")
+    args = {k: v for k, v in spec.items() if k != "generator"}
+    if "seed" in args:
+        args["seed"] = _seed_from_spec(args["seed"])
+    if "size" in args:
+        args["size"] = tuple(args["size"])
+    try:
+        inspect.signature(gen).bind(**args)
+    except TypeError as exc:
+        raise ValueError(f"terrain spec does not fit {name}(): {exc}") from None
+    return gen(**args)

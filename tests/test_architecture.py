@@ -20,9 +20,12 @@ ALLOWED = {
 
 def _imports(package: str) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
-    for f in sorted(os.listdir(os.path.join(ROOT, package))):
-        if not f.endswith(".py"):
-            continue
+    files = []
+    for dirpath, dirnames, filenames in os.walk(os.path.join(ROOT, package)):  # subpackages too (experiments.viz)
+        dirnames[:] = sorted(d for d in dirnames if d != "__pycache__")
+        files += [os.path.relpath(os.path.join(dirpath, f), os.path.join(ROOT, package))
+                  for f in sorted(filenames) if f.endswith(".py")]
+    for f in files:
         tree = ast.parse(open(os.path.join(ROOT, package, f)).read())
         for node in ast.walk(tree):
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \

@@ -6,7 +6,8 @@ import pytest
 from envs import NaoSimEnv
 from envs.wrappers import ActionMismatch
 from sgat.grounding import Transitions, fit_transformer, trajectory_transitions
-from sgat.transformer import GroundedEnv, GroundingSpec
+from experiments.grounding import grounding_spec
+from sgat.transformer import GroundedEnv
 
 
 def random_leg_commands(robot, n, rng, amp=0.15):
@@ -43,7 +44,7 @@ def step_from(env, obs, a):
 @pytest.fixture(scope="module")
 def pair():
     sim = NaoSimEnv(fixed_base=True)
-    spec = GroundingSpec.for_nao(sim)
+    spec = grounding_spec(sim)
     robot = sim.robot
     q0 = robot.pose("crouch", actuated=True)
     real = ActionMismatch(NaoSimEnv(fixed_base=True), gain=0.7, offset=0.05, noise_std=0.03,

@@ -88,9 +88,10 @@ def test_wrong_shape_weights_are_rejected(tmp_path):
     """A transformer directory whose weights do not fit the grounding spec."""
     from envs import NaoSimEnv
     from sgat.models import ForwardModel, InverseModel, ModelFileError
-    from sgat.transformer import ActionTransformer, GroundingSpec
+    from experiments.grounding import grounding_spec
+    from sgat.transformer import ActionTransformer
 
-    spec = GroundingSpec.for_nao(NaoSimEnv())
+    spec = grounding_spec(NaoSimEnv())
     tr = ActionTransformer(spec, ForwardModel(24, 11), InverseModel(24, 11), alpha=0.5)
     tr.save(tmp_path / "m")
     ForwardModel(10, 11).save(tmp_path / "m" / "forward.pt")

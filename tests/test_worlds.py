@@ -216,3 +216,23 @@ def test_real_world_foot_friction_is_the_contact_coefficient(ground):
         p.removeBody(box)
     env.close()
     assert abs(slid[0.25]) < 2e-3 and slid[0.36] > 0.05
+
+
+def test_recorded_terrain_spec_rebuilds_the_episode_field(tmp_path):
+    """A recording's metadata is enough to rebuild the field its episode ran on (terrain.from_spec):
+    the real world's per-episode lumpy field, and a field given to the sim."""
+    from envs import Recording
+    from terrain import from_spec, make
+
+    env = NaoRealEnv(profile="real")
+    for seed in (2, 7):
+        rec = rollout(env, HoldPose(env.robot), seed=seed, seconds=0.05)
+        spec = rec.meta["terrain"]["spec"]
+        assert spec["generator"] == "lumpy" and spec["seed"] == {"entropy": seed, "spawn_key": [1]}
+        assert spec["amplitude"] == rec.meta["effects"]["terrain_amplitude"]
+        back = Recording.from_parquet(rec.to_parquet(tmp_path / f"real{seed}.parquet"))
+        assert np.array_equal(from_spec(back.meta["terrain"]["spec"]).heights, env.terrain.heights)
+    env.close()
+    hf = make("fractal", seed=5, amplitude=0.02)
+    rec = rollout(NaoSimEnv(terrain=hf), HoldPose(nao_h25()), seed=0, seconds=0.05)
+    assert np.array_equal(from_spec(rec.meta["terrain"]["spec"]).heights, hf.heights)

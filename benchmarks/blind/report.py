@@ -1,0 +1,107 @@
+"""The markdown report of the blind benchmark (``summary.md``) from scored trial rows.
+
+:func:`summarize` tabulates the single-effect trials (family top-1, false positives on "none",
+localisation, parameter error, held-out RMS over the floor, gap closed, CI coverage, runtime, a
+per-family table and the confusion matrix) and the two-effect trials (both found, exact set,
+precision, one line per trial).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .families import CLASSES, NOISE
+
+
+def summarize(rows: list[dict], world: str, classes=None) -> str:
+    """Markdown tables of the benchmark results."""
+    single = [r for r in rows if r["kind"] == "single"]
+    two = [r for r in rows if r["kind"] == "two"]
+    L = [f"## sysid blind benchmark, world = {world} ({'MuJoCo sim-as-real' if world == 'sim' else 'PyBullet real'})", ""]
+    if single:
+        seeds = sorted({r["seed"] for r in single})
+        classes = classes or CLASSES[world]
+        L.append(f"Single-effect trials: {len(single)} ({len(classes)} classes x {len(seeds)} seeds: {seeds}); "
+                 f"{single[0]['n_logs']} logs x {single[0]['seconds']:g} s per trial "
+                 f"(train {single[0]['n_logs'] - 1}, held out 1), encoder noise {1000 * NOISE:g} mrad.")
+        L.append("")
+        top1 = np.mean([r["score"]["pred_top1"] == r["truth_class"] for r in single])
+        none = [r for r in single if r["truth_class"] == "none"]
+        fp = np.mean([bool(r["score"]["pred_families"]) for r in none]) if none else float("nan")
+        tp = sum(r["score"]["loc_tp"] for r in single)
+        nt = sum(r["score"]["loc_true"] for r in single)
+        npred = sum(r["score"]["loc_pred"] for r in single)
+        eff = [r for r in single if r["truth_class"] != "none"]
+        after = [r["score"]["rms_after_over_floor"] for r in eff]
+        gc = [r["score"]["gap_closed"] for r in eff if r["score"]["gap_closed"] is not None]
+        cov = [c for r in eff for c in r["score"]["ci_cover"]]
+        L.append("| metric | value |")
+        L.append("|---|---|")
+        L.append(f"| family top-1 | {top1:.0%} ({sum(r['score']['pred_top1'] == r['truth_class'] for r in single)}/{len(single)}) |")
+        L.append(f"| false positives on none | {fp:.0%} ({sum(bool(r['score']['pred_families']) for r in none)}/{len(none)}) |")
+        L.append(f"| localisation precision / recall (family+joint/link) | {tp / max(npred, 1):.2f} / {tp / max(nt, 1):.2f} ({tp}/{npred}, {tp}/{nt}) |")
+        rel = [p["rel"] for r in eff for p in r["score"]["param_err"] if "rel" in p]
+        lat = [p["abs_ms"] for r in eff for p in r["score"]["param_err"] if "abs_ms" in p]
+        L.append(f"| median parameter error (non-latency terms found) | {np.median(rel):.1%} over {len(rel)} terms |" if rel else "| median parameter error | - |")
+        L.append(f"| latency error (median / max) | {np.median(lat):.2f} / {np.max(lat):.2f} ms over {len(lat)} |" if lat else "| latency error | - |")
+        if eff:
+            L.append(f"| held-out RMS after / noise floor (median, max) | {np.median(after):.2f}, {np.max(after):.2f} |")
+            L.append(f"| held-out RMS before / floor (median) | {np.median([r['score']['rms_before_over_floor'] for r in eff]):.2f} |")
+        L.append(f"| gap closed (median, min) | {np.median(gc):.1%}, {np.min(gc):.1%} |" if gc else "| gap closed | - |")
+        L.append(f"| 95 % CI coverage | {np.mean(cov):.0%} ({sum(cov)}/{len(cov)}) |" if cov else "| 95 % CI coverage | - |")
+        L.append(f"| diagnose runtime (median, max) | {np.median([r['score']['runtime_s'] for r in single]):.1f} s, {np.max([r['score']['runtime_s'] for r in single]):.1f} s |")
+        L.append("")
+        L.append("Per family: top-1, median parameter error, after/floor")
+        L.append("")
+        L.append("| truth | n | top-1 | param err (median) | RMS after/floor (max) |")
+        L.append("|---|---|---|---|---|")
+        for c in classes:
+            rr = [r for r in single if r["truth_class"] == c]
+            if not rr:
+                continue
+            pe = [p.get("rel", p.get("abs_ms")) for r in rr for p in r["score"]["param_err"]]
+            unit = " ms" if c == "latency" else ""
+            pes = (f"{np.median(pe):.2f}{unit}" if c == "latency" else f"{np.median(pe):.1%}") if pe else "-"
+            L.append(f"| {c} | {len(rr)} | {sum(r['score']['pred_top1'] == c for r in rr)}/{len(rr)} | {pes} | "
+                     f"{max(r['score']['rms_after_over_floor'] for r in rr):.2f} |")
+        L.append("")
+        L.append("Confusion matrix (rows truth, columns top-1 prediction)")
+        L.append("")
+        preds = classes + sorted({r["score"]["pred_top1"] for r in single} - set(classes))
+        L.append("| truth \\ pred | " + " | ".join(p[:10] for p in preds) + " |")
+        L.append("|---" * (len(preds) + 1) + "|")
+        for c in classes:
+            rr = [r for r in single if r["truth_class"] == c]
+            L.append(f"| {c} | " + " | ".join(str(sum(r["score"]["pred_top1"] == p for r in rr)) for p in preds) + " |")
+        L.append("")
+    if two:
+        both = [set(r["score"]["true_families"]) <= set(r["score"]["pred_families"]) for r in two]
+        exact = [set(r["score"]["true_families"]) == set(r["score"]["pred_families"]) for r in two]
+        prec = [len(set(r["score"]["true_families"]) & set(r["score"]["pred_families"])) / max(1, len(r["score"]["pred_families"])) for r in two]
+        tp = sum(r["score"]["loc_tp"] for r in two)
+        nt = sum(r["score"]["loc_true"] for r in two)
+        npred = sum(r["score"]["loc_pred"] for r in two)
+        rel = [p["rel"] for r in two for p in r["score"]["param_err"] if "rel" in p]
+        after = [r["score"]["rms_after_over_floor"] for r in two]
+        cov = [c for r in two for c in r["score"]["ci_cover"]]
+        L.append(f"Two-effect trials: {len(two)} (seeds {sorted({r['seed'] for r in two})})")
+        L.append("")
+        L.append("| metric | value |")
+        L.append("|---|---|")
+        L.append(f"| both families found | {np.mean(both):.0%} ({sum(both)}/{len(two)}) |")
+        L.append(f"| exact family set | {np.mean(exact):.0%} ({sum(exact)}/{len(two)}) |")
+        L.append(f"| family precision (mean) | {np.mean(prec):.2f} |")
+        L.append(f"| localisation precision / recall | {tp / max(npred, 1):.2f} / {tp / max(nt, 1):.2f} |")
+        L.append(f"| median parameter error (non-latency) | {np.median(rel):.1%} |" if rel else "| median parameter error | - |")
+        L.append(f"| held-out RMS after / floor (median, max) | {np.median(after):.2f}, {np.max(after):.2f} |")
+        L.append(f"| 95 % CI coverage | {np.mean(cov):.0%} ({sum(cov)}/{len(cov)}) |" if cov else "| 95 % CI coverage | - |")
+        L.append(f"| diagnose runtime (median) | {np.median([r['score']['runtime_s'] for r in two]):.1f} s |")
+        L.append("")
+        L.append("| trial | truth | found | RMS after/floor |")
+        L.append("|---|---|---|---|")
+        for r in two:
+            tr = "; ".join(f"{e['family']}" + (f"[{','.join(str(t) for t in e['targets'])}]" if e["targets"][0] else "")
+                           + " " + ",".join(f"{v:.4g}" for v in e["values"]) for e in r["truth"])
+            fd = "; ".join(f"{k}" for k in r["report_model"]) or "none"
+            L.append(f"| {r['trial']} | {tr} | {fd} | {r['score']['rms_after_over_floor']:.2f} |")
+    return "\n".join(L) + "\n"

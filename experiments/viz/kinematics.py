@@ -1,0 +1,121 @@
+"""Forward kinematics of the robot for drawing: link poses of a recording, frames, measured CoP.
+
+Uses the URDF spec of the :class:`robots.RobotModel` (the kinematics both physics engines import);
+quaternions are (w, x, y, z) as in recordings, rotations from :mod:`common.spatial`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from common.spatial import quat_from_rpy, quat_mul, quat_rotate
+from envs.recording import Recording
+from robots import RobotModel
+
+
+def forward_kinematics(robot: RobotModel, q: np.ndarray, base_pos: np.ndarray, base_quat: np.ndarray
+                       ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
+    """World poses of all links from joint angles and the floating-base pose.
+
+    Uses the URDF spec of ``robot`` (joint origins ``xyz`` with zero rpy, hinge ``axis``), the same
+    kinematics both physics engines import.
+
+    Args:
+        robot: the model; its joints must list parents before children.
+        q: joint angles [rad], shape (T, 24) in ``robot.joint_names`` order.
+        base_pos: root link (torso) origin in the world [m], shape (T, 3).
+        base_quat: root orientation, unit quaternions (w, x, y, z), shape (T, 4).
+
+    Returns:
+        (links, pos, quat): link names (``robot.links`` order, root first), positions (T, L, 3) [m]
+        and orientations (T, L, 4) as quaternions (w, x, y, z).
+
+    Raises:
+        ValueError: shapes that do not match.
+    """
+    q = np.asarray(q, dtype=float)
+    base_pos = np.asarray(base_pos, dtype=float)
+    base_quat = np.asarray(base_quat, dtype=float)
+    n = len(robot.joint_names)
+    if q.ndim != 2 or q.shape[1] != n:
+        raise ValueError(f"q must have shape (T, {n}), got {q.shape}")
+    T = q.shape[0]
+    if base_pos.shape != (T, 3) or base_quat.shape != (T, 4):
+        raise ValueError(f"base_pos/base_quat must have shapes ({T}, 3)/({T}, 4), got {base_pos.shape}/{base_quat.shape}")
+    links = robot.links
+    index = {name: i for i, name in enumerate(links)}
+    pos = np.empty((T, len(links), 3))
+    quat = np.empty((T, len(links), 4))
+    pos[:, 0] = base_pos
+    quat[:, 0] = base_quat / np.linalg.norm(base_quat, axis=1, keepdims=True)
+    for k, j in enumerate(robot.joints):
+        ip, ic = index[j.parent], index[j.child]
+        qp = quat[:, ip]
+        pos[:, ic] = pos[:, ip] + quat_rotate(qp, np.broadcast_to(np.asarray(j.xyz, float), (T, 3)))
+        axis = np.asarray(j.axis, float)
+        axis = axis / np.linalg.norm(axis)
+        half = 0.5 * q[:, k]
+        qj = np.concatenate([np.cos(half)[:, None], np.sin(half)[:, None] * axis], axis=1)
+        quat[:, ic] = quat_mul(qp, qj)
+    return links, pos, quat
+
+
+def frame_positions(robot: RobotModel, links: tuple[str, ...], pos: np.ndarray, quat: np.ndarray,
+                    frame: str, offset=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """World position (T, 3) [m] of point ``offset`` [m] given in robot frame ``frame`` (e.g.
+    ``l_sole``), from the link poses of :func:`forward_kinematics`."""
+    fr = robot.frames[frame]
+    i = links.index(fr.link)
+    local = np.asarray(fr.offset, float) + np.asarray(offset, float)
+    return pos[:, i] + quat_rotate(quat[:, i], np.broadcast_to(local, pos[:, i].shape))
+
+
+def link_poses(rec: Recording) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, bool]:
+    """Per-link world poses of a recording: (links, pos (T, L, 3), quat wxyz (T, L, 4), grounded).
+
+    With ground truth (``gt.base``, ``gt.quat``) the poses are exact (``grounded`` True). A log
+    without it (a real robot's) is drawn upright at the origin, tilted by ``angle.roll|pitch`` when
+    present, and lifted so that its lower sole touches z = 0 (``grounded`` False).
+    """
+    robot = rec.robot
+    q = rec.group("q")
+    T = len(rec)
+    if rec.has("gt.base") and rec.has("gt.quat"):
+        return (*forward_kinematics(robot, q, rec.group("gt.base"), rec.group("gt.quat")), True)
+    if rec.has("angle"):
+        ang = rec.group("angle")
+        bq = quat_from_rpy(ang[:, 0], ang[:, 1])
+    else:
+        bq = np.tile([1.0, 0.0, 0.0, 0.0], (T, 1))
+    links, pos, quat = forward_kinematics(robot, q, np.zeros((T, 3)), bq)
+    low = np.minimum(frame_positions(robot, links, pos, quat, "l_sole")[:, 2],
+                     frame_positions(robot, links, pos, quat, "r_sole")[:, 2])
+    pos[:, :, 2] -= low[:, None]
+    return links, pos, quat, False
+
+
+def _measured_cop(rec: Recording, robot, links, pos, quat) -> np.ndarray:
+    """(T, 3) measured CoP [m] on the ground, NaN when no foot touches: ``gt.cop``, or the
+    force-weighted mean of the soles' ``cop.*`` points (from ``fsr.*``) placed by the sole poses."""
+    if rec.has("gt.cop"):
+        return rec.group("gt.cop")
+    T = len(rec)
+    if not (rec.has("fsr") and rec.has("cop")):
+        return np.full((T, 3), np.nan)
+    f = rec.group("fsr")
+    cop = rec.group("cop")
+    pl = frame_positions(robot, links, pos, quat, "l_sole")
+    pr = frame_positions(robot, links, pos, quat, "r_sole")
+    il, ir = links.index(robot.frames["l_sole"].link), links.index(robot.frames["r_sole"].link)
+    pl = pl + quat_rotate(quat[:, il], np.column_stack([cop[:, 0], cop[:, 1], np.zeros(T)]))
+    pr = pr + quat_rotate(quat[:, ir], np.column_stack([cop[:, 2], cop[:, 3], np.zeros(T)]))
+    tot = f[:, 0] + f[:, 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = (f[:, :1] * pl + f[:, 1:] * pr) / tot[:, None]
+    out[~(tot > 1e-3)] = np.nan
+    return out
+
+
+def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) reordered from (w, x, y, z) to Rerun's (x, y, z, w), contiguous."""
+    return np.ascontiguousarray(np.concatenate([q_wxyz[..., 1:], q_wxyz[..., :1]], axis=-1))

@@ -1,0 +1,413 @@
+"""Logging recordings into Rerun: one subtree per recording, the default blueprint, the legend.
+
+The entity layout is described in :mod:`experiments.viz` (the package docstring).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import time
+from collections.abc import Mapping
+
+import numpy as np
+
+from common.files import atomic_path
+from common.spatial import quat_from_rpy, quat_rotate
+from envs.recording import Recording, RecordingError
+from experiments.viz.inputs import check_recording, sanitize_label
+from experiments.viz.kinematics import _measured_cop, _xyzw, link_poses
+from experiments.viz.style import PALETTE, STEP_TIMELINE, TIMELINE, WORLD_COLORS, _color, _pick_color
+from experiments.viz.terrain import _ground_z, terrain_for, terrain_mesh
+from robots import RobotModel
+from terrain import Heightfield
+
+#: Footstep boxes: the NAO sole (robots/nao.py), 5 mm thick.
+SOLE_BOX = (0.160, 0.0888, 0.005)
+SOLE_CENTER = (0.030, 0.00562)  # sole centre ahead of / outward of the sole frame [m]
+#: Default 3D camera: this offset [m] from the point it looks at (behind-left, above).
+EYE_OFFSET = np.array([-0.75, -1.15, 0.55])
+
+
+class _Logger:
+    """Sends one recording's entities; counts rows per entity for the summary."""
+
+    def __init__(self, stream, label: str, rec: Recording):
+        import rerun as rr
+
+        self.rr = rr
+        self.stream = stream
+        self.root = "/" + label
+        self.rows: dict[str, int] = {}
+        t = np.asarray(rec.t, float)
+        self.index = [rr.TimeColumn(TIMELINE, duration=t), rr.TimeColumn(STEP_TIMELINE, sequence=np.arange(len(t)))]
+        self.n = len(t)
+
+    def columns(self, path: str, columns, index=None, n=None) -> None:
+        path = f"{self.root}/{path}"
+        self.stream.send_columns(path, indexes=index or self.index, columns=columns)
+        self.rows[path] = self.rows.get(path, 0) + (n if n is not None else self.n)
+
+    def static(self, path: str, archetype) -> None:
+        self.stream.log(f"{self.root}/{path}" if path else self.root, archetype, static=True)
+
+    def scalar(self, path: str, values: np.ndarray, name: str, color, width: float = 1.5) -> None:
+        rr = self.rr
+        self.static(path, rr.SeriesLines(names=[name], colors=[color], widths=[width]))
+        self.columns(path, rr.Scalars.columns(scalars=np.asarray(values, np.float64)))
+
+    def points(self, path: str, P: np.ndarray, color, radius: float) -> None:
+        """A moving marker: one row per time, an empty row where P is NaN."""
+        rr = self.rr
+        ok = np.all(np.isfinite(P), axis=1)
+        # static styling only: static positions would shadow the time-varying ones
+        self.static(path, rr.Points3D.from_fields(radii=[radius], colors=[color]))
+        self.columns(path, rr.Points3D.columns(positions=P[ok]).partition(ok.astype(np.int64)))
+
+
+def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | None = None,
+                  terrain_note: str = "", color=None) -> dict[str, int]:
+    """Log one recording under ``/<label>`` of an open ``rerun.RecordingStream``.
+
+    Args:
+        stream: the Rerun recording stream (e.g. from :func:`log_rollouts_to_rrd`).
+        label: entity path of the subtree (already sanitized, without leading '/').
+        rec: a checked recording (see :func:`check_recording`).
+        terrain: the heightfield it ran on (None: flat plane at z = 0).
+        terrain_note: where the terrain came from (shown in the events log).
+        color: base RGB colour (default by world).
+
+    Returns:
+        {entity path: number of time-varying rows logged}.
+    """
+    import rerun as rr
+
+    robot = rec.robot
+    world = str(rec.meta.get("world", "unknown"))
+    color = tuple(color or WORLD_COLORS.get(world, PALETTE[0]))
+    L = _Logger(stream, label, rec)
+    T = len(rec)
+
+    # ---------------------------------------------------------------- scene
+    L.static("", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
+    L.static("terrain", rr.Mesh3D(**terrain_mesh(terrain)))
+
+    # ---------------------------------------------------------------- robot
+    links, pos, quat, grounded = link_poses(rec)
+    xyzw = _xyzw(quat)
+    geoms = {robot.root: robot.root_geoms, **{j.child: j.geoms for j in robot.joints}}
+    body_col = _color(color, 0.35)
+    foot_col = _color(color, 0.0)
+    for i, link in enumerate(links):
+        L.columns(f"robot/{link}", rr.Transform3D.columns(translation=pos[:, i], quaternion=xyzw[:, i]))
+        gs = geoms.get(link, ())
+        if not gs:
+            continue
+        col = foot_col if link.endswith("_ankle") else body_col
+        kinds = {g.kind for g in gs}
+        if len(kinds) != 1:  # pragma: no cover - the NAO model has one kind per link
+            raise ValueError(f"link {link!r} mixes geometry kinds {kinds}")
+        kind = kinds.pop()
+        qs = [_xyzw(quat_from_rpy(*g.rpy)) for g in gs]
+        if kind == "box":
+            arch = rr.Boxes3D(centers=[g.xyz for g in gs], half_sizes=[[s / 2 for s in g.size] for g in gs],
+                              quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
+        elif kind == "capsule":
+            # URDF capsule: centred, cylinder of `length` along local z; Rerun: from 0 to +length along z.
+            starts = [np.asarray(g.xyz) + quat_rotate(quat_from_rpy(*g.rpy), np.array([0.0, 0.0, -g.size[1] / 2]))
+                      for g in gs]
+            arch = rr.Capsules3D(lengths=[g.size[1] for g in gs], radii=[g.size[0] for g in gs], translations=starts,
+                                 quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
+        elif kind == "sphere":
+            arch = rr.Ellipsoids3D(centers=[g.xyz for g in gs], half_sizes=[[g.size[0]] * 3 for g in gs],
+                                   colors=[col] * len(gs), fill_mode="solid")
+        else:  # pragma: no cover - spec error
+            raise ValueError(f"unknown geometry kind {kind!r} on link {link!r}")
+        L.static(f"robot/{link}/geom", arch)
+
+    # ---------------------------------------------------------------- balance markers
+    balance: dict[str, np.ndarray] = {}
+    if rec.has("gt.com"):
+        com = rec.group("gt.com")
+        balance["com"] = com
+        L.points("com", com, _color(color, 0.0), 0.012)
+        L.static("com_trail", rr.LineStrips3D([com], colors=[_color(color, 0.3)], radii=[0.002]))
+    cop = _measured_cop(rec, robot, links, pos, quat)
+    if np.isfinite(cop).any():
+        balance["cop"] = cop
+        L.points("cop", cop, [230, 30, 30], 0.010)
+    if "plan.com.x" in rec.columns:
+        pc = np.column_stack([rec.columns["plan.com.x"], rec.columns["plan.com.y"],
+                              rec.columns.get("plan.com.z", np.full(T, np.nan))])
+        if not np.isfinite(pc[:, 2]).any():
+            pc[:, 2] = balance["com"][:, 2] if "com" in balance else 0.26
+        balance["plan_com"] = pc
+        L.points("plan/com", pc, [250, 200, 0], 0.010)
+        L.static("plan/com_trail", rr.LineStrips3D([pc[np.all(np.isfinite(pc), 1)]], colors=[[250, 200, 0]],
+                                                   radii=[0.0015]))
+    if "plan.zmp.x" in rec.columns:
+        zx, zy = rec.columns["plan.zmp.x"], rec.columns["plan.zmp.y"]
+        pz = np.column_stack([zx, zy, _ground_z(terrain, zx, zy) + 0.002])
+        balance["zmp_ref"] = pz
+        L.points("plan/zmp", pz, [0, 200, 200], 0.008)
+
+    # ---------------------------------------------------------------- footsteps
+    steps = rec.meta.get("footsteps") or []
+    if steps:
+        try:
+            fx = np.array([float(s["x"]) for s in steps])
+            fy = np.array([float(s["y"]) for s in steps])
+            fyaw = np.array([float(s.get("yaw", 0.0)) for s in steps])
+            side = [str(s.get("side", "L")) for s in steps]
+            t0 = np.array([float(s.get("t_start") or 0.0) for s in steps])
+            t1 = np.array([math.inf if s.get("t_end") is None else float(s["t_end"]) for s in steps])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise RecordingError(f"{label}: metadata 'footsteps' must be a list of {{x, y, yaw, side, t_start, "
+                                 f"t_end}}: {exc}") from None
+        sgn = np.array([1.0 if s == "L" else -1.0 for s in side])
+        cx = fx + np.cos(fyaw) * SOLE_CENTER[0] - np.sin(fyaw) * sgn * SOLE_CENTER[1]
+        cy = fy + np.sin(fyaw) * SOLE_CENTER[0] + np.cos(fyaw) * sgn * SOLE_CENTER[1]
+        cz = _ground_z(terrain, cx, cy) + SOLE_BOX[2] / 2
+        centers = np.column_stack([cx, cy, cz])
+        qs = np.column_stack([np.zeros((len(steps), 2)), np.sin(fyaw / 2), np.cos(fyaw / 2)])
+        cols = np.array([[60, 60, 230] if s == "L" else [230, 60, 60] for s in side], np.uint8)
+        half = np.tile(np.asarray(SOLE_BOX) / 2, (len(steps), 1))
+        labels = [f"{s}{k}" for k, s in enumerate(side)]
+        L.static("plan/footsteps", rr.Boxes3D(centers=centers, half_sizes=half, quaternions=qs, colors=cols,
+                                              labels=labels, show_labels=False, fill_mode="MajorWireframe"))
+        active = (t0[None, :] <= rec.t[:, None]) & (rec.t[:, None] < t1[None, :])  # (T, S)
+        rows, idx = np.nonzero(active)
+        L.static("plan/footsteps/active", rr.Boxes3D.from_fields(fill_mode="solid"))
+        L.columns("plan/footsteps/active", rr.Boxes3D.columns(
+            centers=centers[idx], half_sizes=half[idx], quaternions=qs[idx], colors=cols[idx]
+        ).partition(active.sum(1).astype(np.int64)))
+
+    # ---------------------------------------------------------------- fall and events
+    seed, prof = rec.meta.get("seed"), rec.meta.get("profile")
+    tinfo = rec.meta.get("terrain") or {}
+    start_msg = (f"{world} rollout: {T} rows x {float(rec.meta['control_dt']) * 1e3:g} ms, seed {seed}"
+                 + (f", profile {prof}" if prof else "") + f", terrain {tinfo.get('name', 'flat')}"
+                 + (f" ({terrain_note})" if terrain_note else "")
+                 + ("" if grounded else "; no ground-truth base pose: robot drawn upright at the origin"))
+    texts, levels, times = [start_msg], ["INFO"], [float(rec.t[0])]
+    if rec.fell:
+        ft = rec.meta.get("fall_time")
+        ft = float(ft) if ft is not None else float(rec.t[-1])
+        reason = rec.meta.get("fall_reason") or "unknown"
+        base = pos[-1, 0]
+        p = [float(base[0]), float(base[1]), float(_ground_z(terrain, base[0], base[1])) + 0.03]
+        msg = f"fell at t = {ft:.2f} s: {reason}"
+        fidx = [rr.TimeColumn(TIMELINE, duration=[ft]), rr.TimeColumn(STEP_TIMELINE, sequence=[T])]
+        L.static("fall", rr.Points3D.from_fields(radii=[0.05], colors=[[230, 0, 0]], show_labels=True))
+        L.columns("fall", rr.Points3D.columns(positions=[p], labels=[msg]), index=fidx, n=1)
+        texts.append(msg)
+        levels.append("WARN")
+        times.append(ft)
+    L.columns("events", rr.TextLog.columns(text=texts, level=levels),
+              index=[rr.TimeColumn(TIMELINE, duration=times),
+                     rr.TimeColumn(STEP_TIMELINE, sequence=[0] + [T] * (len(times) - 1))], n=len(times))
+
+    # ---------------------------------------------------------------- time series
+    idx = {n: i for i, n in enumerate(robot.joint_names)}
+    q = rec.group("q")
+    cmd = robot.expand_action(rec.group("cmd"))
+    app = robot.expand_action(rec.group("app")) if rec.has("app") else None
+    shades = {"q": (0.0, 2.0), "app": (0.35, 1.5), "cmd": (0.6, 1.0)}
+    for j in robot.groups["legs"]:
+        k = idx[j]
+        for kind, arr in (("cmd", cmd), ("app", app), ("q", q)):
+            if arr is None:
+                continue
+            mix, width = shades[kind]
+            L.scalar(f"ts/joints/{j}/{kind}", arr[:, k], f"{label} {kind}", _color(color, mix), width)
+    for group, names in (("gyro", ("x", "y", "z")), ("angle", ("roll", "pitch")), ("fsr", ("L", "R"))):
+        if rec.has(group):
+            arr = rec.group(group)
+            for i, nm in enumerate(names):
+                L.scalar(f"ts/{group}/{nm}", arr[:, i], f"{label} {group}.{nm}", _color(color, 0.0))
+    styles = {"com": (0.0, 2.0), "cop": (-0.45, 1.0), "plan_com": (0.45, 1.5), "zmp_ref": (0.75, 1.0)}
+    for key, arr in balance.items():
+        mix, width = styles[key]
+        for i, ax in enumerate("xy"):
+            L.scalar(f"ts/balance/{ax}/{key}", arr[:, i], f"{label} {key} {ax}", _color(color, mix), width)
+    return L.rows
+
+
+def build_blueprint(labels: list[str], robot: RobotModel, worlds: Mapping[str, str] | None = None,
+                    centers: Mapping[str, tuple[float, float, float]] | None = None, active=(0, 0)):
+    """The default layout: 3D views side by side on top, compare plots below (one timeline).
+
+    Top: one 3D view per label (origin ``/<label>``), its camera looking at ``centers[label]``
+    (world [m], default the origin; e.g. the middle of the torso path) from behind-left; labels
+    of the same world (``worlds[label]``) share a column as tabs; a second tab overlays all robots
+    on the first label's terrain. ``active``: the initially shown (3D tab, plot tab) indices.
+    Bottom tabs: left leg and right leg (one plot per joint: every label's cmd/app/q), IMU (gyro,
+    roll, pitch), balance (x and y of CoM, CoP, planned CoM, ZMP reference), feet (FSR) and events.
+
+    Returns:
+        ``rerun.blueprint.Blueprint``.
+    """
+    import rerun.blueprint as rrb
+
+    worlds = dict(worlds or {})
+    centers = dict(centers or {})
+
+    def eye(label):
+        c = np.asarray(centers.get(label, (0.0, 0.0, 0.2)), float)
+        return rrb.EyeControls3D(position=tuple(c + EYE_OFFSET), look_target=tuple(c))
+
+    def view3d(label):
+        return rrb.Spatial3DView(origin=f"/{label}", name=label, contents=[f"/{label}/**", f"- /{label}/ts/**"],
+                                 eye_controls=eye(label), line_grid=rrb.LineGrid3D(visible=False))
+
+    by_world: dict[str, list[str]] = {}
+    for lab in labels:
+        by_world.setdefault(worlds.get(lab, lab.split("/")[0]), []).append(lab)
+    columns = [view3d(labs[0]) if len(labs) == 1 else rrb.Tabs(*[view3d(x) for x in labs], name=w)
+               for w, labs in by_world.items()]
+    side = rrb.Horizontal(*columns, name="side by side")
+    overlay = rrb.Spatial3DView(
+        origin="/", name="overlay", eye_controls=eye(labels[0]), line_grid=rrb.LineGrid3D(visible=False),
+        contents=[f"/{labels[0]}/terrain"] + [f"/{x}/robot/**" for x in labels] + [f"/{x}/plan/**" for x in labels]
+        + [f"/{x}/fall" for x in labels])
+
+    def plots(suffix: str, name: str, lines_per_label: int = 1):
+        return rrb.TimeSeriesView(name=name, origin="/", contents=[f"/{x}/ts/{suffix}" for x in labels],
+                                  plot_legend=rrb.PlotLegend(visible=len(labels) * lines_per_label <= 4))
+
+    legs = lambda side_: rrb.Grid(*[plots(f"joints/{j}/**", f"{j} [rad]", 3) for j in robot.groups[side_]],
+                                  grid_columns=3, name="left leg" if side_ == "left_leg" else "right leg")
+    imu = rrb.Grid(*[plots(f"gyro/{a}", f"gyro {a} [rad/s]") for a in "xyz"],
+                   plots("angle/roll", "torso roll [rad]"), plots("angle/pitch", "torso pitch [rad]"),
+                   grid_columns=3, name="IMU")
+    bal = rrb.Grid(plots("balance/x/**", "x: CoM, CoP, plan [m]", 4), plots("balance/y/**", "y: CoM, CoP, plan [m]", 4),
+                   grid_columns=2, name="balance")
+    feet = rrb.Grid(plots("fsr/L", "left foot force [N]"), plots("fsr/R", "right foot force [N]"), grid_columns=2,
+                    name="feet")
+    events = rrb.TextLogView(name="events", origin="/", contents=[f"/{x}/events" for x in labels])
+    key = rrb.TextDocumentView(name="legend", origin="/legend")
+    return rrb.Blueprint(
+        rrb.Vertical(rrb.Tabs(side, overlay, name="3D", active_tab=active[0]),
+                     rrb.Tabs(legs("left_leg"), legs("right_leg"), imu, bal, feet, events, key, name="plots",
+                              active_tab=active[1]), row_shares=[3, 2]),
+        collapse_panels=True)
+
+
+#: Shown in the "legend" tab of the default blueprint.
+LEGEND_MD = """# How to read this recording
+
+* **3D** (one view per rollout, tab *overlay* puts all robots on one terrain): the robot from its
+  recorded joint angles and ground-truth base pose; terrain coloured green (low) to sand (high).
+  Yellow line and dot: planned CoM; cyan dot: ZMP reference; red dot: measured centre of pressure;
+  wireframe boxes: planned footsteps (blue left, red right), solid while in use; big red dot with
+  text: where and why the robot fell.
+* **Joint plots** (one per leg joint, all rollouts): the world's colour (sim blue, real orange,
+  grounded green) at three shades: measured `q` (thick, full colour), applied `app` (after
+  grounding, medium), commanded `cmd` (thin, lightest). Hover a line to see its name.
+* **IMU**: gyro [rad/s] and torso roll/pitch [rad]. **balance**: x and y [m] in the world's
+  colour: measured CoM (thick), planned CoM (light), ZMP reference (lightest, steps), measured CoP
+  (dark, thin). **feet**: foot normal forces [N]. **events**: start and fall messages.
+* Timelines: `time` (seconds since reset, shared by all rollouts) and `step` (control step).
+"""
+
+
+def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.PathLike | None = None, *,
+                        terrains: Mapping[str, Heightfield | None] | None = None, spawn: bool = False,
+                        application_id: str = "sgatwalk", recording_id: str | None = None,
+                        blueprint: bool = True) -> dict:
+    """Log recordings side by side into one ``.rrd`` file (or a spawned viewer).
+
+    This is the entry point for ``sgatwalk visualize`` and for ``sgatwalk optimize --rerun``
+    (e.g. ``{"gen_005/best": rec, "gen_005/median": rec, "eval/real_seed_3": rec}``).
+
+    Args:
+        recordings: label -> recording. A label becomes the entity path ``/<label>`` ('/' nests;
+            characters outside [A-Za-z0-9_.-] become '_'); labels must stay distinct and none may be
+            a prefix path of another.
+        path: the ``.rrd`` to write (atomically: a temporary file, then rename); required unless
+            ``spawn``.
+        terrains: label -> heightfield (None = flat) for recordings whose terrain is known;
+            others are regenerated with :func:`terrain_for`.
+        spawn: open a Rerun viewer (``rerun`` on PATH) instead of writing a file.
+        application_id, recording_id: Rerun ids (the viewer merges files of one recording id).
+        blueprint: send :func:`build_blueprint`'s layout as the default blueprint.
+
+    Returns:
+        dict: ``path``, ``labels``, ``rows`` ({entity: time-varying rows}), ``notes`` ({label:
+        terrain note}), ``log_seconds`` (building + sending, without the final flush),
+        ``seconds`` (total), ``bytes`` (file size, 0 when spawning).
+
+    Raises:
+        ValueError: no recordings, clashing labels, no path; RecordingError (a ValueError) for a
+            recording of another robot, an empty or malformed one (message names the label).
+    """
+    import rerun as rr
+
+    if not recordings:
+        raise ValueError("no recordings to visualize")
+    if path is None and not spawn:
+        raise ValueError("give a path for the .rrd file (or spawn=True)")
+    labels: dict[str, Recording] = {}
+    orig: dict[str, str] = {}
+    for lab, rec in recordings.items():
+        s = sanitize_label(lab)
+        if s in labels:
+            raise ValueError(f"recording labels {orig[s]!r} and {lab!r} map to the same entity path /{s}")
+        check_recording(rec, str(lab))
+        labels[s] = rec
+        orig[s] = lab
+    keys = sorted(labels)
+    for a, b in zip(keys, keys[1:]):
+        if b.startswith(a + "/"):
+            raise ValueError(f"label {orig[a]!r} is a prefix of {orig[b]!r}; rename one")
+    terrains = dict(terrains or {})
+    robot = next(iter(labels.values())).robot
+    t_start = time.perf_counter()
+    stream = rr.RecordingStream(application_id, recording_id=recording_id)
+    if not stream.is_enabled():
+        raise ValueError("Rerun logging is disabled (environment variable RERUN=off?); unset it to write .rrd files")
+    bp = None
+    if blueprint:
+        centers = {}
+        for k, r in labels.items():
+            if r.has("gt.base"):
+                b = r.group("gt.base")
+                centers[k] = (0.5 * (b[:, 0].min() + b[:, 0].max()), 0.5 * (b[:, 1].min() + b[:, 1].max()), 0.2)
+        bp = build_blueprint(list(labels), robot, {k: str(r.meta.get("world", k)) for k, r in labels.items()}, centers)
+    rows: dict[str, int] = {}
+    notes: dict[str, str] = {}
+    used: dict[str, int] = {}
+    t_log = 0.0
+    if spawn:
+        import shutil
+        import sys
+
+        venv_bin = os.path.dirname(sys.executable)  # the viewer ships with rerun-sdk, next to python
+        if shutil.which("rerun") is None and os.path.exists(os.path.join(venv_bin, "rerun")):
+            os.environ["PATH"] = venv_bin + os.pathsep + os.environ.get("PATH", "")
+    else:
+        path = os.fspath(path)
+    # a file is written to a temporary beside it and renamed when complete (common.files.atomic_path)
+    with contextlib.nullcontext(None) if spawn else atomic_path(path, suffix=".rrd") as tmp:
+        if spawn:
+            stream.spawn(default_blueprint=bp)
+        else:
+            stream.save(tmp, default_blueprint=bp)
+        try:
+            stream.log("/legend", rr.TextDocument(LEGEND_MD, media_type=rr.MediaType.MARKDOWN), static=True)
+            for lab, rec in labels.items():
+                if lab in terrains or orig[lab] in terrains:
+                    hf = terrains.get(lab, terrains.get(orig[lab]))
+                    note = "flat ground (plane at z = 0)" if hf is None else "the rollout's terrain"
+                else:
+                    hf, note = terrain_for(rec)
+                notes[lab] = note
+                rows.update(log_recording(stream, lab, rec, hf, note, _pick_color(str(rec.meta.get("world", "")), used)))
+            t_log = time.perf_counter() - t_start
+            stream.flush()
+        finally:
+            stream.disconnect()
+    size = 0 if spawn else os.path.getsize(path)
+    return {"path": None if spawn else path, "labels": list(labels), "rows": rows, "notes": notes,
+            "log_seconds": t_log, "seconds": time.perf_counter() - t_start, "bytes": size}
