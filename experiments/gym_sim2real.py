@@ -444,6 +444,7 @@ def ground_and_train(cfg: GymConfig, method: str, noise: float, run: int, sim_po
         ``{"policy": blob, "fit": last GroundingFit, "errors": one-step errors of the last
         transformer on held-out real data, "n_real": real transitions used}``.
     """
+    from sgat.algorithm import grounding_loop, new_progress
     from sgat.grounding import Transitions, fit_transformer
     from sgat.transformer import ActionTransformer, GroundingSpec
 
@@ -451,32 +452,43 @@ def ground_and_train(cfg: GymConfig, method: str, noise: float, run: int, sim_po
     sim_env = make_env(cfg.env)
     spec = GroundingSpec.full(sim_env, history=1)
     nk = noise_key(noise)
-    policy = sim_policy
     real_parts, sim_parts = [], []
-    fit = None
+    fits = []
     fit_kwargs = {"max_epochs": cfg.model_epochs, "patience": cfg.model_patience, "lr": cfg.model_lr,
                   "batch_size": cfg.model_batch}
-    for g in range(cfg.grounding_steps):
+
+    def ground(i, policy):  # collect real and explored sim data with π_i, fit on all data so far
+        g = i - 1
         pol = NumpyPolicy(policy)
         real_eps = collect(real_env, pol, cfg.real_transitions, seed_of(cfg.seed, _REAL_DATA, nk, run, g))
         sim_eps = collect(sim_env, pol, cfg.sim_transitions, seed_of(cfg.seed, _SIM_DATA, run, g),
                           explore=cfg.explore_sigma)
         real_parts.append(episodes_to_transitions(real_eps, spec))
         sim_parts.append(episodes_to_transitions(sim_eps, spec))
-        fit = fit_transformer(Transitions.concat(real_parts), Transitions.concat(sim_parts), spec, method=method,
-                              hidden=cfg.hidden, alpha=cfg.alpha, seed=seed_of(cfg.seed, _FIT, nk, run, g),
-                              fit_kwargs=fit_kwargs)
+        fits.append(fit_transformer(Transitions.concat(real_parts), Transitions.concat(sim_parts), spec, method=method,
+                                    hidden=cfg.hidden, alpha=cfg.alpha, seed=seed_of(cfg.seed, _FIT, nk, run, g),
+                                    fit_kwargs=fit_kwargs))
+        return fits[-1]
+
+    def improve(i, policy, fit, progress):  # TRPO in the grounded sim, warm-started from π_i
+        g = i - 1
         tr = fit.transformer
         ground_seed = seed_of(cfg.seed, _GROUND, nk, run, g)
 
-        def env_fn(i, tr=tr, ground_seed=ground_seed):
-            t_i = ActionTransformer(spec, tr.forward, tr.inverse, method=tr.method, alpha=tr.alpha,
-                                    seed=seed_of(ground_seed, i))
-            return _keep_stream_grounded_env(make_env(cfg.env), t_i, cfg.ctrl_cost_weight)
+        def env_fn(k, tr=tr, ground_seed=ground_seed):
+            t_k = ActionTransformer(spec, tr.forward, tr.inverse, method=tr.method, alpha=tr.alpha,
+                                    seed=seed_of(ground_seed, k))
+            return _keep_stream_grounded_env(make_env(cfg.env), t_k, cfg.ctrl_cost_weight)
 
-        policy = train_policy(cfg, env_fn, cfg.grounded_steps, seed_of(cfg.seed, _RETRAIN, run, g), init=policy)
+        return train_policy(cfg, env_fn, cfg.grounded_steps, seed_of(cfg.seed, _RETRAIN, run, g), init=policy)
+
+    def evaluate(i, policy, progress):
         if log:
-            log(f"{method} noise {noise:g} run {run}: grounding step {g + 1}/{cfg.grounding_steps} done")
+            log(f"{method} noise {noise:g} run {run}: grounding step {i}/{cfg.grounding_steps} done")
+
+    policy = grounding_loop(new_progress(sim_policy), cfg.grounding_steps, ground=ground, improve=improve,
+                            evaluate=evaluate)["policy"]
+    fit = fits[-1] if fits else None
     held = collect(real_env, NumpyPolicy(sim_policy), min(2000, cfg.real_transitions),
                    seed_of(cfg.seed, _HELDOUT, nk, run))
     tr_eval = ActionTransformer(spec, fit.transformer.forward, fit.transformer.inverse, method=method,

@@ -65,6 +65,7 @@ from common.defaults import EPISODE_SECONDS
 from common.files import atomic_path
 from common.files import atomic_write_bytes as _atomic_write
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
+from sgat.algorithm import grounding_loop, new_progress
 
 METHODS = ("sgat", "gat", "none", "ane", "identified", "hybrid", "real")
 #: Methods that ground the sim with a learned action transformer.
@@ -210,6 +211,12 @@ class Optimizer:
         except Exception as exc:
             raise CheckpointError(f"{path!r} is corrupted ({type(exc).__name__}: {exc}); "
                                   "delete the run directory to start over") from None
+        for prog in state["progress"].values():  # checkpoints from before sgat.algorithm: old key and stage names
+            if "theta" in prog and "policy" not in prog:
+                prog["policy"] = prog.pop("theta")
+                prog["candidate"] = prog.pop("selected", None)
+                prog["model"] = None
+                prog["stage"] = {"fit": "ground", "cma": "improve", "eval": "evaluate"}.get(prog["stage"], prog["stage"])
         if state.get("cma_version") != cma.__version__:
             raise CheckpointError(f"{path!r} was written with cma {state.get('cma_version')}, this is "
                                   f"{cma.__version__}; CMA-ES states do not carry across versions")
@@ -320,7 +327,7 @@ class Optimizer:
         cfg = self.cfg
         world, kw = self._world_kw(method, step)
         if prog.get("es") is None:
-            x0 = GaitParams.from_array(prog["theta"]).to_vector()
+            x0 = GaitParams.from_array(prog["policy"]).to_vector()
             r = cfg.trust_region  # the models are fitted on θ_i's data: search near θ_i
             lo, hi = np.clip(x0 - r, 0.0, 1.0), np.clip(x0 + r, 0.0, 1.0)
             opts = {"bounds": [lo.tolist(), hi.tolist()], "popsize": cfg.popsize, "verbose": -9, "verb_log": 0, "verb_disp": 0,
@@ -382,7 +389,7 @@ class Optimizer:
         world, kw = self._world_kw(method, step)
         names = ["CMA-ES mean", "best candidate", "incumbent θ_i"]
         cands = [GaitParams.from_vector(es.result.xfavorite, clip=True).to_array(),
-                 GaitParams.from_vector(es.result.xbest, clip=True).to_array(), np.asarray(prog["theta"], dtype=float)]
+                 GaitParams.from_vector(es.result.xbest, clip=True).to_array(), np.asarray(prog["policy"], dtype=float)]
         seeds = _seeds(cfg, 5, step, n=cfg.select_episodes)
         res = self._map([t for th in cands for t in self._tasks(world, th, seeds, **kw)], "select")
         n = len(seeds)
@@ -449,7 +456,7 @@ class Optimizer:
             theta0 = (GaitParams.load(self.cfg.params) if self.cfg.params else GaitParams.initial()).to_array()
             self.state = {"config": self.cfg.to_dict(), "cma_version": cma.__version__, "theta0": theta0.tolist(),
                           "rows": [], "evals": [], "generations": [],
-                          "progress": {m: {"step": 1, "stage": "fit", "theta": theta0.tolist(), "es": None, "gen": 0}
+                          "progress": {m: {**new_progress(theta0.tolist()), "es": None, "gen": 0}
                                        for m in self.cfg.methods}}
             self._write_config()
             self._save()
@@ -461,33 +468,35 @@ class Optimizer:
             ev = self._evaluate(self.state["theta0"], 0, "theta0")
             self.state["rows"].append({"method": "theta0", "step": 0, **ev})
             self._save()
-        for method in cfg.methods:
-            prog = self.state["progress"][method]
-            while prog["step"] <= cfg.grounding_steps:
-                step = prog["step"]
-                if prog["stage"] == "fit":
-                    if method in GROUNDED:
-                        self._fit(method, step, prog["theta"])
-                    prog["stage"] = "cma"
-                    self._save()
-                if prog["stage"] == "cma":
-                    self._cma(method, step, prog)
-                    prog["selected"] = self._select(method, step, prog).tolist()
-                    prog["stage"] = "eval"
-                    self._save()
-                if prog["stage"] == "eval":
-                    theta = np.array(prog["selected"])
-                    ev = self._evaluate(theta, step, method)
-                    GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
-                    self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist(),
-                                               "select_scores": prog.get("select_scores")})
-                    if ev["trials"]:
-                        self.log(f"[{method} step {step}] real: {ev['speed_mean']:.2f} ± {ev['speed_std']:.2f} cm/s, "
-                                 f"falls {ev['falls']}/{ev['trials']}")
-                    prog.update(step=step + 1, stage="fit", theta=theta.tolist(), es=None, gen=0)
-                    self._save()
+        for method in cfg.methods:  # Algorithm 1 per method (sgat.algorithm), checkpointed after every stage
+            grounding_loop(self.state["progress"][method], cfg.grounding_steps,
+                           ground=lambda i, theta, m=method: self._fit(m, i, theta) if m in GROUNDED else None,
+                           improve=lambda i, theta, model, prog, m=method: self._improve(m, i, prog),
+                           evaluate=lambda i, theta, prog, m=method: self._record_step(m, i, theta, prog),
+                           save=self._save)
         self._figure()
         return self.result()
+
+    def _improve(self, method: str, step: int, prog: dict) -> list:
+        """Policy improvement of a grounding step: CMA-ES in the training world, then the choice of
+        θ_{i+1} (:meth:`_select`); the CMA-ES state lives in ``prog`` (``es``, ``gen``) so that a
+        killed run resumes mid-generation loop."""
+        self._cma(method, step, prog)
+        return self._select(method, step, prog).tolist()
+
+    def _record_step(self, method: str, step: int, theta, prog: dict) -> None:
+        """Real trials of θ_{i+1}, its θ file and its Table I row; then the CMA-ES state is dropped."""
+        from walk_engine import GaitParams
+
+        theta = np.asarray(theta, dtype=float)
+        ev = self._evaluate(theta, step, method)
+        GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
+        self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist(),
+                                   "select_scores": prog.get("select_scores")})
+        if ev["trials"]:
+            self.log(f"[{method} step {step}] real: {ev['speed_mean']:.2f} ± {ev['speed_std']:.2f} cm/s, "
+                     f"falls {ev['falls']}/{ev['trials']}")
+        prog.update(es=None, gen=0)
 
     def _identify(self) -> dict:
         """Identify the real world once for ``identified`` and ``hybrid`` (``experiments.identify``)."""

@@ -70,6 +70,8 @@ from typing import Literal
 
 import numpy as np
 
+from sgat.algorithm import grounding_loop, new_progress
+
 __all__ = [
     "TabularMDP",
     "ForwardModel",
@@ -826,27 +828,27 @@ def ground(
     pi = policy_iteration(sim, policy0).policy
     initial = pi.copy()
     S, A = sim.n_states, sim.n_actions
-    counts = np.zeros((S, A, S), dtype=np.int64)
-    total, unchanged, history = 0, 0, []
-    model = ForwardModel.from_counts(counts)
-    grounded = sim
-    converged = False
-    step = 0
-    for step in range(1, max_grounding_steps + 1):
-        data = rollout(real, pi, real_episodes, rng, max_steps=max_steps, explore=explore,
-                       record=True)
+    st = {"counts": np.zeros((S, A, S), dtype=np.int64), "total": 0, "unchanged": 0, "history": [],
+          "model": ForwardModel.from_counts(np.zeros((S, A, S), dtype=np.int64)), "grounded": sim}
+
+    def ground_step(i, policy):  # real episodes with π_i, counted forward model, grounded MDP
+        data = rollout(real, policy, real_episodes, rng, max_steps=max_steps, explore=explore, record=True)
         new_counts = count_transitions(S, A, data.s, data.a, data.s2)
-        counts = counts + new_counts if accumulate else new_counts
-        total += int(data.s.size)
-        model = ForwardModel.from_counts(counts)
-        G = action_transformer(sim, model, method, min_count=min_count)
-        grounded = grounded_mdp(sim, G, name=f"{method.upper()}-grounded {sim.name}")
-        new_pi = policy_iteration(grounded, pi).policy
-        changed = int(np.sum(new_pi != pi))
-        history.append(changed)
-        pi = new_pi
-        unchanged = unchanged + 1 if changed == 0 else 0
-        if unchanged >= patience:
-            converged = True
-            break
-    return GroundingResult(pi, initial, grounded, model, step, converged, total, history)
+        st["counts"] = st["counts"] + new_counts if accumulate else new_counts
+        st["total"] += int(data.s.size)
+        st["model"] = ForwardModel.from_counts(st["counts"])
+        G = action_transformer(sim, st["model"], method, min_count=min_count)
+        st["grounded"] = grounded_mdp(sim, G, name=f"{method.upper()}-grounded {sim.name}")
+        return st["grounded"]
+
+    def evaluate(i, new_pi, progress):  # how many states changed their action
+        changed = int(np.sum(new_pi != progress["policy"]))
+        st["history"].append(changed)
+        st["unchanged"] = st["unchanged"] + 1 if changed == 0 else 0
+
+    prog = grounding_loop(new_progress(pi), max_grounding_steps, ground=ground_step,
+                          improve=lambda i, policy, grounded, progress: policy_iteration(grounded, policy).policy,
+                          evaluate=evaluate, stop=lambda i, progress: st["unchanged"] >= patience)
+    converged = st["unchanged"] >= patience
+    return GroundingResult(prog["policy"], initial, st["grounded"], st["model"], prog["step"] - 1, converged,
+                           st["total"], st["history"])
