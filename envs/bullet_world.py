@@ -32,15 +32,21 @@ import numpy as np
 
 
 @contextlib.contextmanager
-def _quiet_fd(stream):
-    """Silence a C-level stream: Bullet prints ``pybullet build time`` (stderr) on import and
-    ``argv[0]=`` (stdout) on connect; the latter would corrupt ``--json`` output."""
+def _quiet_fd(fd: int):
+    """Silence a C-level file descriptor (1: stdout, 2: stderr): Bullet prints ``pybullet build
+    time`` (stderr) on import and ``argv[0]=`` (stdout) on connect; the latter would corrupt
+    ``--json`` output. Works on the descriptor, so it also holds when ``sys.stdout`` is replaced
+    (``contextlib.redirect_stdout``, pytest's capture, a worker forked from such a process)."""
     try:
-        fd = stream.fileno()
-    except (AttributeError, OSError, ValueError):  # captured stream (pytest): nothing to silence
+        os.fstat(fd)
+    except OSError:  # no such descriptor: nothing to silence
         yield
         return
-    stream.flush()
+    for stream in (sys.stdout, sys.stderr, sys.__stdout__, sys.__stderr__):
+        try:
+            stream.flush()
+        except (AttributeError, OSError, ValueError):
+            pass
     saved = os.dup(fd)
     try:
         with open(os.devnull, "w") as devnull:
@@ -51,7 +57,7 @@ def _quiet_fd(stream):
         os.close(saved)
 
 
-with _quiet_fd(sys.stderr):
+with _quiet_fd(2):
     import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
@@ -118,7 +124,7 @@ class NaoRealEnv(NaoEnv):
             raise ValueError(f"terrain must be 'lumpy', 'flat', None or a Heightfield, got {terrain!r}")
         self.terrain_spec = terrain
         self.solver_iterations = int(solver_iterations)
-        with _quiet_fd(sys.stdout):
+        with _quiet_fd(1):
             self.client = BulletClient(connection_mode=pybullet.DIRECT)
         r = self.robot
         self.effects: EffectDraw = self.profile.draw(np.random.default_rng(0), len(r.joint_names), len(r.links))

@@ -28,7 +28,7 @@ def register(sub) -> argparse.ArgumentParser:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = OptimizeConfig()
     p.add_argument("--methods", default="sgat", help=f"comma list of {', '.join(METHODS)} (default sgat; identified and "
-                   "hybrid first identify the real world from excitation logs, ~4 min)")
+                   "hybrid first identify the real world from excitation logs, ~3 min)")
     p.add_argument("--preset", choices=sorted(PRESETS), default="quick",
                    help="quick (default; README: measured time) or paper (population 150, 2 grounding steps)")
     p.add_argument("--grounding-steps", type=A.count(1, 100), help=f"grounding steps (default {d.grounding_steps})")
