@@ -61,8 +61,8 @@ def run(args) -> dict:
                      progress=not args.json, log=log)
     if not args.json:
         print(res["table"])
-        print(f"{res['episodes']} episodes ({res['ran']} run now, {res['resumed']} resumed) in "
-              f"{res['wall_s']:.1f} s on {res['workers']} {res['executor']} worker(s)")
+        print(f"{res['episodes']} episodes ({res['ran']} run now, {res['resumed']} resumed); the run took "
+              f"{res['wall_s']:.1f} s in all, on {res['workers']} {res['executor']} worker(s)")
         for k in ("trials_csv", "trials_parquet", "summary_csv", "png"):
             print(f"  {k}: {res['files'][k]}")
         for path in res["files"].get("rrd", []):
@@ -72,7 +72,8 @@ def run(args) -> dict:
     out = {"rows": [{k: r[k] for k in keys} for r in res["rows"]], "out": res["out"], "files": res["files"],
            "episodes": res["episodes"], "ran": res["ran"], "resumed": res["resumed"], "wall_s": res["wall_s"],
            "workers": res["workers"], "executor": res["executor"],
-           "axis": res["config"]["axis"], "world": res["config"]["world"], "terrain": res["config"]["terrain"]}
+           "axis": res["config"]["axis"], "world": res["config"]["world"], "terrain": res["config"]["terrain"],
+           "table": res["table"]}
     if "worst" in res:
         out["worst"] = res["worst"]
     return out

@@ -148,7 +148,12 @@ def _walk(res: dict) -> str:
     return f"```\n{format_walk(res)}\n```"
 
 
-RENDERERS = {"fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk}
+def _stress(res: dict) -> str:
+    return (f"```text\n{res['table']}\n{res['episodes']} episodes\n```\n\n"
+            + (f"The run took {res['wall_s'] / 60:.1f} min on {res['workers']} worker(s)." if res.get("wall_s") else ""))
+
+
+RENDERERS = {"fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
@@ -170,8 +175,8 @@ def render(text: str, results_dir: str = RESULTS) -> str:
         body = f"```console\n$ {doc['command']}\n```\n\n{RENDERERS[kind](doc['result'])}\n"
         mach = doc.get("machine")
         if mach:
-            body += (f"\n<sub>Run on {mach['cpus']} cores; 1-minute load average {mach['load_before']:.1f} at the start, "
-                     f"{mach['load_after']:.1f} at the end.</sub>\n")
+            body += (f"\n<sub>Saved by a run on {mach['cpus']} cores; 1-minute load average {mach['load_before']:.1f} at "
+                     f"its start, {mach['load_after']:.1f} at its end (a resumed run: of its last invocation).</sub>\n")
         return m.group(1) + body + m.group(4)
 
     return _BLOCK.sub(block, text)

@@ -58,6 +58,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
+from common.files import WallClock
 from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.parse import parse_values
 from experiments.stats import wilson_interval
@@ -658,10 +659,10 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
 
     from experiments.executors import make_executor
 
-    t0 = time.perf_counter()
     out = Path(out) if out is not None else default_out(cfg)
     old_rows = _check_resume(out, cfg)
     out.mkdir(parents=True, exist_ok=True)
+    clock = WallClock(out)  # the run's time over all the invocations that resumed it
     _atomic_write_bytes(out / "stress.json", json.dumps(cfg.to_dict(), indent=1).encode())
     tasks = plan_tasks(cfg)
     rows: dict[tuple, dict] = {_key(r): r for r in old_rows}
@@ -676,12 +677,19 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
         n = chunk or max(8, 4 * int(getattr(ex, "workers", 1)))
         bar = tqdm(total=len(tasks), initial=resumed, desc="stress", unit="ep", file=sys.stderr,
                    disable=None if progress else True)
+        t_start = last = time.perf_counter()
         try:
             for i in range(0, len(todo), n):
                 part = todo[i:i + n]
                 for r in ex.map(run_trial, part, progress=bar.update):
                     rows[_key(r)] = r
                 write_csv(_ordered(rows, cfg), TRIAL_COLUMNS, trials_csv)
+                now = time.perf_counter()
+                if bar.disable and (now - last > 30 or i + n >= len(todo)):  # no terminal: a line on stderr
+                    done = min(i + n, len(todo))
+                    print(f"[stress {now - t_start:7.1f} s] {done}/{len(todo)} episodes, ETA "
+                          f"{(now - t_start) / done * (len(todo) - done):.0f} s", file=sys.stderr, flush=True)
+                    last = now
         except KeyboardInterrupt:
             if log:
                 log(f"stress: stopped; {len(rows)} episodes are saved in {trials_csv}: "
@@ -706,7 +714,7 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
         if own:
             ex.close()
     result.update({"rows": table, "out": str(out), "files": files, "episodes": len(tasks), "ran": len(todo),
-                   "resumed": resumed, "wall_s": time.perf_counter() - t0, "executor": getattr(ex, "name", "?"),
+                   "resumed": resumed, "wall_s": clock.save(), "executor": getattr(ex, "name", "?"),
                    "workers": int(getattr(ex, "workers", 1)), "config": cfg.to_dict(),
                    "table": format_table(table, cfg)})
     return result
