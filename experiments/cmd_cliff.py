@@ -228,21 +228,20 @@ def policy_string(policy: np.ndarray, rows: int = 4, cols: int = 12) -> str:
     return "/".join("".join(letters[r * cols:(r + 1) * cols]) for r in range(rows))
 
 
-def _print_table(rows: list[dict[str, Any]], episodes: int, seed: int) -> None:
-    print(f"Cliff Walking 4x12, GAT vs SGAT; real return over {episodes} episodes "
-          f"(mean ± s.e.), seed {seed}")
+def format_table(rows: list[dict[str, Any]], episodes: int, seed: int) -> str:
+    """The table ``sgatwalk cliff`` prints, from its rows (also from its ``--json`` result)."""
     head = f"{'noise':>6}  {'GAT':>16}  {'SGAT':>16}  {'optimum (real)':>16}  grounding steps"
-    print(head)
-    print("-" * len(head))
+    lines = [f"Cliff Walking 4x12, GAT vs SGAT; real return over {episodes} episodes (mean ± s.e.), seed {seed}",
+             head, "-" * len(head)]
     for r in rows:
-        cells = [f"{r[f'{k}_return']:8.2f} ± {r[f'{k}_se']:5.2f}" for k in ("gat", "sgat",
-                                                                            "optimal")]
+        cells = [f"{r[f'{k}_return']:8.2f} ± {r[f'{k}_se']:5.2f}" for k in ("gat", "sgat", "optimal")]
         steps = f"GAT {r['gat_steps']}{'' if r['gat_converged'] else '*'}, " \
                 f"SGAT {r['sgat_steps']}{'' if r['sgat_converged'] else '*'}"
-        print(f"{r['noise']:6.2f}  {cells[0]:>16}  {cells[1]:>16}  {cells[2]:>16}  {steps}")
+        lines.append(f"{r['noise']:6.2f}  {cells[0]:>16}  {cells[1]:>16}  {cells[2]:>16}  {steps}")
     if any(not (r["gat_converged"] and r["sgat_converged"]) for r in rows):
-        print("* policy still changing at the grounding-step cap (at noise 1 every action is "
-              "equally good, so sampling noise in the counts keeps re-ordering them)")
+        lines.append("* policy still changing at the grounding-step cap (at noise 1 every action is "
+                     "equally good, so sampling noise in the counts keeps re-ordering them)")
+    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------------------------
@@ -323,7 +322,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     plot_paths(show, paths_path)
 
     if not args.json:
-        _print_table(rows, args.episodes, args.seed)
+        print(format_table(rows, args.episodes, args.seed))
         print(f"sweep took {elapsed:.1f} s; wrote {csv_path}, {png_path}, {paths_path}")
     public = [{k: v for k, v in r.items() if k != "policies"} for r in rows]
     for r, full in zip(public, rows):

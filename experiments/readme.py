@@ -153,7 +153,14 @@ def _stress(res: dict) -> str:
             + (f"The run took {res['wall_s'] / 60:.1f} min on {res['workers']} worker(s)." if res.get("wall_s") else ""))
 
 
-RENDERERS = {"fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
+def _cliff(res: dict) -> str:
+    from experiments.cmd_cliff import format_table
+
+    took = f"The sweep took {res['elapsed_s']:.1f} s." if res.get("elapsed_s") else ""
+    return f"```text\n{format_table(res['rows'], res['episodes'], res['seed'])}\n```\n\n{took}"
+
+
+RENDERERS = {"cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
