@@ -52,8 +52,6 @@ def run(args) -> dict:
     for w in worlds:
         if w not in ("sim", "real"):
             raise ValueError(f"unknown world {w!r}; choose from sim, real")
-    if not (args.seconds > 0):
-        raise ValueError(f"--seconds must be positive, got {args.seconds}")
     hf = None
     if args.amplitude is not None and args.terrain is None:
         raise ValueError("--amplitude needs --terrain (e.g. --terrain lumpy --amplitude 0.01)")
@@ -90,11 +88,20 @@ def run(args) -> dict:
         results.append(res)
         env.close()
     if not args.json:
-        print(f"{'world':6s} {'fell':5s} {'reason':10s} {'CoM drift':>10s} {'CoM z':>7s} {'feet L/R [N]':>14s} "
-              f"{'terrain':22s} {'x realtime':>10s}")
-        for r in results:
-            print(f"{r['world']:6s} {str(r['fell']):5s} {str(r['fall_reason'] or '-'):10s} "
-                  f"{1000 * r['com_drift_m']:8.1f}mm {r['com_height_m']:7.3f} "
-                  f"{r['foot_force_n'][0]:6.1f}/{r['foot_force_n'][1]:6.1f} {r['terrain']:22s} {r['realtime_factor']:10.1f}"
-                  + (f"  -> {r['recording']}" if "recording" in r else ""))
+        print(format_stand(results))
     return {"pose": args.pose, "seed": args.seed, "worlds": results}
+
+
+def format_stand(results: list[dict]) -> str:
+    """The table ``sgatwalk stand`` prints, from its per-world results (also from ``--json``; the
+    real-time factor shows when the result has it, i.e. with ``--timings``)."""
+    rt = all("realtime_factor" in r for r in results)
+    lines = [f"{'world':6s} {'fell':5s} {'reason':10s} {'CoM drift':>10s} {'CoM z':>7s} {'feet L/R [N]':>14s} "
+             f"{'terrain':22s}" + (f" {'x realtime':>10s}" if rt else "")]
+    for r in results:
+        lines.append(f"{r['world']:6s} {str(r['fell']):5s} {str(r['fall_reason'] or '-'):10s} "
+                     f"{1000 * r['com_drift_m']:8.1f}mm {r['com_height_m']:7.3f} "
+                     f"{r['foot_force_n'][0]:6.1f}/{r['foot_force_n'][1]:6.1f} {r['terrain']:22s}"
+                     + (f" {r['realtime_factor']:10.1f}" if rt else "")
+                     + (f"  -> {r['recording']}" if "recording" in r else ""))
+    return "\n".join(lines)

@@ -160,7 +160,13 @@ def _cliff(res: dict) -> str:
     return f"```text\n{format_table(res['rows'], res['episodes'], res['seed'])}\n```\n\n{took}"
 
 
-RENDERERS = {"cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
+def _stand(res: dict) -> str:
+    from experiments.cmd_stand import format_stand
+
+    return f"```text\n{format_stand(res['worlds'])}\n```"
+
+
+RENDERERS = {"stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
@@ -183,7 +189,7 @@ def render(text: str, results_dir: str = RESULTS) -> str:
         mach = doc.get("machine")
         if mach:
             body += (f"\n<sub>Saved by a run on {mach['cpus']} cores; 1-minute load average {mach['load_before']:.1f} at "
-                     f"its start, {mach['load_after']:.1f} at its end (a resumed run: of its last invocation).</sub>\n")
+                     f"its start, {mach['load_after']:.1f} at its end (for a resumed run: of its last invocation).</sub>\n")
         return m.group(1) + body + m.group(4)
 
     return _BLOCK.sub(block, text)
