@@ -166,7 +166,12 @@ def _stand(res: dict) -> str:
     return f"```text\n{format_stand(res['worlds'])}\n```"
 
 
-RENDERERS = {"stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
+def _gym(res: dict) -> str:
+    took = f"The sweep took {res['wall_s'] / 60:.1f} min." if res.get("wall_s") else ""
+    return f"```text\n{res['table']}\n```\n\n{took}"
+
+
+RENDERERS = {"gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
