@@ -133,6 +133,19 @@ def scale_body_masses(env: gym.Env, factor: float, bodies: list[str] | None = No
             "total_after": float(m.body_mass.sum())}
 
 
+def _route_mujoco_warnings() -> None:
+    """Send MuJoCo's own warnings (``mju_warning``) to Python's ``warnings`` instead of its default
+    handler, which appends them to ``MUJOCO_LOG.TXT`` in the working directory (gymnasium's
+    HalfCheetah XML uses the deprecated ``settotalmass`` compiler attribute). Installed once per
+    process, and only where no handler is installed yet (``mujoco.set_mju_user_warning``)."""
+    import warnings
+
+    import mujoco
+
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(lambda msg: warnings.warn(f"MuJoCo: {msg}", RuntimeWarning, stacklevel=2))
+
+
 def make_env(task: str, *, heavy: bool = False, noise: float = 0.0, pole_factor: float = 10.0,
              mass_factor: float = 20.0 / 14.0, seed: int | None = None) -> gym.Env:
     """A task's env: the sim (defaults), a noisy sim (``noise`` > 0, the ANE baseline), or a
@@ -152,6 +165,7 @@ def make_env(task: str, *, heavy: bool = False, noise: float = 0.0, pole_factor:
         ValueError: unknown task, invalid factor or noise.
     """
     task = canonical_env(task)
+    _route_mujoco_warnings()
     env = gym.make(TASKS[task]["env_id"])
     change = None
     if heavy:

@@ -128,3 +128,13 @@ def test_set_state_from_obs_round_trip(task):
     assert np.allclose(env.unwrapped.step(a)[0], other.unwrapped.step(a)[0])
     with pytest.raises(ValueError):
         set_state_from_obs(other, obs[:-1])
+
+
+def test_halfcheetah_leaves_no_mujoco_log_in_the_working_directory(tmp_path, monkeypatch):
+    """gymnasium's HalfCheetah XML triggers a MuJoCo deprecation warning at compile; it goes to
+    Python's warnings, not to a MUJOCO_LOG.TXT beside the user's files."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.warns(RuntimeWarning, match="settotalmass"):
+        env = make_env("HalfCheetah")
+    env.close()
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
