@@ -79,8 +79,6 @@ def run(args) -> dict:
         if bool(cal.get("fixed_base")) != logs[0].fixed_base:
             raise ValueError(f"{args.calibration}: calibrated on {'fixed' if cal.get('fixed_base') else 'floating'}-base "
                              "logs; the recordings are not")
-    if args.rounds < 1:
-        raise ValueError(f"--rounds must be >= 1, got {args.rounds}")
     fams = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
     base = None
     if args.base_report:
@@ -94,8 +92,6 @@ def run(args) -> dict:
                 base = terms_from_labels({**prev.get("base_model", {}), **prev["model"]})
             except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
                 raise ValueError(f"{args.base_report}: not a report.json of sgatwalk diagnose ({exc})") from None
-    if args.time_budget < 0:
-        raise ValueError(f"--time-budget must be >= 0, got {args.time_budget}")
     rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
                    time_budget_s=args.time_budget or None)
     paths = write_report(rep, logs, args.out, plots=not args.no_plots)

@@ -74,8 +74,6 @@ def register(sub) -> argparse.ArgumentParser:
 def config_from_args(args):
     from experiments.gym_config import GymConfig
 
-    if args.runs is not None and args.runs < 1:
-        raise ValueError(f"--runs must be >= 1, got {args.runs}")
     methods = tuple(m.strip().lower() for m in args.methods.split(",") if m.strip())
     over = dict(
         experiment=args.experiment, methods=methods, runs=args.runs, seed=args.seed,
@@ -90,7 +88,6 @@ def config_from_args(args):
 
 
 def run(args) -> dict:
-    from experiments.gym_config import GymConfig  # noqa: F401  (validation errors are ValueErrors)
     from experiments import gym_sim2real as G
 
     cfg = config_from_args(args)

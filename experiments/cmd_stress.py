@@ -54,8 +54,6 @@ def run(args) -> dict:
     cfg = make_config(args.params, world=args.world, terrain=terrain, amplitude=args.amplitude,
                       trials=args.trials, seed=args.seed, profile=args.profile, sweep=args.sweep,
                       seconds=args.seconds)
-    if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers must be >= 1, got {args.workers}")
     log = None if args.json else print
     res = run_stress(cfg, args.out, workers=args.workers, ray_address=args.ray_address, rerun=args.rerun,
                      progress=not args.json, log=log)
