@@ -17,7 +17,7 @@ import numpy as np
 
 
 def quat_to_mat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) of one unit quaternion (w, x, y, z)."""
+    """Rotation matrix (3, 3) of one unit quaternion (w, x, y, z) (a (4, N) array gives (3, 3, N))."""
     w, x, y, z = q
     return np.array([
         [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -26,13 +26,35 @@ def quat_to_mat(q: np.ndarray) -> np.ndarray:
     ])
 
 
+def quats_to_mats(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (n, 3, 3) of quaternions (n, 4) (w, x, y, z): :func:`quat_to_mat`'s
+    arithmetic element by element, so each matrix equals it bit for bit."""
+    return np.ascontiguousarray(np.moveaxis(quat_to_mat(np.asarray(q).T), -1, 0))
+
+
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product of two 3-vectors (``np.cross`` is ~10x slower on tiny arrays)."""
+    """Cross product of two 3-vectors (``np.cross`` is ~10x slower on tiny arrays), or of (n, 3)
+    arrays row by row (same arithmetic)."""
+    if np.ndim(a) > 1 or np.ndim(b) > 1:
+        a, b = np.broadcast_arrays(a, b)
+        return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1], a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                         a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def roll_pitch(R: np.ndarray) -> tuple[float, float]:
-    """Roll and pitch [rad] (ZYX Euler) of one rotation matrix (3, 3)."""
+def libm(f, *args) -> np.ndarray:
+    """``f`` (a ``math`` function) applied element by element to 1-D arrays: libm's result bit for
+    bit. NumPy's SIMD ``arctan2``, ``arcsin``, ``arccos`` and ``exp`` differ from libm in the last bit
+    on AVX-512 machines, so batched code that must reproduce scalar ``math`` code uses this."""
+    return np.fromiter(map(f, *(np.asarray(a, dtype=float).tolist() for a in args)), float, count=len(args[0]))
+
+
+def roll_pitch(R: np.ndarray):
+    """Roll and pitch [rad] (ZYX Euler) of one rotation matrix (3, 3); of (n, 3, 3) matrices: two
+    arrays (n,), the same ``math`` calls element by element (:func:`libm`)."""
+    if np.ndim(R) > 2:
+        return (libm(math.atan2, R[:, 2, 1], R[:, 2, 2]),
+                libm(math.asin, np.maximum(-1.0, np.minimum(1.0, -R[:, 2, 0]))))
     return math.atan2(R[2, 1], R[2, 2]), math.asin(max(-1.0, min(1.0, -R[2, 0])))
 
 

@@ -114,6 +114,32 @@ def build_spec(robot: RobotModel, terrain: Heightfield | None = None, *, fixed_b
     return spec
 
 
+def foot_contact_sums(geom1, geom2, normal, pos, geom_foot, ground, episode=None, episodes: int = 1):
+    """Total normal force and force-weighted contact point of each foot, from MuJoCo's contacts.
+
+    Args:
+        geom1, geom2: the contacts' geom ids (ncon,); normal: their normal forces [N] (ncon,) (elliptic
+            cone: a contact's first constraint row, ``efc_force[efc_address]``, what ``mj_contactForce``
+            returns as force[0]; MuJoCo docs, "Computation > Contact"); pos: contact points (ncon, 3).
+        geom_foot: geom id -> 0 (left foot), 1 (right foot), -1 (other); ground: the ground geom id.
+        episode, episodes: for contacts of several episodes concatenated: each contact's episode
+            index (ncon,) and their number (batched rollouts, ``envs.batch``).
+
+    Returns:
+        (force (episodes, 2) [N], moment (episodes, 2, 3) = Σ f·p [N m]); divide by the force for
+        the centre of pressure. Sums run in contact order (``np.bincount``), so one episode's sums
+        are the same bit for bit alone or in a batch.
+    """
+    foot = np.where(geom2 == ground, geom_foot[geom1], np.where(geom1 == ground, geom_foot[geom2], -1))
+    sel = foot >= 0
+    grp = 2 * (0 if episode is None else episode[sel]) + foot[sel]
+    fn = normal[sel]
+    n = 2 * episodes
+    force = np.bincount(grp, fn, minlength=n)
+    mom = np.stack([np.bincount(grp, fn * pos[sel, c], minlength=n) for c in range(3)], axis=-1)
+    return force.reshape(episodes, 2), mom.reshape(episodes, 2, 3)
+
+
 class NaoSimEnv(NaoEnv):
     """The MuJoCo "sim" world: deterministic, flat by default, optional heightfield.
 
@@ -194,21 +220,13 @@ class NaoSimEnv(NaoEnv):
         base_quat = d.xquat[self._torso].copy()
         acc_site = d.site_xpos[self._sites["accel"]]
         accel_vel = linvel + cross(angvel, acc_site - base_pos)
-        force = np.zeros(2)
-        cop = np.zeros((2, 3))
         if d.ncon:
             con = d.contact
-            g1, g2 = con.geom1, con.geom2
-            foot = np.where(g2 == self._ground, self._geom_foot[g1], np.where(g1 == self._ground, self._geom_foot[g2], -1))
-            sel = foot >= 0
-            if sel.any():
-                # elliptic cone: a contact's first constraint row is its normal force (MuJoCo docs,
-                # "Computation > Contact"; what mj_contactForce returns as force[0])
-                fn = d.efc_force[con.efc_address[sel]]
-                for k in (0, 1):
-                    m_k = foot[sel] == k
-                    force[k] = fn[m_k].sum()
-                    cop[k] = fn[m_k] @ con.pos[sel][m_k]
+            force, cop = foot_contact_sums(con.geom1, con.geom2, d.efc_force[con.efc_address], con.pos,
+                                           self._geom_foot, self._ground)
+            force, cop = force[0], cop[0]
+        else:
+            force, cop = np.zeros(2), np.zeros((2, 3))
         with np.errstate(invalid="ignore", divide="ignore"):
             cop = np.where(force[:, None] > 0, cop / force[:, None], np.nan)
         q, dq = self._joint_state()

@@ -97,27 +97,49 @@ def rollout(env, controller: Controller | Callable[[np.ndarray], Any], seed: int
             break
         if truncated:
             break
-    m = k + 1
+    return assemble_recording(base, O, C, A, G, k + 1, seed=seed, seconds=seconds, fell=fell, reason=reason,
+                              fall_time=fall_time, meta=meta)
+
+
+#: Ground-truth columns of a recording, in the order of :func:`rollout`'s ``G`` array (19 used of 22).
+GT_COLUMNS = ("gt.base.x", "gt.base.y", "gt.base.z", "gt.quat.w", "gt.quat.x", "gt.quat.y", "gt.quat.z",
+              "gt.vel.x", "gt.vel.y", "gt.vel.z", "gt.angvel.x", "gt.angvel.y", "gt.angvel.z",
+              "gt.com.x", "gt.com.y", "gt.com.z", "gt.cop.x", "gt.cop.y", "gt.cop.z")
+
+
+def assemble_recording(base, O: np.ndarray, C: np.ndarray, A: np.ndarray, G: np.ndarray, m: int, *, seed,
+                       seconds: float, fell: bool, reason: str | None, fall_time: float | None,
+                       meta: dict | None = None, terrain=...) -> Recording:
+    """The validated :class:`Recording` of the first ``m`` rows of one episode's arrays.
+
+    Args:
+        base: the unwrapped world (robot, layout, time steps, terrain, profile).
+        O, C, A, G: observations (N, layout.size), commands and applied commands (N, 23), ground
+            truth (N, >= 19) in :data:`GT_COLUMNS` order; rows >= ``m`` are ignored.
+        m: rows recorded; seed, seconds, fell, reason, fall_time, meta: the episode's metadata.
+        terrain: the episode's heightfield (None: flat) if not ``base.terrain``.
+
+    Used by :func:`rollout` and by batched rollouts (``experiments.batch``), so both write the same
+    recording bit for bit.
+    """
+    robot = base.robot
+    terrain = base.terrain if terrain is ... else terrain
     md = {
         "schema_version": 1, "robot": robot.name, "world": getattr(base, "world", "unknown"),
         "control_dt": base.control_dt, "physics_dt": base.physics_dt, "seed": seed, "seconds": seconds,
         "fixed_base": base.fixed_base,
-        "terrain": None if base.terrain is None else base.terrain.to_dict(),
+        "terrain": None if terrain is None else terrain.to_dict(),
         "fell": fell, "fall_time": fall_time, "fall_reason": reason,
     }
     if hasattr(base, "profile"):
         md["profile"] = base.profile.name
         md["effects"] = base.effects.to_dict()
     md.update(meta or {})
-    names = layout.names
     cols = {"t": np.arange(m) * base.control_dt}
-    cols.update({nm: O[:m, i].copy() for i, nm in enumerate(names)})
+    cols.update({nm: O[:m, i].copy() for i, nm in enumerate(base.layout.names)})
     cols.update({f"cmd.{nm}": C[:m, i].copy() for i, nm in enumerate(robot.actuated_joint_names)})
     cols.update({f"app.{nm}": A[:m, i].copy() for i, nm in enumerate(robot.actuated_joint_names)})
-    gt = ["gt.base.x", "gt.base.y", "gt.base.z", "gt.quat.w", "gt.quat.x", "gt.quat.y", "gt.quat.z",
-          "gt.vel.x", "gt.vel.y", "gt.vel.z", "gt.angvel.x", "gt.angvel.y", "gt.angvel.z",
-          "gt.com.x", "gt.com.y", "gt.com.z", "gt.cop.x", "gt.cop.y", "gt.cop.z"]
-    cols.update({nm: G[:m, i].copy() for i, nm in enumerate(gt)})
+    cols.update({nm: G[:m, i].copy() for i, nm in enumerate(GT_COLUMNS)})
     rec = Recording(cols, md)
     rec.validate()
     return rec

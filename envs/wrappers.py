@@ -42,8 +42,12 @@ class ActionMismatch(gym.Wrapper):
         self.rng = np.random.default_rng(seed)
 
     def reset(self, *, seed=None, options=None):
-        self.rng = np.random.default_rng(self.seed if seed is None else np.random.SeedSequence([int(seed), 0xA71]))
+        self.reseed(seed)
         return self.env.reset(seed=seed, options=options)
+
+    def reseed(self, seed=None) -> None:
+        """The noise generator of an episode with ``seed`` (what :meth:`reset` does before the env's reset)."""
+        self.rng = np.random.default_rng(self.seed if seed is None else np.random.SeedSequence([int(seed), 0xA71]))
 
     def perturb(self, action) -> np.ndarray:
         """The applied action for ``action`` (a new array; ``action`` is untouched)."""

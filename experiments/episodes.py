@@ -61,9 +61,9 @@ class EpisodeLog:
 
     def run(self, ex, tasks: list[dict], desc: str, progress: bool = True) -> None:
         """Run the tasks (``experiments.tasks.run_episode`` dicts with a ``key``) that have no result
-        yet, in batches of ``4 × workers``; each batch is appended to ``episodes.jsonl`` as it ends.
+        yet, in chunks of 150 (sent to the workers as lock-step batches); each chunk is appended to ``episodes.jsonl`` as it ends.
         Without a terminal a line with the count and an ETA goes to ``say`` every 30 s."""
-        from experiments.tasks import run_episode
+        from experiments.batch import MAX_BATCH, map_episodes
 
         todo = [t for t in tasks if t["key"] not in self.done]
         if not todo:
@@ -76,11 +76,11 @@ class EpisodeLog:
             from tqdm import tqdm
 
             bar = tqdm(total=len(todo), desc=desc, leave=False, disable=None)
-        chunk = max(8, 4 * getattr(ex, "workers", 1))
+        chunk = max(8, 2 * MAX_BATCH)  # lock-step batches (experiments.batch), saved as each chunk ends
         try:
             for k in range(0, len(todo), chunk):
                 part = todo[k:k + chunk]
-                res = ex.map(run_episode, part, progress=(bar.update if bar else None))
+                res = map_episodes(ex, part, progress=(bar.update if bar else None))
                 rows = [{"key": t["key"], "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"]),
                          "seconds": r["steps"] * CONTROL_DT} for t, r in zip(part, res)]
                 for row in rows:

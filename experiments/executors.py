@@ -43,7 +43,10 @@ class SerialExecutor:
     workers = 1
     name = "serial"
 
-    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None) -> list:
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None,
+            weights: Sequence[int] | None = None) -> list:
+        """``[fn(t) for t in tasks]``; ``progress(w)`` after each task, ``w = weights[i]`` (default 1:
+        a task that is a batch of episodes counts as its episodes)."""
         out = []
         for i, t in enumerate(tasks):
             try:
@@ -55,7 +58,7 @@ class SerialExecutor:
                 except Exception as exc2:
                     raise TaskFailed(f"task {i} failed twice: {type(exc2).__name__}: {exc2}") from exc2
             if progress:
-                progress(1)
+                progress(weights[i] if weights else 1)
         return out
 
     def close(self) -> None:
@@ -84,8 +87,10 @@ class ProcessExecutor(SerialExecutor):
             self._pool = cf.ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_worker_init)
         return self._pool
 
-    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None) -> list:
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None,
+            weights: Sequence[int] | None = None) -> list:
         tasks = list(tasks)
+        step = (lambda i: progress(weights[i] if weights else 1)) if progress else (lambda i: None)
         results: list[Any] = [None] * len(tasks)
         done = [False] * len(tasks)
         errors = [0] * len(tasks)
@@ -97,8 +102,7 @@ class ProcessExecutor(SerialExecutor):
             try:
                 results[i] = fut.result()
                 done[i] = True
-                if progress:
-                    progress(1)
+                step(i)
             except BrokenProcessPool:
                 broken = True
             except Exception as exc:
@@ -112,8 +116,7 @@ class ProcessExecutor(SerialExecutor):
             for i in lost:
                 results[i] = self._isolated(fn, tasks[i], i)
                 done[i] = True
-                if progress:
-                    progress(1)
+                step(i)
         for i in range(len(tasks)):  # tasks that raised: one more try each
             if not done[i]:
                 try:
@@ -123,8 +126,7 @@ class ProcessExecutor(SerialExecutor):
                     results[i] = self._isolated(fn, tasks[i], i)
                 except Exception as exc:
                     raise TaskFailed(f"task {i} failed twice: {type(exc).__name__}: {exc}") from exc
-                if progress:
-                    progress(1)
+                step(i)
         return results
 
     def _discard(self) -> None:
@@ -178,7 +180,8 @@ class RayExecutor(SerialExecutor):
         self.workers = int(ray.cluster_resources().get("CPU", 1))
         self._remote = {}
 
-    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None) -> list:
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None,
+            weights: Sequence[int] | None = None) -> list:
         ray = self._ray
         if fn not in self._remote:
             self._remote[fn] = ray.remote(max_retries=1, retry_exceptions=True)(fn)
@@ -194,7 +197,7 @@ class RayExecutor(SerialExecutor):
                 except Exception as exc:
                     raise TaskFailed(f"task {index[r]} failed on Ray after a retry: {exc}") from exc
                 if progress:
-                    progress(1)
+                    progress(weights[index[r]] if weights else 1)
         return out
 
     def close(self) -> None:

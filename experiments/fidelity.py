@@ -315,14 +315,14 @@ class Fidelity:
         """Recordings in ``world`` on ``seeds`` under ``data/`` (cached), walk j with gait
         ``thetas[j % len(thetas)]``; returns the paths."""
         from envs import Recording
-        from experiments.tasks import run_episode
+        from experiments.batch import map_episodes
 
         paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
         todo = [(j, s, p) for j, (s, p) in enumerate(zip(seeds, paths)) if not os.path.exists(p)]
         if todo:
             tasks = [{"world": world, "theta": thetas[j % len(thetas)], "seed": s, "seconds": self.cfg.seconds,
                       "profile": self.cfg.profile, "record": True, **kw} for j, s, _ in todo]
-            for (_, s, p), r in zip(todo, self.ex.map(run_episode, tasks)):
+            for (_, s, p), r in zip(todo, map_episodes(self.ex, tasks)):
                 Recording(*r["recording"]).to_parquet(p)
         return paths
 

@@ -64,6 +64,7 @@ import numpy as np
 from common.defaults import EPISODE_SECONDS
 from common.files import atomic_path
 from common.files import atomic_write_bytes as _atomic_write
+from experiments.batch import expected_generation_seconds, map_episodes
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 from sgat.algorithm import grounding_loop, new_progress
 
@@ -235,9 +236,7 @@ class Optimizer:
 
             bar = tqdm(total=len(tasks), desc=desc, leave=False, disable=None)
         try:
-            from experiments.tasks import run_episode
-
-            return self.ex.map(run_episode, tasks, progress=(bar.update if bar else None))
+            return map_episodes(self.ex, tasks, progress=(bar.update if bar else None))
         finally:
             if bar:
                 bar.close()
@@ -335,6 +334,13 @@ class Optimizer:
             prog["es"] = cma.CMAEvolutionStrategy(x0, cfg.sigma0, opts)
             prog["gen"] = 0
         es = prog["es"]
+        n_ep = cfg.popsize * cfg.episodes_per_candidate
+        est = expected_generation_seconds(n_ep, cfg.seconds, getattr(self.ex, "workers", 1),
+                                          batchable=world in ("sim", "grounded") and "identified" not in kw)
+        self.log(f"[{method} step {step}] a generation is {cfg.popsize} candidates x {cfg.episodes_per_candidate} "
+                 f"episode(s) of {cfg.seconds:g} s in the {world} world: expected ~{est['expected_s']:.0f} s on "
+                 f"{getattr(self.ex, 'workers', 1)} worker(s) (physics limit {est['physics_limit_s']:.0f} s, bare mj_step "
+                 f"{est['bare_step_us']:.0f} us per control step here)")
         bar = None
         if self.progress:
             from tqdm import tqdm
@@ -368,11 +374,12 @@ class Optimizer:
             self._save()
             if bar is not None and not bar.disable:
                 bar.update(1)
-                bar.set_postfix(best=f"{fit.max():.1f}", median=f"{np.median(fit):.1f}", sigma=f"{es.sigma:.3f}")
+                bar.set_postfix(best=f"{fit.max():.1f}", median=f"{np.median(fit):.1f}", sigma=f"{es.sigma:.3f}",
+                                took=f"{wall:.0f}s (expected {est['expected_s']:.0f}s)")
             else:  # no terminal: a line per generation with elapsed time and an estimate of the rest
                 done = [g["wall_s"] for g in self.state["generations"] if g["method"] == method and g["step"] == step]
                 self.log(f"[{method} step {step}] generation {gen + 1}/{cfg.generations}: best {fit.max():.1f}, median "
-                         f"{np.median(fit):.1f}, sigma {es.sigma:.3f} ({wall:.0f} s; step ETA "
+                         f"{np.median(fit):.1f}, sigma {es.sigma:.3f} (measured {wall:.0f} s, expected ~{est['expected_s']:.0f} s; step ETA "
                          f"{np.mean(done) * (cfg.generations - gen - 1):.0f} s)")
         if bar:
             bar.close()
@@ -434,7 +441,7 @@ class Optimizer:
         except ImportError as exc:  # pragma: no cover - visualization not available
             self.log(f"rerun logging skipped: {exc}")
             return
-        res = self.ex.map(__import__("experiments.tasks", fromlist=["run_episode"]).run_episode, tasks)
+        res = map_episodes(self.ex, tasks)
         recs = {r["recording"][1]["world"]: Recording(*r["recording"]) for r in res}
         os.makedirs(os.path.join(self.run_dir, "rerun"), exist_ok=True)
         log_rollouts_to_rrd(recs, os.path.join(self.run_dir, "rerun", f"{name}.rrd"))

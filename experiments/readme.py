@@ -171,7 +171,25 @@ def _gym(res: dict) -> str:
     return f"```text\n{res['table']}\n```\n\n{took}"
 
 
-RENDERERS = {"gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
+def _bench(res: dict) -> str:
+    """``benchmarks/bench_generation.py``: its table, and what a paper-scale optimization costs."""
+    from experiments.optimize import PRESETS
+
+    g = res["worlds"]["grounded"]
+    p = PRESETS["paper"]
+    gens = p["grounding_steps"] * p["generations"]
+    per_gen = g["generation_s_on_workers"] * p["popsize"] * p["episodes_per_candidate"] / res["popsize"]
+    return (f"```text\n{res['table']}\n```\n\nSo a paper-scale CMA-ES generation in the grounded sim ({res['popsize']} "
+            f"candidates × 1 episode) takes about **{g['generation_s_on_workers']:.0f} s on {res['workers']} idle cores** "
+            f"(physics limit {g['physics_limit_s_on_workers']:.0f} s; before batching, one episode at a time, "
+            f"{g['single_episode_ms'] * res['popsize'] / 1000 / res['workers']:.0f} s). `sgatwalk optimize --preset paper` "
+            f"({p['grounding_steps']} grounding steps × {p['generations']} generations × {p['popsize']} candidates × "
+            f"{p['episodes_per_candidate']} episodes of {p['seconds']} s) runs {gens} such generations of "
+            f"{p['popsize'] * p['episodes_per_candidate']} episodes per grounded method: about {gens * per_gen / 60:.0f} min "
+            f"of CMA-ES per method on {res['workers']} cores, plus its real and sim walks and the model fits.")
+
+
+RENDERERS = {"bench": _bench, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:

@@ -375,7 +375,11 @@ def run_trial(task: dict) -> dict:
         env = _with_terrain(env, hf)
     params = GaitParams.from_array(np.asarray(task["theta"], dtype=float))
     rec, res = run_walk(params, seed=int(task["episode_seed"]), seconds=float(task["seconds"]), env=env)
-    base = env.unwrapped
+    return _trial_row(task, hf, env.unwrapped, rec, res, time.perf_counter() - t0)
+
+
+def _trial_row(task: dict, hf, base, rec, res, wall_s: float) -> dict:
+    """The :data:`TRIAL_COLUMNS` row of one finished trial (and its recording if asked)."""
     row = {
         "policy": task["policy"], "theta_hash": task["theta_hash"], "level": float(task["level"]),
         "trial": int(task["trial"]), "terrain_seed": int(task["terrain_seed"]),
@@ -383,12 +387,44 @@ def run_trial(task: dict) -> dict:
         "terrain": hf.name if hf is not None else (base.terrain.name if base.terrain is not None else "flat"),
         "fell": bool(res.fell), "fall_reason": res.fall_reason, "fall_time_s": res.fall_time_s,
         "speed_cm_s": float(res.speed_cm_s), "distance_m": float(res.distance_m), "drift_m": float(res.drift_m),
-        "fitness": float(res.fitness), "steps": int(res.steps), "wall_s": time.perf_counter() - t0,
+        "fitness": float(res.fitness), "steps": int(res.steps), "wall_s": wall_s,
     }
     if task.get("record"):
         rec.meta.update({"stress": {k: task[k] for k in ("policy", "level", "trial", "terrain_seed")}})
         row["recording"] = (rec.columns, rec.meta)
     return row
+
+
+def _batch_key(task: dict):
+    """Sim-world trials of the same duration run in lock-step (:func:`run_trials`)."""
+    return ("sim", float(task["seconds"])) if task["world"] == "sim" else None
+
+
+def run_trials(tasks: list[dict]) -> list[dict]:
+    """:func:`run_trial` of each task, the sim-world ones in lock-step
+    (:func:`experiments.batch.lockstep_walks`, every trial on its own heightfield): the same rows
+    bit for bit, except ``wall_s``, which is the batch's time divided among its trials."""
+    from experiments.batch import lockstep_walks
+
+    out: list = [None] * len(tasks)
+    groups: dict = {}
+    for i, t in enumerate(tasks):
+        k = _batch_key(t)
+        if k is None:
+            out[i] = run_trial(t)
+        else:
+            groups.setdefault(k, []).append(i)
+    for idx in groups.values():
+        group = [tasks[i] for i in idx]
+        t0 = time.perf_counter()
+        env = _world(group[0]["world"], group[0]["profile"])
+        fields = [terrain_of(*t["terrain"]) if t["terrain"] is not None else None for t in group]
+        walks = lockstep_walks(env, [t["theta"] for t in group], [int(t["episode_seed"]) for t in group],
+                               float(group[0]["seconds"]), terrains=fields)
+        wall = (time.perf_counter() - t0) / len(group)
+        for i, t, hf, (rec, res) in zip(idx, group, fields, walks):
+            out[i] = _trial_row(t, hf, env, rec, res, wall)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -674,15 +710,20 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
     ex = make_executor(workers, ray_address) if own else executor
     trials_csv = out / "trials.csv"
     try:
-        n = chunk or max(8, 4 * int(getattr(ex, "workers", 1)))
+        from experiments.batch import MAX_BATCH, chunk_tasks
+
+        n = chunk or max(8, 2 * MAX_BATCH)  # trials.csv is rewritten after each chunk (resume point)
         bar = tqdm(total=len(tasks), initial=resumed, desc="stress", unit="ep", file=sys.stderr,
                    disable=None if progress else True)
         t_start = last = time.perf_counter()
         try:
             for i in range(0, len(todo), n):
                 part = todo[i:i + n]
-                for r in ex.map(run_trial, part, progress=bar.update):
-                    rows[_key(r)] = r
+                batches = chunk_tasks(part, int(getattr(ex, "workers", 1)), key=_batch_key)
+                for res in ex.map(run_trials, [[part[j] for j in b] for b in batches], progress=bar.update,
+                                  weights=[len(b) for b in batches]):
+                    for r in res:
+                        rows[_key(r)] = r
                 write_csv(_ordered(rows, cfg), TRIAL_COLUMNS, trials_csv)
                 now = time.perf_counter()
                 if bar.disable and (now - last > 30 or i + n >= len(todo)):  # no terminal: a line on stderr

@@ -195,17 +195,20 @@ class ActionTransformer:
         if self.n_members > 1 and self.method == "sgat":
             self.member = int(self.rng.integers(self.n_members))
 
-    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool) -> np.ndarray:
+    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None) -> np.ndarray:
+        """Member k's grounded action; ``normal(shape)`` draws the SGAT noise (default: ``self.rng``)."""
         fwd, inv = self.forwards[k], self.inverses[k]
+        normal = normal or self.rng.standard_normal
         x = np.concatenate([hist, a], axis=-1)
         if not sample:
             ds = fwd.predict(x)[0]
         elif self.sim_forwards:
             mu, sd = fwd.predict(x)
             sd_sim = self.sim_forwards[k].predict(x)[1]
-            ds = mu + np.sqrt(np.maximum(sd ** 2 - sd_sim ** 2, 0.0)) * self.rng.standard_normal(mu.shape)
+            ds = mu + np.sqrt(np.maximum(sd ** 2 - sd_sim ** 2, 0.0)) * normal(mu.shape)
         else:
-            ds = fwd.sample(x, self.rng)
+            mu, sd = fwd.predict(x)  # ForwardModel.sample with the given generator
+            ds = mu + sd * normal(mu.shape) if fwd.stochastic else mu
         z = [hist, ds, a] if inv.command_input else [hist, ds]
         return inv.predict(np.concatenate(z, axis=-1))
 
@@ -219,8 +222,52 @@ class ActionTransformer:
             g = self._ground(self.member, hist, a, sample=True)
         else:
             g = np.mean([self._ground(k, hist, a, sample=False) for k in range(self.n_members)], axis=0)
+        return self._blend(a, g)
+
+    def _blend(self, a: np.ndarray, g: np.ndarray) -> np.ndarray:
         out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
         return np.clip(out, self.spec.action_low, self.spec.action_high)
+
+    @property
+    def samples(self) -> bool:
+        """Whether :meth:`transform` draws noise: SGAT with stochastic forward models draws
+        ``spec.state_dim`` standard normals from ``self.rng`` per call."""
+        return bool(self.forwards) and self.method == "sgat" and self.forwards[0].stochastic
+
+    def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None) -> np.ndarray:
+        """:meth:`transform` for n episodes at once, each with its own ensemble member and noise.
+
+        Args:
+            hist: state histories (n, k*S); a: actions (n, A).
+            members: n ensemble members (each episode's draw at :meth:`reset`).
+            noise: (n, S) standard normal draws, row i the next ``S`` draws of episode i's generator
+                (needed when :attr:`samples`; a generator's draws of (T, S) at once are its next T
+                draws of (S,), so a caller may draw a whole episode's noise at its start).
+
+        Returns:
+            (n, A); row i is bit-identical to :meth:`transform` ``(hist[i], a[i])`` of a transformer
+            with ``member = members[i]`` whose generator draws ``noise[i]`` (NumPy's matmul runs the
+            same BLAS routine per item on (n, 1, d) stacks as on one (d,) row).
+
+        Raises:
+            ValueError: noise missing when the transformer samples.
+        """
+        a = np.asarray(a, dtype=np.float64)
+        if self.is_identity:
+            return a.copy()
+        h3, a3 = np.asarray(hist, dtype=np.float64)[:, None, :], a[:, None, :]
+        if self.samples:
+            if noise is None:
+                raise ValueError("an SGAT transformer samples: give each episode's standard normal draws (noise)")
+            noise = np.asarray(noise, dtype=np.float64)[:, None, :]
+            members = np.asarray(members)
+            g = np.empty_like(a3)
+            for k in np.unique(members).tolist():
+                sel = np.flatnonzero(members == k)
+                g[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel])
+        else:
+            g = np.mean([self._ground(k, h3, a3, sample=False) for k in range(self.n_members)], axis=0)
+        return self._blend(a3, g)[:, 0]
 
     # -- persistence ---------------------------------------------------------------------------
     @staticmethod
@@ -298,13 +345,23 @@ class GroundedEnv(gym.Wrapper):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
+        self.start(seed, obs)
+        return obs, info
+
+    def start(self, seed: int | None, obs: np.ndarray) -> None:
+        """Begin an episode with ``seed`` whose first observation is ``obs`` (what :meth:`reset` does
+        after the env's reset; batched rollouts call it directly)."""
         self.transformer.reset(seed)
         s = self.transformer.spec.states(obs)
         self._hist.clear()
         self._hist.extend([s] * self.transformer.spec.history)
-        return obs, info
 
-    def step(self, action):
+    def ground(self, action) -> np.ndarray:
+        """The action to apply for the agent's ``action`` (a new array), given the state history.
+
+        Raises:
+            ValueError: wrong shape, NaN or infinite entries (non-identity transformer).
+        """
         a = np.array(action, dtype=np.float64)  # a copy: the agent's array is never modified
         spec = self.transformer.spec
         applied = a.copy()
@@ -315,6 +372,15 @@ class GroundedEnv(gym.Wrapper):
                 raise ValueError("action contains NaN or infinite values")
             hist = np.concatenate(list(self._hist))
             applied[spec.action_index] = self.transformer.transform(hist, a[spec.action_index])
+        return applied
+
+    def observe(self, obs: np.ndarray) -> None:
+        """Append the state of the new observation to the history."""
+        self._hist.append(self.transformer.spec.states(obs))
+
+    def step(self, action):
+        a = np.array(action, dtype=np.float64)
+        applied = self.ground(a)
         obs, reward, terminated, truncated, info = self.env.step(applied)
         info = dict(info)
         info.setdefault("applied_action", applied)
@@ -323,5 +389,5 @@ class GroundedEnv(gym.Wrapper):
             agent_ctrl = -self.ctrl_cost_weight * float(np.sum(a ** 2))
             reward = reward - info["reward_ctrl"] + agent_ctrl
             info["reward_ctrl"] = agent_ctrl
-        self._hist.append(spec.states(obs))
+        self.observe(obs)
         return obs, reward, terminated, truncated, info

@@ -145,3 +145,9 @@ class IdentifiedSimEnv(NaoSimEnv):
 
     def _sensor_noise(self, fields: dict[str, np.ndarray]) -> None:
         fields["q"] += self._bias
+
+    def batch_hooks(self) -> dict:
+        """What this world changes in the sim's step, for lock-step batches (:class:`envs.batch.SimBatch`):
+        the encoder offsets (subtracted from the servo targets, added to the measured angles) and the
+        series hinges whose angles add to the measured joint angles."""
+        return {"ctrl_offset": self._bias.copy(), "q_offset": self._bias.copy(), "series": list(self._series)}

@@ -143,12 +143,12 @@ class _Interrupt(SerialExecutor):
     def __init__(self, stop):
         self.calls, self.stop, self.ran = 0, stop, 0
 
-    def map(self, fn, tasks, progress=None):
+    def map(self, fn, tasks, progress=None, weights=None):
         self.calls += 1
         if self.calls == self.stop:
             raise KeyboardInterrupt
-        self.ran += len(tasks)
-        return super().map(fn, tasks, progress)
+        self.ran += sum(weights) if weights else len(tasks)  # a task may be a batch of episodes
+        return super().map(fn, tasks, progress, weights)
 
 
 def test_resume_where_it_stopped(tmp_path):

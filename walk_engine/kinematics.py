@@ -190,15 +190,23 @@ def leg_ik(side: str, p_sole, R_sole) -> np.ndarray:
     return np.array([a, b - math.pi / 4, c, q3, q4, q5])
 
 
-def _target_scalar(side: str, p, R) -> tuple[float, float, float, tuple]:
-    """Scalar version of :func:`_hip_frame_target`: (x, y, z, rows of R') in the 45-deg hip frame."""
-    sg = 1.0 if side == "L" else -1.0
+def _hip_frame(sg, p, R) -> tuple:
+    """Sole target in the 45-deg hip frame before the reach clip: (x, y, z, rows of R'). Plain
+    arithmetic, so floats and arrays (``walk_engine.batch``) go through the same operations."""
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
     ax = p[0] + r02 * FOOT_HEIGHT
     ay = p[1] + r12 * FOOT_HEIGHT - sg * HIP_OFFSET_Y
     az = p[2] + r22 * FOOT_HEIGHT + HIP_OFFSET_Z
     c = _C45
-    x, y, z = ax, c * ay + sg * c * az, -sg * c * ay + c * az
+    rows = ((r00, r01, r02),
+            (c * r10 + sg * c * r20, c * r11 + sg * c * r21, c * r12 + sg * c * r22),
+            (-sg * c * r10 + c * r20, -sg * c * r11 + c * r21, -sg * c * r12 + c * r22))
+    return ax, c * ay + sg * c * az, -sg * c * ay + c * az, rows
+
+
+def _target_scalar(side: str, p, R) -> tuple[float, float, float, tuple]:
+    """Scalar version of :func:`_hip_frame_target`: (x, y, z, rows of R') in the 45-deg hip frame."""
+    x, y, z, rows = _hip_frame(1.0 if side == "L" else -1.0, p, R)
     d = math.sqrt(x * x + y * y + z * z)
     if d > REACH_CLIP * LEG_REACH:
         k = REACH_CLIP * LEG_REACH / d
@@ -209,9 +217,6 @@ def _target_scalar(side: str, p, R) -> tuple[float, float, float, tuple]:
             x, y, z = x * k, y * k, z * k
         else:
             x, y, z = 0.0, 0.0, -MIN_REACH
-    rows = ((r00, r01, r02),
-            (c * r10 + sg * c * r20, c * r11 + sg * c * r21, c * r12 + sg * c * r22),
-            (-sg * c * r10 + c * r20, -sg * c * r11 + c * r21, -sg * c * r12 + c * r22))
     return x, y, z, rows
 
 

@@ -1,0 +1,275 @@
+"""Batched walk episodes: many :func:`experiments.tasks.run_episode` tasks in lock-step in one worker.
+
+:func:`run_batch` takes a list of ``run_episode`` task dicts and returns exactly what
+``[run_episode(t) for t in tasks]`` returns, bit for bit (``tests/test_batch.py``), faster: tasks of
+a MuJoCo world (``sim``, ``identified``, ``grounded`` on either, ANE exploration noise) run as one
+:class:`envs.batch.SimBatch` (one ``MjModel``, one ``MjData`` per episode; a model per episode
+where the world builds one per episode, as the identified sim on its random ground) driven by one
+:class:`walk_engine.batch.BatchWalkEngine` (the ZMP engine vectorized over the episodes), the
+grounding transformer called once per control step for the batch (each episode with its own
+generator and ensemble member) and the ANE noise per episode. Tasks of the PyBullet ``real``
+world run one by one through ``run_episode``.
+
+Per control step each active episode costs its ``mj_step`` calls plus a few microseconds of
+array work; episodes that fall leave the batch. ``benchmarks/bench_generation.py`` measures the
+ratio to bare ``mj_step``.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from common.defaults import EPISODE_SECONDS
+from envs.batch import SimBatch
+from envs.mujoco_world import NaoSimEnv
+from envs.rollout import assemble_recording
+from envs.wrappers import ActionMismatch
+from experiments.fitness import walk_fitness
+from experiments.grounding import nao_spec
+from experiments.tasks import _transformer, _world, run_episode
+from walk_engine import GaitParams, WalkCommand
+from walk_engine.batch import BatchWalkEngine
+
+
+def _batchable(task: dict) -> bool:
+    return task["world"] in ("sim", "grounded", "identified")
+
+
+def _group_key(task: dict) -> tuple:
+    """Tasks that share a world (and so a template env) and a duration."""
+    return (task["world"], task.get("transformer"), float(task.get("seconds", EPISODE_SECONDS)),
+            tuple(task.get("identified") or ()), bool(task.get("identified_terms", True)),
+            bool(task.get("identified_ground", True)))
+
+
+def run_batch(tasks: list[dict]) -> list[dict]:
+    """Run walk episodes in lock-step where the world allows it; results in task order.
+
+    Args:
+        tasks: :func:`experiments.tasks.run_episode` task dicts (any worlds, any mix).
+
+    Returns:
+        ``[run_episode(t) for t in tasks]``, bit-identical (recordings included when asked).
+
+    Raises:
+        ValueError: what ``run_episode`` raises for a bad task (unknown world, missing reports).
+    """
+    tasks = list(tasks)
+    out: list = [None] * len(tasks)
+    groups: dict = {}
+    for i, t in enumerate(tasks):
+        if _batchable(t):
+            groups.setdefault(_group_key(t), []).append(i)
+        else:
+            out[i] = run_episode(t)
+    for idx in groups.values():
+        for i, r in zip(idx, _run_sim_group([tasks[i] for i in idx])):
+            out[i] = r
+    return out
+
+
+def _run_sim_group(tasks: list[dict]) -> list[dict]:
+    """One group of sim-world tasks with the same world, transformer and duration."""
+    env = _world({**tasks[0], "action_noise": 0.0}).unwrapped
+    tr = _transformer(tasks[0]["transformer"]) if tasks[0]["world"] == "grounded" else None
+    walks = lockstep_walks(env, [t["theta"] for t in tasks], [int(t["seed"]) for t in tasks],
+                           float(tasks[0].get("seconds", EPISODE_SECONDS)),
+                           action_noise=[float(t.get("action_noise", 0.0) or 0.0) for t in tasks], transformer=tr)
+    results = []
+    for t, (rec, res) in zip(tasks, walks):
+        rec.meta.update({"world": t["world"], **t.get("meta", {})})
+        out = res.to_dict()
+        out["seed"] = int(t["seed"])
+        if t.get("record"):
+            out["recording"] = (rec.columns, rec.meta)
+        results.append(out)
+    return results
+
+
+def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=None, action_noise=None,
+                   transformer=None) -> list:
+    """Walk B gaits of the ZMP engine in the sim ``env`` in lock-step (see the module docstring).
+
+    Args:
+        env: a :class:`envs.NaoSimEnv`, or a subclass with ``batch_hooks`` (the identified sim), the
+            template (its state is restored afterwards).
+        thetas: B gait parameter vectors (SI, 16); seeds: B episode seeds; seconds: episode length [s].
+        terrains: B heightfields (or None: the env's own ground) to walk on, each episode its own.
+        action_noise: B std [rad] of Gaussian noise on the applied leg targets (the ANE baseline or
+            exploration noise, as :class:`envs.wrappers.ActionMismatch` with the episode's seed).
+        transformer: an :class:`sgat.ActionTransformer` grounding every episode (the grounded sim,
+            as :class:`sgat.GroundedEnv`; each episode its own generator and ensemble member).
+
+    Returns:
+        B ``(Recording, WalkResult)``, each bit-identical to
+        :func:`experiments.fitness.run_walk` of that episode alone in the same (wrapped) world.
+
+    Raises:
+        ValueError: B differs between the arguments.
+    """
+    B = len(thetas)
+    seeds = [int(s) for s in seeds]
+    terrains = list(terrains) if terrains is not None else None
+    sigma = list(action_noise) if action_noise is not None else [0.0] * B
+    if len(seeds) != B or len(sigma) != B or (terrains is not None and len(terrains) != B):
+        raise ValueError(f"lockstep_walks: {B} gaits but {len(seeds)} seeds, {len(sigma)} noise levels"
+                         + ("" if terrains is None else f", {len(terrains)} terrains"))
+    n = int(round(seconds / env.control_dt))
+    sim = SimBatch(env, B)
+    # the wrappers of experiments.tasks._world, one per episode (their state is per episode)
+    noise = [ActionMismatch(env, noise_std=s, index=nao_spec().action_index, seed=seeds[i]) if s > 0 else None
+             for i, s in enumerate(sigma)]
+    tr = transformer
+    grounded = tr is not None and not tr.is_identity
+    if grounded:  # sgat.GroundedEnv per episode: its generator, its ensemble member, its state history
+        eps = [copy.copy(tr) for _ in range(B)]
+        spec = tr.spec
+        H = np.empty((B, spec.history, spec.state_dim))
+        Z = np.empty((B, n, spec.state_dim)) if tr.samples else None
+    params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
+    engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
+    sim.reset(seeds, terrains)
+    for i in range(B):
+        if noise[i] is not None:
+            noise[i].reseed(seeds[i])
+        if grounded:
+            eps[i].reset(seeds[i])
+            H[i] = spec.states(sim.obs[i])
+            if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
+                Z[i] = eps[i].rng.standard_normal((n, spec.state_dim))
+    engine.reset(sim.obs)
+    layout = env.layout
+    na = env.action_space.shape[0]
+    O = np.empty((B, n, layout.size))
+    C = np.empty((B, n, na))
+    A = np.empty((B, n, na))
+    G = np.full((B, n, 22), np.nan)
+    rows = np.zeros(B, dtype=int)
+    fall_time: list = [None] * B
+    actions = np.zeros((B, na))
+    for k in range(n):
+        idx = np.flatnonzero(sim.active)
+        if not len(idx):
+            break
+        O[idx, k] = sim.obs[idx]
+        G[idx, k, :19] = sim.gt[idx]
+        cmd = engine.step(sim.obs, idx)
+        C[idx, k] = cmd
+        act = cmd.copy()
+        if grounded:
+            ai = spec.action_index
+            act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
+                                               None if Z is None else Z[idx, k])
+        for j, i in enumerate(idx):
+            actions[i] = act[j] if noise[i] is None else noise[i].perturb(act[j])
+        sim.step(actions)
+        A[idx, k] = sim.applied[idx]
+        rows[idx] = k + 1
+        ended = idx[~sim.active[idx]]
+        for i in ended:
+            fall_time[i] = (k + 1) * env.control_dt
+        if grounded:
+            live = idx[sim.active[idx]]
+            H[live] = np.concatenate([H[live, 1:], spec.states(sim.obs[live])[:, None]], axis=1)
+    cmd_meta = WalkCommand()
+    out = []
+    for i in range(B):
+        meta = {"params": params[i].to_dict(), "command": {"vx": cmd_meta.vx, "vy": cmd_meta.vy, "wz": cmd_meta.wz},
+                "controller": "walk_engine.WalkEngine"}
+        rec = assemble_recording(env, O[i], C[i], A[i], G[i], int(rows[i]), seed=seeds[i], seconds=seconds,
+                                 fell=sim.reason[i] is not None, reason=sim.reason[i], fall_time=fall_time[i],
+                                 meta=meta, terrain=sim.terrain(i))
+        out.append((rec, walk_fitness(rec, seconds)))
+    return out
+
+
+#: Most episodes in one batch by default: a paper-scale population (150) on 2 workers is 2 batches;
+#: the per-episode overhead barely falls beyond ~75 (benchmarks/bench_generation.py).
+MAX_BATCH = 75
+
+
+def chunk_tasks(tasks: list[dict], workers: int = 1, batch_size: int | None = None, key=None) -> list[list[int]]:
+    """Split task indices into batches for :func:`run_batch` (or another batched task function).
+
+    Tasks that can run in lock-step (same world, transformer and duration; or the same ``key(task)``
+    when a key function is given, None meaning "not batchable") are cut into
+    ``ceil(n / workers)``-sized batches (at most ``batch_size``, default :data:`MAX_BATCH`), so
+    every worker gets a share; every other task is a batch of its own.
+
+    Returns:
+        Lists of indices into ``tasks``, every index exactly once.
+
+    Raises:
+        ValueError: workers or batch_size < 1.
+    """
+    if workers < 1 or (batch_size is not None and batch_size < 1):
+        raise ValueError(f"workers and batch_size must be >= 1, got {workers}, {batch_size}")
+    cap = MAX_BATCH if batch_size is None else int(batch_size)
+    groups: dict = {}
+    out: list[list[int]] = []
+    key = key or (lambda t: _group_key(t) if _batchable(t) else None)
+    for i, t in enumerate(tasks):
+        k = key(t)
+        if k is not None:
+            groups.setdefault(k, []).append(i)
+        else:
+            out.append([i])
+    for idx in groups.values():
+        size = min(cap, -(-len(idx) // workers))
+        out.extend(idx[k:k + size] for k in range(0, len(idx), size))
+    return out
+
+
+def map_episodes(ex, tasks: list[dict], progress=None, batch_size: int | None = None) -> list[dict]:
+    """``[run_episode(t) for t in tasks]`` on the executor ``ex``, sent as batches (:func:`chunk_tasks`).
+
+    The results are bit-identical whatever the batch size and the number of workers
+    (``tests/test_batch.py``). ``progress(n)`` is called with the number of episodes of each
+    finished batch.
+    """
+    tasks = list(tasks)
+    chunks = chunk_tasks(tasks, getattr(ex, "workers", 1), batch_size)
+    res = ex.map(run_batch, [[tasks[i] for i in c] for c in chunks], progress=progress,
+                 weights=[len(c) for c in chunks])
+    out: list = [None] * len(tasks)
+    for c, r in zip(chunks, res):
+        for i, x in zip(c, r):
+            out[i] = x
+    return out
+
+
+#: Fraction of bare ``mj_step`` speed a batched generation reaches per core (the README's
+#: ``benchmarks/bench_generation.py`` result, rounded down); used only for the time estimate below.
+BATCHED_RATIO = 0.8
+
+
+def expected_generation_seconds(episodes: int, seconds: float, workers: int, batchable: bool = True) -> dict:
+    """How long a generation of ``episodes`` episodes of ``seconds`` should take on ``workers`` cores.
+
+    Times bare ``mj_step`` of the sim holding its stance for 100 control steps in this process
+    (about 20 ms), scales it to every control step of every episode (none falling), and divides by
+    the workers: the physics limit. The expectation is that divided by :data:`BATCHED_RATIO` for
+    worlds that run batched, by 0.4 for the others (one episode at a time).
+
+    Returns:
+        ``{"physics_limit_s", "expected_s", "bare_step_us"}``.
+    """
+    import time
+
+    import mujoco
+
+    env = NaoSimEnv()
+    env.reset(seed=0)
+    m, d = env.model, env.data
+    mujoco.mj_step(m, d, nstep=env.n_substeps)
+    t0 = time.perf_counter()
+    for _ in range(100):
+        mujoco.mj_step(m, d, nstep=env.n_substeps)
+    per_step = (time.perf_counter() - t0) / 100
+    env.close()
+    steps = episodes * int(round(seconds / env.control_dt))
+    limit = steps * per_step / max(1, workers)
+    return {"physics_limit_s": limit, "expected_s": limit / (BATCHED_RATIO if batchable else 0.4),
+            "bare_step_us": 1e6 * per_step}

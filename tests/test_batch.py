@@ -1,0 +1,180 @@
+"""Batched rollouts: lock-step episodes give bit-identical results to one episode at a time,
+whatever the batch size and the worker count; the batched walk engine is the scalar one."""
+
+import numpy as np
+import pytest
+import torch
+
+from envs import NaoSimEnv
+from envs.batch import SimBatch
+from experiments.batch import chunk_tasks, map_episodes, run_batch
+from experiments.executors import ProcessExecutor, SerialExecutor
+from experiments.grounding import grounding_spec
+from experiments.tasks import run_episode
+from sgat.models import ForwardModel, InverseModel
+from sgat.transformer import ActionTransformer
+from walk_engine import GaitParams, WalkEngine
+from walk_engine.batch import BatchWalkEngine
+
+SECONDS = 2.5
+
+
+def _gaits(n: int, seed: int = 1, box: float = 0.4) -> list[list[float]]:
+    """θ0 and gaits drawn in a wide box around it (some fall within seconds)."""
+    rng = np.random.default_rng(seed)
+    u0 = GaitParams().to_vector()
+    return [GaitParams().to_array().tolist()] + [
+        GaitParams.from_vector(u0 + rng.uniform(-box, box, len(u0)), clip=True).to_array().tolist() for _ in range(n - 1)]
+
+
+def _assert_same(a: list[dict], b: list[dict]) -> None:
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        x, y = dict(x), dict(y)
+        rx, ry = x.pop("recording", None), y.pop("recording", None)
+        assert x == y  # fitness, speed, fall, fall time, drift, steps: bit for bit
+        if rx is not None:
+            assert ry is not None and rx[1] == ry[1] and set(rx[0]) == set(ry[0])
+            for c in rx[0]:
+                assert np.array_equal(rx[0][c], ry[0][c], equal_nan=True), c
+
+
+@pytest.fixture(scope="module")
+def transformers(tmp_path_factory):
+    """Saved SGAT (2-member ensemble) and GAT transformers with random (untrained) weights: they
+    push the legs around enough to make some walks fall."""
+    spec = grounding_spec(NaoSimEnv())
+    S, A = spec.state_dim, spec.action_dim
+    out = {}
+    for method, stochastic in (("sgat", True), ("gat", False)):
+        torch.manual_seed(7 if stochastic else 8)
+        fw = [ForwardModel(S, A, stochastic=stochastic) for _ in range(2)]
+        inv = [InverseModel(S, A, command_input=True) for _ in range(2)]
+        path = tmp_path_factory.mktemp(method)
+        ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0).save(path)
+        out[method] = str(path)
+    return out
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    """A diagnosis report with one effect of every kind the identified sim builds differently: a
+    latency (delay buffers), backlash and joint compliance (series hinges), an encoder offset, a gain,
+    friction, and uneven ground (a model per episode on its own random surface)."""
+    import json
+
+    path = tmp_path_factory.mktemp("report") / "report.json"
+    path.write_text(json.dumps({
+        "model": {"latency": 0.012, "backlash[LAnklePitch]": 0.01, "joint_compliance[RKneePitch]": 0.01,
+                  "sensor_bias[LHipPitch]": 0.004, "pd_gain[RAnklePitch]": 0.9, "coulomb_friction[LKneePitch]": 0.05},
+        "effects": [{"family": "terrain_roughness", "value": 0.003}]}))
+    return str(path)
+
+
+@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "identified", "hybrid"])
+def test_batched_episodes_are_bit_identical_to_single_episodes(world, transformers, report):
+    """Every MuJoCo world the optimizer trains in: results and recordings equal run_episode's,
+    falls included."""
+    kw = {"sim": {"world": "sim"}, "ane": {"world": "sim", "action_noise": 0.05},
+          "sgat": {"world": "grounded", "transformer": transformers.get("sgat")},
+          "gat": {"world": "grounded", "transformer": transformers.get("gat")},
+          "identified": {"world": "identified", "identified": [report]},
+          "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]}}[world]
+    tasks = [{**kw, "theta": th, "seed": 10 + i, "seconds": SECONDS, "record": True}
+             for i, th in enumerate(_gaits(6))]
+    single = [run_episode(t) for t in tasks]
+    batched = run_batch(tasks)
+    _assert_same(single, batched)
+    falls = sum(r["fell"] for r in single)
+    assert 0 < falls < len(tasks), "the panel should hold walks that fall and walks that do not"
+
+
+def test_mixed_worlds_keep_task_order(transformers):
+    """Real-world tasks run one by one, the rest in lock-step; results come back in task order."""
+    th = _gaits(3)
+    tasks = [{"world": "sim", "theta": th[0], "seed": 1, "seconds": 1.0},
+             {"world": "real", "theta": th[0], "seed": 1, "seconds": 1.0},
+             {"world": "grounded", "transformer": transformers["sgat"], "theta": th[1], "seed": 2, "seconds": 1.0},
+             {"world": "sim", "theta": th[2], "seed": 3, "seconds": 1.0}]
+    _assert_same([run_episode(t) for t in tasks], run_batch(tasks))
+
+
+def test_results_do_not_depend_on_batch_size_or_workers(transformers):
+    tasks = [{"world": "grounded", "transformer": transformers["sgat"], "theta": th, "seed": 20 + i, "seconds": 1.5}
+             for i, th in enumerate(_gaits(7, seed=2))]
+    ref = map_episodes(SerialExecutor(), tasks, batch_size=1)
+    for bs in (2, 7):
+        _assert_same(ref, map_episodes(SerialExecutor(), tasks, batch_size=bs))
+    with ProcessExecutor(2) as ex:
+        done = []
+        _assert_same(ref, map_episodes(ex, tasks, progress=done.append))
+    assert sum(done) == len(tasks)
+
+
+def test_chunks_split_by_world_and_cover_every_task():
+    tasks = ([{"world": "sim", "seed": i} for i in range(10)] + [{"world": "real", "seed": 0}]
+             + [{"world": "grounded", "transformer": "a", "seed": i} for i in range(3)])
+    chunks = chunk_tasks(tasks, workers=2, batch_size=4)
+    assert sorted(i for c in chunks for i in c) == list(range(len(tasks)))
+    assert [10] in chunks  # the real-world task alone
+    for c in chunks:
+        assert len({(tasks[i]["world"], tasks[i].get("transformer")) for i in c}) == 1
+        assert len(c) <= 4
+    with pytest.raises(ValueError, match="batch_size"):
+        chunk_tasks(tasks, batch_size=0)
+
+
+def test_batch_engine_matches_scalar_engine_on_the_same_observations():
+    """Fed identical (synthetic, noisy) observation streams, every row of the batched engine equals
+    the scalar engine's targets, through phase changes and the start blend."""
+    robot = NaoSimEnv().robot
+    params = [GaitParams.from_array(np.asarray(th)) for th in _gaits(5, seed=4, box=0.3)]
+    rng = np.random.default_rng(0)
+    obs = np.tile(np.zeros(62), (5, 1))
+    obs[:, :24] = robot.pose("crouch") + rng.normal(0, 0.02, (5, 24))
+    scalar = [WalkEngine(robot, p) for p in params]
+    for e, o in zip(scalar, obs):
+        e.reset(o)
+    batch = BatchWalkEngine(robot, params)
+    batch.reset(obs)
+    idx = np.arange(5)
+    for k in range(150):
+        obs = obs + rng.normal(0, 0.05, obs.shape)
+        if k == 100:
+            idx = idx[[0, 2, 3]]  # episodes leave the batch
+        got = batch.step(obs, idx)
+        want = np.stack([scalar[i].step(obs[i]) for i in idx])
+        assert np.array_equal(got, want), k
+
+
+def test_sim_batch_rejects_bad_actions_and_other_worlds():
+    env = NaoSimEnv()
+    sim = SimBatch(env, 2)
+    sim.reset([0, 1])
+    a = np.tile(env.robot.pose("crouch", actuated=True), (2, 1))
+    a[1, 3] = np.nan
+    with pytest.raises(ValueError, match="episode 1.*NaN"):
+        sim.step(a)
+    with pytest.raises(ValueError, match="shape"):
+        sim.step(a[:1])
+    with pytest.raises(TypeError, match="NaoSimEnv"):
+        from envs import NaoRealEnv
+
+        SimBatch(NaoRealEnv(), 2)
+
+
+def test_stress_trials_in_lockstep_equal_single_trials():
+    """Stress sweeps batch their sim trials, each on its own heightfield: rows (but the wall time)
+    and recordings equal run_trial's."""
+    from experiments import stress as S
+
+    cfg = S.make_config(world="sim", amplitude="0,0.02,0.04", trials=2, seconds=2.0)
+    tasks = S.plan_tasks(cfg)
+    tasks[1] = {**tasks[1], "record": True}
+    single = [S.run_trial(t) for t in tasks]
+    batched = S.run_trials(tasks)
+    for a, b in zip(single, batched):
+        a, b = dict(a), dict(b)
+        a.pop("wall_s"), b.pop("wall_s")
+        _assert_same([a], [b])
+    assert len({(r["terrain"], r["terrain_seed"]) for r in single}) == len(single)  # each on its own ground
