@@ -18,7 +18,9 @@ ratio to bare ``mj_step``.
 from __future__ import annotations
 
 import copy
+import time
 
+import mujoco
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
@@ -256,10 +258,6 @@ def expected_generation_seconds(episodes: int, seconds: float, workers: int, bat
     Returns:
         ``{"physics_limit_s", "expected_s", "bare_step_us"}``.
     """
-    import time
-
-    import mujoco
-
     env = NaoSimEnv()
     env.reset(seed=0)
     m, d = env.model, env.data

@@ -120,7 +120,7 @@ def compare_at_noise(
 
 def sweep(noises: list[float], *, progress: bool = False, **kwargs: Any) -> list[dict[str, Any]]:
     """:func:`compare_at_noise` for every noise value (tqdm progress bar if ``progress``)."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # lazy: tqdm
 
     it = tqdm(noises, desc="cliff", unit="noise", file=sys.stderr,
               disable=None if progress else True)  # None: only on a terminal
@@ -143,7 +143,7 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def _figure_bytes(fig) -> bytes:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # lazy: matplotlib
 
     FigureCanvasAgg(fig)
     buf = io.BytesIO()
@@ -153,7 +153,7 @@ def _figure_bytes(fig) -> bytes:
 
 def plot_returns(rows: list[dict[str, Any]], path: Path, episodes: int) -> None:
     """Paper Fig. 7 style: mean real return vs noise for GAT, SGAT and the real optimum."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: matplotlib
 
     x = np.array([r["noise"] for r in rows])
     order = np.argsort(x, kind="stable")
@@ -191,8 +191,8 @@ def _greedy_path(mdp: T.TabularMDP, policy: np.ndarray, limit: int = 200) -> lis
 
 def plot_paths(row: dict[str, Any], path: Path, rows_: int = 4, cols: int = 12) -> None:
     """Paper Fig. 6 style: the grid, the cliff and the paths GAT and SGAT take without noise."""
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
+    from matplotlib.figure import Figure  # lazy: matplotlib
+    from matplotlib.patches import Rectangle  # lazy: matplotlib
 
     sim = T.cliff_walking(0.0, rows=rows_, cols=cols)
     fig = Figure(figsize=(6.4, 2.6))

@@ -17,6 +17,11 @@ FILE``) are judged against.
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import sys
+
+from common.files import atomic_write_text
 import experiments.argtypes as A
 
 
@@ -42,14 +47,9 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    import json
-    import os
-    import sys
-
-    from sysid.data import load_logs
-    from sysid.diagnose import calibrate, diagnose
-    from common.files import atomic_write_text
-    from sysid.report import format_report, public_json, write_report
+    from sysid.data import load_logs  # lazy: loads the engines; keeps sgatwalk --help fast
+    from sysid.diagnose import calibrate, diagnose  # lazy: loads the engines; keeps sgatwalk --help fast
+    from sysid.report import format_report, public_json, write_report  # lazy: loads the engines; keeps sgatwalk --help fast
 
     logs = load_logs(args.real)
     say = None if args.json else (lambda s: print(s, file=sys.stderr))
@@ -82,7 +82,7 @@ def run(args) -> dict:
     fams = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
     base = None
     if args.base_report:
-        from sysid.report import terms_from_labels
+        from sysid.report import terms_from_labels  # lazy: loads the engines; keeps sgatwalk --help fast
 
         if not os.path.exists(args.base_report):
             raise FileNotFoundError(f"no report at {args.base_report!r}")

@@ -11,6 +11,9 @@ physical robot; sensor noise differs per log. ``sgatwalk diagnose --real OUT`` r
 from __future__ import annotations
 
 import argparse
+import time
+
+from robots import nao_h25
 import experiments.argtypes as A
 
 
@@ -35,12 +38,9 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    import time
-
-    from envs import make_world
-    from envs.effects import get_profile
-    from robots import nao_h25
-    from sysid.worlds import freeze, record_excitation, rough_ground
+    from envs import make_world  # lazy: loads the engines; keeps sgatwalk --help fast
+    from envs.effects import get_profile  # lazy: loads the engines; keeps sgatwalk --help fast
+    from sysid.worlds import freeze, record_excitation, rough_ground  # lazy: loads the engines; keeps sgatwalk --help fast
 
     robot = nao_h25()
     kw = {"fixed_base": args.fixed_base}

@@ -24,7 +24,8 @@ import argparse
 import os
 import sys
 
-from experiments.fidelity import DEFAULT_WORLDS, FidelityConfig
+from experiments.executors import make_executor
+from experiments.fidelity import DEFAULT_WORLDS, Fidelity, FidelityConfig, format_table
 import experiments.argtypes as A
 
 
@@ -55,9 +56,6 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    from experiments.executors import make_executor
-    from experiments.fidelity import Fidelity
-
     for p in args.params:
         if not os.path.isfile(p):
             raise FileNotFoundError(f"--params: no such file {p!r}")
@@ -72,8 +70,6 @@ def run(args) -> dict:
         res = Fidelity(cfg, out, ex, log=log, progress=not args.json).run()
     res["run_dir"] = out  # res["wall_s"]: the run's time over all its invocations (timing.json)
     if not args.json:
-        from experiments.fidelity import format_table
-
         print(format_table(res), flush=True)
         print(f"run directory: {out} (fidelity.json, fidelity.png, table.txt)", flush=True)
     return res

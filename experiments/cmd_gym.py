@@ -14,8 +14,10 @@ import argparse
 import math
 import os
 import time
+from pathlib import Path
 
-from experiments.gym_config import EXPERIMENTS, METHODS, PRESETS
+from experiments.executors import make_executor
+from experiments.gym_config import EXPERIMENTS, METHODS, PRESETS, GymConfig
 import experiments.argtypes as A
 
 
@@ -72,8 +74,6 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def config_from_args(args):
-    from experiments.gym_config import GymConfig
-
     methods = tuple(m.strip().lower() for m in args.methods.split(",") if m.strip())
     over = dict(
         experiment=args.experiment, methods=methods, runs=args.runs, seed=args.seed,
@@ -88,14 +88,12 @@ def config_from_args(args):
 
 
 def run(args) -> dict:
-    from experiments import gym_sim2real as G
+    from experiments import gym_sim2real as G  # lazy: keeps sgatwalk --help fast
 
     cfg = config_from_args(args)
     out = args.out or os.path.join("runs", f"gym_{cfg.env}_{cfg.experiment}_{cfg.preset}")
     log = (lambda *a, **k: None) if args.json else print
     if args.report:
-        from pathlib import Path
-
         table = G.ResultTable(Path(out))
         if not table.path.exists():
             raise FileNotFoundError(f"--report: no results table at {table.path}")
@@ -112,8 +110,6 @@ def run(args) -> dict:
         log(text)
         log(f"wrote {fig}")
         return {"summary": summary, "table": text, "files": {"figure": str(fig)}, "config": cfg.to_dict()}
-
-    from experiments.executors import make_executor
 
     ex = make_executor(args.workers, args.ray_address)
     t0 = time.perf_counter()

@@ -19,7 +19,8 @@ import os
 import sys
 import time
 
-from experiments.optimize import METHODS, PRESETS, OptimizeConfig
+from experiments.executors import make_executor
+from experiments.optimize import METHODS, PRESETS, OptimizeConfig, Optimizer
 import experiments.argtypes as A
 
 
@@ -84,9 +85,6 @@ def config_from_args(args) -> OptimizeConfig:
 
 
 def run(args) -> dict:
-    from experiments.executors import make_executor
-    from experiments.optimize import Optimizer
-
     if args.resume:
         cfg, run_dir = OptimizeConfig(), args.resume
         if not os.path.isdir(run_dir):

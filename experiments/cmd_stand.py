@@ -46,7 +46,7 @@ def _record_path(path: str, world: str, n_worlds: int) -> str:
 
 
 def run(args) -> dict:
-    from envs import HoldPose, make_world, rollout  # engines load only when the command runs
+    from envs import HoldPose, make_world, rollout  # lazy: engines load only when the command runs
 
     worlds = [w.strip() for w in args.world.split(",") if w.strip()]
     for w in worlds:

@@ -48,7 +48,7 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    from experiments.stress import make_config, run_stress
+    from experiments.stress import make_config, run_stress  # lazy: scipy; keeps sgatwalk --help fast
 
     terrain = args.terrain if (args.terrain is not None or args.sweep is not None) else "lumpy"
     cfg = make_config(args.params, world=args.world, terrain=terrain, amplitude=args.amplitude,

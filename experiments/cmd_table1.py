@@ -17,7 +17,8 @@ import argparse
 import os
 import sys
 
-from experiments.table1 import Table1Config
+from experiments.executors import make_executor
+from experiments.table1 import Table1, Table1Config, format_table
 import experiments.argtypes as A
 
 
@@ -40,9 +41,6 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    from experiments.executors import make_executor
-    from experiments.table1 import Table1, format_table
-
     opt = {k: v for k, v in (("popsize", args.popsize), ("generations", args.generations),
                              ("grounding_steps", args.grounding_steps), ("seconds", args.seconds)) if v is not None}
     cfg = Table1Config(methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()), seeds=args.seeds,

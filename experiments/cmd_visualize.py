@@ -23,6 +23,7 @@ import os
 import experiments.argtypes as A
 
 from common.defaults import EPISODE_SECONDS
+from experiments.cmd_stand import _record_path
 
 WORLDS = ("sim", "real", "grounded")
 
@@ -57,7 +58,7 @@ def register(sub) -> argparse.ArgumentParser:
 def _grounded_env(sim_env, transformer_path):
     """``sgat.GroundedEnv(sim, transformer)`` with the transformer saved by ``sgatwalk optimize``
     (``RUN_DIR/models/<method>_step<i>``)."""
-    from sgat.transformer import ActionTransformer, GroundedEnv
+    from sgat.transformer import ActionTransformer, GroundedEnv  # lazy: torch; keeps sgatwalk --help fast
 
     if transformer_path is None:
         raise ValueError("world 'grounded' needs --transformer DIR (e.g. RUN_DIR/models/sgat_step1 of 'sgatwalk optimize')")
@@ -68,8 +69,8 @@ def _grounded_env(sim_env, transformer_path):
 
 def _live(args) -> tuple[dict, dict, list[str]]:
     """Run one rollout per world; returns (label -> recording, label -> terrain, notes)."""
-    from envs import HoldPose, make_world, rollout
-    from experiments.viz import plan_from_engine
+    from envs import HoldPose, make_world, rollout  # lazy: loads the engines; keeps sgatwalk --help fast
+    from experiments.viz import plan_from_engine  # lazy: loads the engines; keeps sgatwalk --help fast
 
     worlds = [w.strip() for w in args.world.split(",") if w.strip()]
     if not worlds:
@@ -81,7 +82,7 @@ def _live(args) -> tuple[dict, dict, list[str]]:
         raise ValueError(f"--world lists a world twice: {args.world!r}")
     params = None
     if args.pose is None:
-        from walk_engine import GaitParams, WalkEngine
+        from walk_engine import GaitParams, WalkEngine  # lazy: scipy; keeps sgatwalk --help fast
 
         params = GaitParams.load(args.params) if args.params else GaitParams()
     elif args.params:
@@ -110,8 +111,6 @@ def _live(args) -> tuple[dict, dict, list[str]]:
             recs[w] = rec
             terrains[w] = env.unwrapped.terrain
             if args.record:
-                from experiments.cmd_stand import _record_path
-
                 notes.append(f"{w}: recording -> {rec.to_parquet(_record_path(args.record, w, len(worlds)))}")
     finally:
         for env in envs.values():
@@ -120,7 +119,7 @@ def _live(args) -> tuple[dict, dict, list[str]]:
 
 
 def run(args) -> dict:
-    from experiments.viz import find_recordings, log_rollouts_to_rrd, screenshot_rrd
+    from experiments.viz import find_recordings, log_rollouts_to_rrd, screenshot_rrd  # lazy: loads the engines; keeps sgatwalk --help fast
 
     if args.spawn and args.save:
         raise ValueError("give --save or --spawn, not both")

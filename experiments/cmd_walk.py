@@ -57,7 +57,7 @@ def run(args) -> dict:
     command = WalkCommand(args.vx, args.vy, args.wz)
     env = None
     if args.world == "identified":
-        from sysid.identified import IdentifiedSimEnv
+        from sysid.identified import IdentifiedSimEnv  # lazy: sysid; keeps sgatwalk --help fast
 
         env = IdentifiedSimEnv.from_reports(args.report, terrain=None if terrain in (None, "flat") else terrain)
     t0 = time.perf_counter()

@@ -63,7 +63,7 @@ class EpisodeLog:
         """Run the tasks (``experiments.tasks.run_episode`` dicts with a ``key``) that have no result
         yet, in chunks of 150 (sent to the workers as lock-step batches); each chunk is appended to ``episodes.jsonl`` as it ends.
         Without a terminal a line with the count and an ETA goes to ``say`` every 30 s."""
-        from experiments.batch import MAX_BATCH, map_episodes
+        from experiments.batch import MAX_BATCH, map_episodes  # lazy: loads the engines and torch
 
         todo = [t for t in tasks if t["key"] not in self.done]
         if not todo:
@@ -73,7 +73,7 @@ class EpisodeLog:
         self.say(f"{desc}: {len(todo)} episodes ({len(tasks) - len(todo)} resumed)")
         bar = None
         if progress:
-            from tqdm import tqdm
+            from tqdm import tqdm  # lazy: tqdm
 
             bar = tqdm(total=len(todo), desc=desc, leave=False, disable=None)
         chunk = max(8, 2 * MAX_BATCH)  # lock-step batches (experiments.batch), saved as each chunk ends

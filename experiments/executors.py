@@ -30,7 +30,7 @@ class TaskFailed(RuntimeError):
 def _worker_init() -> None:
     os.environ["OMP_NUM_THREADS"] = "1"
     try:
-        import torch
+        import torch  # lazy: torch (optional here; only in workers)
 
         torch.set_num_threads(1)
     except ImportError:  # pragma: no cover
@@ -162,7 +162,7 @@ class RayExecutor(SerialExecutor):
 
     def __init__(self, address: str):
         try:
-            import ray
+            import ray  # lazy: ray (optional)
         except ImportError:
             raise ValueError("--ray-address needs Ray: pip install 'sgatwalk[ray]'") from None
         self._ray = ray

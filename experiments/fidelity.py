@@ -45,6 +45,7 @@ their split-half reliability (``experiments.stats``). Everything random is keyed
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -57,7 +58,11 @@ from common.defaults import EPISODE_SECONDS
 from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.episodes import EpisodeLog
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
+from experiments.identify import calibrate_engines, identify_real
 from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
+from experiments.tasks import fit_grounding_task
+from sgat.grounding import GroundingConfig
+from walk_engine import GaitParams
 
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid")
@@ -95,8 +100,6 @@ class WorldSpec:
     @property
     def key(self) -> str:
         """The world's cache key: its kind and a hash of every setting (a changed default is a new world)."""
-        import hashlib
-
         d = dataclasses.asdict(self)
         d.pop("name")
         for k in _LATER_OPTIONS:  # options added later hash only when set, so earlier caches stay valid
@@ -125,8 +128,6 @@ def parse_world(text: str) -> WorldSpec:
     Raises:
         ValueError: unknown kind or option, or a bad value (named).
     """
-    from sgat.grounding import GroundingConfig
-
     parts = [p.strip() for p in str(text).split(":")]
     kind = parts[0]
     if kind not in KINDS:
@@ -281,8 +282,6 @@ class Fidelity:
     # ---------------------------------------------------------------- panel
     def panel(self) -> list[dict]:
         """θ0, the drawn gaits and the given θ files: ``[{"name", "theta"}]`` (saved to panel.json)."""
-        from walk_engine import GaitParams
-
         path = os.path.join(self.run_dir, "panel.json")
         if os.path.exists(path):
             with open(path) as f:
@@ -304,8 +303,6 @@ class Fidelity:
     def _data_gaits(self, n: int, draw: int) -> list[list[float]]:
         """The gaits grounding walks are made with: θ0, and ``n - 1`` gaits drawn in the box (their
         own seed stream, not the panel's)."""
-        from walk_engine import GaitParams
-
         u0 = GaitParams.initial().to_vector()
         rng = np.random.default_rng(np.random.SeedSequence([self.cfg.seed, _DATA_GAITS, draw]))
         us = [u0] + [np.clip(u0 + rng.uniform(-self.cfg.box, self.cfg.box, len(u0)), 0, 1) for _ in range(n - 1)]
@@ -314,8 +311,8 @@ class Fidelity:
     def _walks(self, world: str, seeds: list[int], tag: str, thetas: list, **kw) -> list[str]:
         """Recordings in ``world`` on ``seeds`` under ``data/`` (cached), walk j with gait
         ``thetas[j % len(thetas)]``; returns the paths."""
-        from envs import Recording
-        from experiments.batch import map_episodes
+        from envs import Recording  # lazy: loads the engines
+        from experiments.batch import map_episodes  # lazy: loads the engines
 
         paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
         todo = [(j, s, p) for j, (s, p) in enumerate(zip(seeds, paths)) if not os.path.exists(p)]
@@ -327,8 +324,6 @@ class Fidelity:
         return paths
 
     def _identify(self, draw: int) -> dict:
-        from experiments.identify import identify_real
-
         cfg = self.cfg
         return identify_real(os.path.join(self.run_dir, "identified", f"d{draw}"),
                              seed=_seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, profile=cfg.profile,
@@ -346,16 +341,12 @@ class Fidelity:
             ``{world name: {draw: {"transformer": dir or None, "identified": [reports] or None,
             "real_walks", "real_seconds", "excitation_logs", "excitation_seconds", ...}}}``.
         """
-        from experiments.tasks import fit_grounding_task
-
         cfg = self.cfg
         out: dict = {s.name: {} for s in self.specs}
         need_id = any(s.needs_identification for s in self.specs)
         idents: dict[int, dict] = {}
         self._calibration = None
         if need_id:
-            from experiments.identify import calibrate_engines
-
             t0 = time.perf_counter()
             self._calibration = calibrate_engines(os.path.join(self.run_dir, "identified", "calibration"),
                                                   seed=_seeds(cfg.seed, _CAL, n=1)[0] % 1_000_000,
@@ -498,7 +489,7 @@ class Fidelity:
 
 
 def _rec_seconds(path: str) -> float:
-    from envs import Recording
+    from envs import Recording  # lazy: loads the engines
 
     rec = Recording.from_parquet(path)
     return float(len(rec) * rec.meta["control_dt"])
@@ -546,10 +537,10 @@ def format_table(res: dict) -> str:
 
 def plot(res: dict, path: str) -> None:
     """Predicted against real fitness, one panel per world, one colour per draw."""
-    import matplotlib
+    import matplotlib  # lazy: matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # lazy: matplotlib
 
     worlds = list(res["worlds"].items())
     n = len(worlds)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 
+from robots import nao_h25
 from sgat.grounding import GroundingConfig, GroundingFit, fit_grounding, recording_transitions
 from sgat.transformer import GroundingSpec
 
@@ -62,7 +63,7 @@ def grounding_spec(env, state: str = "legs", history: int = 1) -> GroundingSpec:
 @functools.lru_cache(maxsize=8)
 def nao_spec(state: str = "legs", history: int = 1) -> GroundingSpec:
     """The NAO grounding spec (:func:`grounding_spec`) of the MuJoCo sim."""
-    from envs import NaoSimEnv
+    from envs import NaoSimEnv  # lazy: loads the engines
 
     env = NaoSimEnv()
     try:
@@ -85,8 +86,7 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
     Raises:
         KeyError: a recording lacks an observation column. ValueError: unusable data.
     """
-    from envs import ObservationLayout
-    from robots import nao_h25
+    from envs import ObservationLayout  # lazy: loads the engines
 
     spec = nao_spec(state, history)
     layout = ObservationLayout(nao_h25())

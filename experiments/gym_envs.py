@@ -17,6 +17,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 
@@ -89,7 +91,7 @@ class GaussianActionNoise(gym.Wrapper):
 
 def body_names(env: gym.Env) -> list[str]:
     """Names of the bodies of a MuJoCo env's model, index order (``world`` first)."""
-    import mujoco
+    import mujoco  # lazy: mujoco (only the MuJoCo tasks need it)
 
     m = env.unwrapped.model
     return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) for i in range(m.nbody)]
@@ -108,7 +110,7 @@ def scale_body_masses(env: gym.Env, factor: float, bodies: list[str] | None = No
     Raises:
         ValueError: non-positive factor or an unknown body name.
     """
-    import mujoco
+    import mujoco  # lazy: mujoco (only the MuJoCo tasks need it)
 
     factor = float(factor)
     if not np.isfinite(factor) or factor <= 0:
@@ -138,9 +140,7 @@ def _route_mujoco_warnings() -> None:
     handler, which appends them to ``MUJOCO_LOG.TXT`` in the working directory (gymnasium's
     HalfCheetah XML uses the deprecated ``settotalmass`` compiler attribute). Installed once per
     process, and only where no handler is installed yet (``mujoco.set_mju_user_warning``)."""
-    import warnings
-
-    import mujoco
+    import mujoco  # lazy: mujoco (only the MuJoCo tasks need it)
 
     if mujoco.get_mju_user_warning() is None:
         mujoco.set_mju_user_warning(lambda msg: warnings.warn(f"MuJoCo: {msg}", RuntimeWarning, stacklevel=2))

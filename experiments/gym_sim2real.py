@@ -37,8 +37,10 @@ Inference in evaluation and data collection runs in NumPy (:class:`NumpyPolicy`,
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import hashlib
+import importlib.metadata as md
 import io
 import json
 import math
@@ -55,6 +57,7 @@ from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.files import atomic_write_text
 from experiments.gym_config import METHODS, NO_REAL_DATA, GymConfig
 from experiments.gym_envs import make_env, set_state_from_obs
+from sgat.algorithm import grounding_loop, new_progress
 
 # Seed purposes (the first key after the base seed).
 _SIM_POLICY, _REAL_POLICY, _REAL_DATA, _SIM_DATA, _RETRAIN, _FIT, _EVAL, _HELDOUT, _GROUND = range(1, 10)
@@ -81,7 +84,7 @@ def fingerprint_hash(cfg: GymConfig, method: str) -> str:
 
 def _torch_one_thread() -> None:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    import torch
+    import torch  # lazy: torch
 
     if torch.get_num_threads() != 1:
         torch.set_num_threads(1)
@@ -93,7 +96,7 @@ def _torch_one_thread() -> None:
 
 def _policy_blob(model, venv) -> dict:
     """A trained policy as plain data: SB3 zip bytes + VecNormalize statistics (or None)."""
-    from stable_baselines3.common.vec_env import VecNormalize
+    from stable_baselines3.common.vec_env import VecNormalize  # lazy: stable_baselines3 (torch)
 
     buf = io.BytesIO()
     model.save(buf)
@@ -148,7 +151,7 @@ class NumpyPolicy:
     """
 
     def __init__(self, blob: dict):
-        from sb3_contrib import TRPO
+        from sb3_contrib import TRPO  # lazy: sb3_contrib (torch)
 
         model = TRPO.load(io.BytesIO(blob["zip"]), device="cpu")
         pol = model.policy
@@ -199,7 +202,7 @@ def _keep_stream_grounded_env(env, transformer, ctrl_cost_weight):
     of a vectorised trainer (which resets with no seed) would replay the same sampled noise
     sequence. This subclass restores the running generator after an unseeded reset.
     """
-    from sgat.transformer import GroundedEnv
+    from sgat.transformer import GroundedEnv  # lazy: sgat.transformer loads torch
 
     class _StreamingGroundedEnv(GroundedEnv):
         def reset(self, *, seed=None, options=None):
@@ -223,9 +226,9 @@ def train_policy(cfg: GymConfig, env_fn: Callable[[int], Any], steps: int, seed:
         the policy blob (see :func:`save_policy`).
     """
     _torch_one_thread()
-    from sb3_contrib import TRPO
-    from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from sb3_contrib import TRPO  # lazy: sb3_contrib (torch)
+    from stable_baselines3.common.monitor import Monitor  # lazy: stable_baselines3 (torch)
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # lazy: stable_baselines3 (torch)
 
     hp = cfg.trpo_params()
     n_envs, normalize = int(hp.pop("n_envs")), bool(hp.pop("normalize"))
@@ -289,7 +292,7 @@ def collect(env, policy: NumpyPolicy, n: int, seed: int, *, deterministic: bool 
 
 def episodes_to_transitions(eps, spec):
     """Per-episode (obs (T+1, n), act (T, m)) -> ``sgat.grounding.Transitions``."""
-    from sgat.grounding import Transitions, trajectory_transitions
+    from sgat.grounding import Transitions, trajectory_transitions  # lazy: sgat.grounding loads torch
 
     parts = []
     for O, A in eps:
@@ -444,9 +447,8 @@ def ground_and_train(cfg: GymConfig, method: str, noise: float, run: int, sim_po
         ``{"policy": blob, "fit": last GroundingFit, "errors": one-step errors of the last
         transformer on held-out real data, "n_real": real transitions used}``.
     """
-    from sgat.algorithm import grounding_loop, new_progress
-    from sgat.grounding import Transitions, fit_transformer
-    from sgat.transformer import ActionTransformer, GroundingSpec
+    from sgat.grounding import Transitions, fit_transformer  # lazy: sgat.grounding loads torch
+    from sgat.transformer import ActionTransformer, GroundingSpec  # lazy: sgat.transformer loads torch
 
     real_env = _real_env_fn(cfg, noise)()
     sim_env = make_env(cfg.env)
@@ -557,8 +559,8 @@ def _normalize_row(r: dict) -> dict:
 
 def write_rows(path: Path, rows: list[dict]) -> None:
     """Write result rows as one Parquet file (atomic)."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # lazy: pyarrow
+    import pyarrow.parquet as pq  # lazy: pyarrow
 
     table = pa.Table.from_pylist([_normalize_row(r) for r in rows])
     buf = io.BytesIO()
@@ -572,7 +574,7 @@ def read_rows(path: Path) -> list[dict]:
     Raises:
         ValueError: the file is not a readable results table.
     """
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # lazy: pyarrow
 
     path = Path(path)
     if not path.exists():
@@ -740,7 +742,7 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: boo
         ``{"summary": [...], "table": text, "files": {...}, "new_rows": n, "fingerprints": {...},
         "wall_s": s, "tasks": n}``.
     """
-    from tqdm import tqdm
+    from tqdm import tqdm  # lazy: tqdm
 
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -815,8 +817,6 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: boo
 
 
 def _versions() -> dict:
-    import importlib.metadata as md
-
     v = {}
     for p in ("sb3-contrib", "stable-baselines3", "gymnasium", "mujoco", "torch", "numpy"):
         try:
@@ -915,8 +915,6 @@ def format_table(summary: list[dict], cfg: GymConfig) -> str:
 
 
 def write_summary_csv(summary: list[dict], path: Path) -> None:
-    import csv
-
     cols = ["noise", "method", "runs", "return_mean", "return_se", "normalized", "normalized_se", "ane_sigma",
             "privileged", "uses_real_data", "step_err_sim", "step_err_grounded", "wall_s_mean"]
     buf = io.StringIO()
@@ -935,8 +933,8 @@ def plot_bars(summary: list[dict], cfg: GymConfig, path: Path) -> None:
     """Bars in the style of the paper's Figs. 8-9: per noise, the real return of each method
     normalised to the real-trained return (red dashed line at 1); hatched bars used no real
     data; error bars = standard error over runs. Without real-trained results, raw returns."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # lazy: matplotlib
+    from matplotlib.figure import Figure  # lazy: matplotlib
 
     have_real = any(s["method"] == "real" and math.isfinite(s["return_mean"]) for s in summary)
     bars = [m for m in ("none", "ane", "gat", "sgat") if m in cfg.methods]

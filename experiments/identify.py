@@ -27,12 +27,15 @@ import time
 
 import numpy as np
 
+from common.files import atomic_write_text, jsonable
+from terrain import lumpy as lumpy_field
+
+
 def _record(out_dir: str, *, fixed_base: bool, profile, n_logs: int, seconds: float, seed: int,
             lumpy: bool = False) -> list[str]:
-    from envs import NaoRealEnv
-    from envs.effects import get_profile
-    from sysid.worlds import record_excitation
-    from terrain import lumpy as lumpy_field
+    from envs import NaoRealEnv  # lazy: loads the engines
+    from envs.effects import get_profile  # lazy: loads the engines
+    from sysid.worlds import record_excitation  # lazy: loads the engines
 
     prof = get_profile(profile)
     env = NaoRealEnv(profile=prof, terrain="flat", fixed_base=fixed_base)
@@ -60,9 +63,8 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
         ``{"fixed": path, "floating": path or None}`` of the ``calibration.json`` files (reused when
         present).
     """
-    from sysid.data import load_logs
-    from sysid.diagnose import calibrate
-    from common.files import atomic_write_text, jsonable
+    from sysid.data import load_logs  # lazy: loads the engines
+    from sysid.diagnose import calibrate  # lazy: loads the engines and scipy
 
     out = {}
     for kind in ("fixed", "floating") if floating else ("fixed",):
@@ -101,9 +103,9 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
         "effects": {label: value}, "terrain_rms_height": m, "wall_s": s}``; the diagnoses are reused
         when their reports exist.
     """
-    from sysid.data import load_logs
-    from sysid.diagnose import diagnose
-    from sysid.report import terms_from_labels, write_report
+    from sysid.data import load_logs  # lazy: loads the engines
+    from sysid.diagnose import diagnose  # lazy: loads the engines and scipy
+    from sysid.report import terms_from_labels, write_report  # lazy: loads the engines
 
     t0 = time.perf_counter()
     say = progress or (lambda s: None)
@@ -132,7 +134,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             rep = json.load(f)
         base = terms_from_labels({**rep.get("base_model", {}), **rep["model"]})
         reports.append(rep_path)
-    from sysid.identified import load_identified
+    from sysid.identified import load_identified  # lazy: loads the engines
 
     terms, rms = load_identified(reports)
     return {"reports": reports, "logs": n_logs, "seconds": secs,

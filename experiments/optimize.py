@@ -60,13 +60,22 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from tqdm import tqdm
 
 from common.defaults import EPISODE_SECONDS
 from common.files import atomic_path
 from common.files import atomic_write_bytes as _atomic_write
+from envs import Recording
 from experiments.batch import expected_generation_seconds, map_episodes
-from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
+from experiments.grounding import (DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS,
+                                   fit_nao_grounding)
+from experiments.identify import calibrate_engines, identify_real
 from sgat.algorithm import grounding_loop, new_progress
+from sgat.grounding import GroundingConfig
+from walk_engine import GaitParams
+from walk_engine.params import NAMES as PARAM_NAMES
 
 METHODS = ("sgat", "gat", "none", "ane", "identified", "hybrid", "real")
 #: Methods that ground the sim with a learned action transformer.
@@ -200,7 +209,7 @@ class Optimizer:
         Raises:
             FileNotFoundError: no checkpoint. CheckpointError: corrupted, or cma version differs.
         """
-        import cma
+        import cma  # lazy: cma
 
         path = os.path.join(run_dir, STATE_FILE)
         if not os.path.exists(path):
@@ -232,8 +241,6 @@ class Optimizer:
     def _map(self, tasks: list[dict], desc: str) -> list[dict]:
         bar = None
         if self.progress:
-            from tqdm import tqdm
-
             bar = tqdm(total=len(tasks), desc=desc, leave=False, disable=None)
         try:
             return map_episodes(self.ex, tasks, progress=(bar.update if bar else None))
@@ -243,8 +250,6 @@ class Optimizer:
 
     def _recordings(self, world: str, theta, seeds, **kw) -> list:
         """Recordings of θ in ``world`` on ``seeds``, cached as Parquet under ``data/``."""
-        from envs import Recording
-
         tag = f"{world}_{_theta_key(theta)}_n{kw.get('action_noise', 0):g}"
         paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
         todo = [s for s, p in zip(seeds, paths) if not os.path.exists(p)]
@@ -258,8 +263,6 @@ class Optimizer:
     # ---------------------------------------------------------------- the stages
     def grounding_config(self, method: str):
         """The model settings (``sgat.grounding.GroundingConfig``) of ``method``'s grounding steps."""
-        from sgat.grounding import GroundingConfig
-
         cfg = self.cfg
         alpha = cfg.hybrid_alpha if method == "hybrid" else cfg.alpha
         return GroundingConfig(alpha=alpha, method="sgat" if method == "hybrid" else method, hidden=tuple(cfg.hidden),
@@ -267,8 +270,6 @@ class Optimizer:
                                inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs)
 
     def _fit(self, method: str, step: int, theta) -> str:
-        from experiments.grounding import fit_nao_grounding
-
         cfg = self.cfg
         out = os.path.join(self.run_dir, "models", f"{method}_step{step}")
         if os.path.exists(os.path.join(out, "transformer.json")):
@@ -318,10 +319,7 @@ class Optimizer:
         return ("real" if method == "real" else "sim"), {}
 
     def _cma(self, method: str, step: int, prog: dict) -> None:
-        import cma
-
-        from walk_engine import GaitParams
-        from walk_engine.params import NAMES as PARAM_NAMES
+        import cma  # lazy: cma
 
         cfg = self.cfg
         world, kw = self._world_kw(method, step)
@@ -343,8 +341,6 @@ class Optimizer:
                  f"{est['bare_step_us']:.0f} us per control step here)")
         bar = None
         if self.progress:
-            from tqdm import tqdm
-
             bar = tqdm(total=cfg.generations, initial=prog["gen"], desc=f"{method} step {step} CMA-ES", disable=None)
         while prog["gen"] < cfg.generations:
             gen = prog["gen"]
@@ -389,8 +385,6 @@ class Optimizer:
         training world, on ``select_episodes`` fresh seeds shared by the three (common random
         numbers). Keeping θ_i when neither beats it means a step the grounded sim cannot confirm
         changes nothing; re-evaluating on fresh seeds removes the best candidate's winner's curse."""
-        from walk_engine import GaitParams
-
         cfg = self.cfg
         es = prog["es"]
         world, kw = self._world_kw(method, step)
@@ -434,10 +428,8 @@ class Optimizer:
         self._to_rrd(tasks, f"{label}_step{step}_real_eval")
 
     def _to_rrd(self, tasks, name) -> None:
-        from envs import Recording
-
         try:
-            from experiments.viz import log_rollouts_to_rrd
+            from experiments.viz import log_rollouts_to_rrd  # lazy: optional (ImportError handled here)
         except ImportError as exc:  # pragma: no cover - visualization not available
             self.log(f"rerun logging skipped: {exc}")
             return
@@ -448,9 +440,7 @@ class Optimizer:
 
     # ---------------------------------------------------------------- driver
     def run(self, resume: bool = False) -> dict:
-        import cma
-
-        from walk_engine import GaitParams
+        import cma  # lazy: cma
 
         if resume:
             self.state = self.load_state(self.run_dir)
@@ -493,8 +483,6 @@ class Optimizer:
 
     def _record_step(self, method: str, step: int, theta, prog: dict) -> None:
         """Real trials of θ_{i+1}, its θ file and its Table I row; then the CMA-ES state is dropped."""
-        from walk_engine import GaitParams
-
         theta = np.asarray(theta, dtype=float)
         ev = self._evaluate(theta, step, method)
         GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
@@ -507,8 +495,6 @@ class Optimizer:
 
     def _identify(self) -> dict:
         """Identify the real world once for ``identified`` and ``hybrid`` (``experiments.identify``)."""
-        from experiments.identify import calibrate_engines, identify_real
-
         t0 = time.perf_counter()
         root = os.path.join(self.run_dir, "identified")
         self.log("[identify] engine-gap calibration and excitation logs of the real world, then two diagnoses")
@@ -540,14 +526,11 @@ class Optimizer:
                 "table": format_table(self.state["rows"])}
 
     def _write_config(self) -> None:
-        import yaml
+        import yaml  # lazy: yaml
 
         _atomic_write(os.path.join(self.run_dir, "config.yaml"), yaml.safe_dump(self.cfg.to_dict(), sort_keys=False).encode())
 
     def _write_tables(self) -> None:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
         gens = self.state.get("generations", [])
         if gens:
             buf = io.StringIO()
@@ -565,10 +548,10 @@ class Optimizer:
             _atomic_write(os.path.join(self.run_dir, "table.txt"), (res["table"] + "\n").encode())
 
     def _figure(self) -> None:
-        import matplotlib
+        import matplotlib  # lazy: matplotlib
 
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # lazy: matplotlib
 
         gens = self.state["generations"]
         if not gens:

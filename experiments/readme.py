@@ -17,11 +17,18 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import math
 import os
 import re
 import sys
+
+from common.files import atomic_write_text
+from experiments.cli import main as cli_main
+from experiments.cmd_cliff import format_table
+from experiments.cmd_stand import format_stand
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
@@ -31,8 +38,6 @@ _BLOCK = re.compile(r"(<!-- results:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /r
 def save(name: str, command: str, result: dict, results_dir: str = RESULTS, machine: dict | None = None) -> str:
     """Write ``docs/results/NAME.json`` (atomically); returns its path. ``machine``: where and under
     what load it ran (cores, 1-minute load average before and after)."""
-    from common.files import atomic_write_text
-
     path = os.path.join(results_dir, f"{name}.json")
     doc = {"command": command, "result": result, **({"machine": machine} if machine else {})}
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
@@ -143,7 +148,7 @@ def _table1(res: dict) -> str:
 
 
 def _walk(res: dict) -> str:
-    from experiments.cmd_walk import format_walk
+    from experiments.cmd_walk import format_walk  # lazy: loads the engines
 
     return f"```\n{format_walk(res)}\n```"
 
@@ -154,15 +159,11 @@ def _stress(res: dict) -> str:
 
 
 def _cliff(res: dict) -> str:
-    from experiments.cmd_cliff import format_table
-
     took = f"The sweep took {res['elapsed_s']:.1f} s." if res.get("elapsed_s") else ""
     return f"```text\n{format_table(res['rows'], res['episodes'], res['seed'])}\n```\n\n{took}"
 
 
 def _stand(res: dict) -> str:
-    from experiments.cmd_stand import format_stand
-
     return f"```text\n{format_stand(res['worlds'])}\n```"
 
 
@@ -173,7 +174,7 @@ def _gym(res: dict) -> str:
 
 def _bench(res: dict) -> str:
     """``benchmarks/bench_generation.py``: its table, and what a paper-scale optimization costs."""
-    from experiments.optimize import PRESETS
+    from experiments.optimize import PRESETS  # lazy: loads torch and the engines
 
     g = res["worlds"]["grounded"]
     p = PRESETS["paper"]
@@ -220,11 +221,6 @@ def render(text: str, results_dir: str = RESULTS) -> str:
 
 def run_and_save(name: str, args: list[str]) -> str:
     """Run ``sgatwalk ARGS --json --timings`` in this process and save its result as ``docs/results/NAME.json``."""
-    import contextlib
-    import io
-
-    from experiments.cli import main as cli_main
-
     machine = {"cpus": os.cpu_count(), "load_before": os.getloadavg()[0]}
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
@@ -261,8 +257,6 @@ def main(argv=None) -> int:
             return 1
         return 0
     if new != text:
-        from common.files import atomic_write_text
-
         atomic_write_text(args.readme, new)
     return 0
 

@@ -55,13 +55,17 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+import gymnasium as gym
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
 from common.files import WallClock
 from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.parse import parse_values
+from experiments.executors import make_executor
 from experiments.stats import wilson_interval
+from terrain import make
+from walk_engine import GaitParams
 
 #: Terrain kinds a stress run sweeps (``terrain.TERRAINS`` without "flat": amplitude 0 is flat).
 TERRAIN_KINDS = ("lumpy", "fractal", "steps", "slope")
@@ -112,7 +116,7 @@ def parse_sweep(spec: str) -> tuple[str, list[float]]:
     Raises:
         ValueError: no ``=``, an unknown effect (the message lists the known ones), bad values.
     """
-    from envs.effects import EFFECTS
+    from envs.effects import EFFECTS  # lazy: loads the engines
 
     if "=" not in str(spec):
         raise ValueError(f"--sweep: expected EFFECT=lo:hi:n (e.g. latency_s=0:0.04:5), got {spec!r}")
@@ -145,8 +149,6 @@ def load_policies(paths: Sequence[str | os.PathLike | None] | None) -> list[Poli
         FileNotFoundError: a file that does not exist; ValueError: unreadable or invalid JSON
         (messages from ``GaitParams.load`` name the file and the problem).
     """
-    from walk_engine import GaitParams
-
     out: list[Policy] = []
     seen: dict[str, int] = {}
     for p in (list(paths) if paths else [None]):
@@ -246,7 +248,7 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
         an empty or negative level range, trials < 1, a missing or invalid params file, a sweep in
         the sim, an effect value outside its physical domain.
     """
-    from envs.effects import get_profile
+    from envs.effects import get_profile  # lazy: loads the engines
 
     if world not in ("real", "sim"):
         raise ValueError(f"unknown world {world!r}; choose real or sim")
@@ -297,7 +299,7 @@ def plan_tasks(cfg: StressConfig) -> list[dict]:
     ``terrain`` (None or ``[kind, terrain seed, amplitude]``), ``level``, ``trial``,
     ``terrain_seed``, ``episode_seed``, ``seconds``, ``record``.
     """
-    from envs.effects import RealProfile
+    from envs.effects import RealProfile  # lazy: loads the engines
 
     tasks = []
     for level in cfg.levels:
@@ -327,13 +329,11 @@ _ENVS: dict = {}
 @lru_cache(maxsize=16)
 def terrain_of(kind: str, seed: int, amplitude: float):
     """The heightfield of a (kind, terrain seed, level): identical in every process and world."""
-    from terrain import make
-
     return make(kind, seed=int(seed), amplitude=float(amplitude))
 
 
 def _world(world: str, profile: dict | None):
-    from envs import NaoRealEnv, NaoSimEnv
+    from envs import NaoRealEnv, NaoSimEnv  # lazy: loads the engines
 
     key = (world, json.dumps(profile, sort_keys=True))
     if key not in _ENVS:
@@ -348,8 +348,6 @@ def _world(world: str, profile: dict | None):
 def _with_terrain(env, hf):
     """``env`` whose ``reset`` always puts ``hf`` down (``options={"terrain": hf}``): lets
     :func:`experiments.fitness.run_walk` (which passes no reset options) walk on a given field."""
-    import gymnasium as gym
-
     class WithTerrain(gym.Wrapper):
         def reset(self, *, seed=None, options=None):
             return self.env.reset(seed=seed, options={**(options or {}), "terrain": hf})
@@ -364,8 +362,7 @@ def run_trial(task: dict) -> dict:
         a :data:`TRIAL_COLUMNS` row; with ``task["record"]`` also ``recording`` = (columns, meta).
         A fall (or an unstable simulation) is a row with ``fell`` True, never an exception.
     """
-    from experiments.fitness import run_walk
-    from walk_engine import GaitParams
+    from experiments.fitness import run_walk  # lazy: loads the engines
 
     t0 = time.perf_counter()
     env = _world(task["world"], task["profile"])
@@ -404,7 +401,7 @@ def run_trials(tasks: list[dict]) -> list[dict]:
     """:func:`run_trial` of each task, the sim-world ones in lock-step
     (:func:`experiments.batch.lockstep_walks`, every trial on its own heightfield): the same rows
     bit for bit, except ``wall_s``, which is the batch's time divided among its trials."""
-    from experiments.batch import lockstep_walks
+    from experiments.batch import lockstep_walks  # lazy: loads the engines and torch
 
     out: list = [None] * len(tasks)
     groups: dict = {}
@@ -545,8 +542,8 @@ def read_trials(path: Path) -> list[dict]:
 
 def write_parquet(rows: Sequence[dict], path: Path) -> None:
     """The trial rows as Parquet (one column per :data:`TRIAL_COLUMNS`), atomically."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
+    import pyarrow as pa  # lazy: pyarrow
+    import pyarrow.parquet as pq  # lazy: pyarrow
 
     types = {c: pa.int64() for c in _INT} | {c: pa.float64() for c in _FLOAT} | {"fell": pa.bool_()}
     table = pa.table({c: pa.array([r.get(c) for r in rows], type=types.get(c, pa.string())) for c in TRIAL_COLUMNS})
@@ -558,8 +555,8 @@ def write_parquet(rows: Sequence[dict], path: Path) -> None:
 def plot_stress(table: Sequence[dict], cfg: StressConfig, path: Path, title: str | None = None) -> None:
     """Fall rate (95 % Wilson band) and speed of non-fallers (± std band) against the level, one
     line per policy, written as a PNG."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # lazy: matplotlib
+    from matplotlib.figure import Figure  # lazy: matplotlib
 
     fig = Figure(figsize=(7.5, 7.0))
     FigureCanvasAgg(fig)
@@ -691,9 +688,7 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
         ValueError: ``out`` holds a run with other settings or a malformed ``trials.csv``;
         experiments.executors.TaskFailed: an episode failed twice.
     """
-    from tqdm import tqdm
-
-    from experiments.executors import make_executor
+    from tqdm import tqdm  # lazy: tqdm
 
     out = Path(out) if out is not None else default_out(cfg)
     old_rows = _check_resume(out, cfg)
@@ -710,7 +705,7 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
     ex = make_executor(workers, ray_address) if own else executor
     trials_csv = out / "trials.csv"
     try:
-        from experiments.batch import MAX_BATCH, chunk_tasks
+        from experiments.batch import MAX_BATCH, chunk_tasks  # lazy: loads the engines and torch
 
         n = chunk or max(8, 2 * MAX_BATCH)  # trials.csv is rewritten after each chunk (resume point)
         bar = tqdm(total=len(tasks), initial=resumed, desc="stress", unit="ep", file=sys.stderr,
@@ -764,8 +759,8 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
 def _rerun_worst(cfg: StressConfig, rows: list[dict], ex, out: Path, files: dict) -> list[dict]:
     """Re-run the worst trial of each policy and level with recording on, check that it repeats,
     and log them into ``rerun/<policy>.rrd`` (one entity per level)."""
-    from envs import Recording
-    from experiments.viz import log_rollouts_to_rrd
+    from envs import Recording  # lazy: loads the engines
+    from experiments.viz import log_rollouts_to_rrd  # lazy: loads the engines
 
     worst = worst_trials(rows, cfg)
     by_key = {_key(t): t for t in plan_tasks(cfg)}

@@ -50,7 +50,7 @@ class Table1Config:
     optimize: dict = dataclasses.field(default_factory=dict)  # OptimizeConfig overrides (e.g. popsize)
 
     def validate(self) -> None:
-        from experiments.optimize import METHODS, OptimizeConfig
+        from experiments.optimize import METHODS, OptimizeConfig  # lazy: loads torch and the engines; keeps sgatwalk --help fast
 
         bad = [m for m in self.methods if m not in METHODS or m == "real"]
         if bad or not self.methods:
@@ -88,7 +88,7 @@ class Table1:
         self._episodes = self._log.done
 
     def _optimize(self, s: int) -> dict:
-        from experiments.optimize import OptimizeConfig, Optimizer
+        from experiments.optimize import OptimizeConfig, Optimizer  # lazy: loads torch and the engines; keeps sgatwalk --help fast
 
         run = os.path.join(self.run_dir, f"opt_seed{s}")
         cfg = OptimizeConfig(**{**self.cfg.optimize, "methods": tuple(self.cfg.methods), "seed": s, "eval_trials": 0})

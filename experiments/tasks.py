@@ -31,6 +31,7 @@ Torch is kept to one thread in workers (``experiments.executors``).
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 
@@ -41,7 +42,7 @@ _TRANSFORMERS: dict = {}
 
 
 def _transformer(path: str):
-    from sgat.transformer import ActionTransformer
+    from sgat.transformer import ActionTransformer  # lazy: sgat loads torch
 
     key = (path, os.path.getmtime(os.path.join(path, "transformer.json")))
     if key not in _TRANSFORMERS:
@@ -51,10 +52,10 @@ def _transformer(path: str):
 
 
 def _world(task: dict):
-    from envs import NaoRealEnv, NaoSimEnv
-    from envs.wrappers import ActionMismatch
-    from sgat.transformer import GroundedEnv
-    from experiments.grounding import nao_spec
+    from envs import NaoRealEnv, NaoSimEnv  # lazy: loads the engines
+    from envs.wrappers import ActionMismatch  # lazy: loads the engines
+    from sgat.transformer import GroundedEnv  # lazy: sgat loads torch
+    from experiments.grounding import nao_spec  # lazy: loads torch (sgat)
 
     world = task["world"]
     if world not in ("real", "sim", "grounded", "identified"):
@@ -72,7 +73,7 @@ def _world(task: dict):
         if world == "real":
             _WORLDS[key] = NaoRealEnv(profile=task.get("profile", "real"), terrain=task.get("terrain", "lumpy"))
         elif reports:
-            from sysid.identified import IdentifiedSimEnv, load_identified
+            from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
 
             terms, rms = load_identified(list(reports))
             _WORLDS[key] = IdentifiedSimEnv(terms if parts[0] else {}, rms if parts[1] else 0.0)
@@ -95,8 +96,8 @@ def run_episode(task: dict) -> dict:
         ``drift_m``, ``distance_m``, ``seed``, and ``recording`` = (columns, meta) if
         ``task["record"]``. A NaN or exploding simulation counts as a fall ("unstable").
     """
-    from experiments.fitness import run_walk
-    from walk_engine import GaitParams
+    from experiments.fitness import run_walk  # lazy: loads the engines
+    from walk_engine import GaitParams  # lazy: scipy
 
     env = _world(task)
     params = GaitParams.from_array(np.asarray(task["theta"], dtype=float))
@@ -119,11 +120,9 @@ def fit_grounding_task(task: dict) -> dict:
     Returns:
         ``{"out", "forward_val", "inverse_val", "n_real", "n_sim", "wall_s"}``.
     """
-    import time
-
-    from envs import Recording
-    from experiments.grounding import fit_nao_grounding
-    from sgat.grounding import GroundingConfig
+    from envs import Recording  # lazy: loads the engines
+    from experiments.grounding import fit_nao_grounding  # lazy: loads torch (sgat)
+    from sgat.grounding import GroundingConfig  # lazy: sgat loads torch
 
     t0 = time.perf_counter()
     cfg = dict(task["config"])

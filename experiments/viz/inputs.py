@@ -5,7 +5,9 @@ from __future__ import annotations
 import os
 import re
 
-from envs.recording import Recording, RecordingError
+import pyarrow.parquet as pq
+
+from envs.recording import META_KEY, Recording, RecordingError
 from experiments.viz.style import WORLD_COLORS
 
 
@@ -46,10 +48,6 @@ def sanitize_label(label: str) -> str:
 
 def _is_recording_file(path: str) -> bool:
     """Whether a Parquet file carries ``sgatwalk`` recording metadata (cheap: schema only)."""
-    import pyarrow.parquet as pq
-
-    from envs.recording import META_KEY
-
     try:
         md = pq.read_schema(path).metadata or {}
     except Exception:  # noqa: BLE001 - not Parquet at all: let from_parquet name the problem

@@ -8,6 +8,8 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import shutil
+import sys
 import time
 from collections.abc import Mapping
 
@@ -34,7 +36,7 @@ class _Logger:
     """Sends one recording's entities; counts rows per entity for the summary."""
 
     def __init__(self, stream, label: str, rec: Recording):
-        import rerun as rr
+        import rerun as rr  # lazy: rerun
 
         self.rr = rr
         self.stream = stream
@@ -81,7 +83,7 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
     Returns:
         {entity path: number of time-varying rows logged}.
     """
-    import rerun as rr
+    import rerun as rr  # lazy: rerun
 
     robot = rec.robot
     world = str(rec.meta.get("world", "unknown"))
@@ -248,7 +250,7 @@ def build_blueprint(labels: list[str], robot: RobotModel, worlds: Mapping[str, s
     Returns:
         ``rerun.blueprint.Blueprint``.
     """
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # lazy: rerun
 
     worlds = dict(worlds or {})
     centers = dict(centers or {})
@@ -342,7 +344,7 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
         ValueError: no recordings, clashing labels, no path; RecordingError (a ValueError) for a
             recording of another robot, an empty or malformed one (message names the label).
     """
-    import rerun as rr
+    import rerun as rr  # lazy: rerun
 
     if not recordings:
         raise ValueError("no recordings to visualize")
@@ -380,9 +382,6 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
     used: dict[str, int] = {}
     t_log = 0.0
     if spawn:
-        import shutil
-        import sys
-
         venv_bin = os.path.dirname(sys.executable)  # the viewer ships with rerun-sdk, next to python
         if shutil.which("rerun") is None and os.path.exists(os.path.join(venv_bin, "rerun")):
             os.environ["PATH"] = venv_bin + os.pathsep + os.environ.get("PATH", "")

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import os
+import shutil
+import socket
+import sys
+import tempfile
 import time
 
 from experiments.viz.style import TIMELINE
@@ -28,10 +32,6 @@ def screenshot_rrd(rrd_path: str | os.PathLike, png_path: str | os.PathLike, *, 
         FileNotFoundError: no such ``.rrd``.
         RuntimeError: no ``rerun`` executable, no graphics adapter, or the viewer failed.
     """
-    import shutil
-    import socket
-    import sys
-
     rrd_path = os.path.abspath(os.fspath(rrd_path))
     png_path = os.path.abspath(os.fspath(png_path))
     if not os.path.exists(rrd_path):
@@ -40,7 +40,7 @@ def screenshot_rrd(rrd_path: str | os.PathLike, png_path: str | os.PathLike, *, 
     if not os.path.exists(exe):
         raise RuntimeError("no 'rerun' viewer executable found (it comes with rerun-sdk; put its bin/ on PATH)")
     try:
-        from rerun.experimental import ViewerClient
+        from rerun.experimental import ViewerClient  # lazy: rerun
     except ImportError as exc:  # pragma: no cover - rerun-sdk < 0.41
         raise RuntimeError(f"this rerun-sdk has no headless viewer client: {exc}") from None
     with socket.socket() as s:
@@ -89,8 +89,6 @@ class _quiet_child_output:
     headless viewer's log lines do not mix with the command's output."""
 
     def __enter__(self):
-        import sys
-
         for f in (sys.stdout, sys.stderr):
             try:
                 f.flush()
@@ -113,8 +111,6 @@ class _quiet_child_output:
 
 def tempfile_dir() -> str:
     """A private runtime directory for the headless viewer (``XDG_RUNTIME_DIR`` must be 0700)."""
-    import tempfile
-
     d = os.path.join(tempfile.gettempdir(), f"sgatwalk-xdg-{os.getuid()}")
     os.makedirs(d, mode=0o700, exist_ok=True)
     return d

@@ -7,7 +7,7 @@ import re
 import numpy as np
 
 from envs.recording import Recording
-from terrain import Heightfield
+from terrain import Heightfield, flat, from_spec, lumpy, make
 
 #: Flat ground drawn when a recording has no heightfield: this size [m], centred at the origin.
 FLAT_SIZE = (6.0, 3.0)
@@ -79,8 +79,6 @@ def terrain_for(rec: Recording) -> tuple[Heightfield | None, str]:
         (heightfield or None for flat ground, a note saying where it came from). When nothing
         matches, None and a note saying that the flat plane drawn is a stand-in.
     """
-    from terrain import flat, from_spec, lumpy, make
-
     info = rec.meta.get("terrain")
     if not info:
         return None, "flat ground (plane at z = 0)"
