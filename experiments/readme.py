@@ -190,7 +190,27 @@ def _bench(res: dict) -> str:
             f"of CMA-ES per method on {res['workers']} cores, plus its real and sim walks and the model fits.")
 
 
-RENDERERS = {"bench": _bench, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
+def _diagnose(res: dict) -> str:
+    """``sgatwalk diagnose --json``: the report it prints, the localisation table cut to its worst rows."""
+    from sysid.report import format_report
+
+    out, rows = [], None
+    for line in format_report(res).splitlines():
+        if line.startswith("LOCALISATION"):
+            rows = 0
+        elif rows is not None and line.startswith("  ") and not line.lstrip().startswith("channel"):
+            rows += 1
+            if rows == 4:
+                out.append("  ...")
+            if rows >= 4:
+                continue
+        elif rows is not None and not line.startswith("  "):
+            rows = None
+        out.append(line)
+    return "```text\n" + "\n".join(out) + "\n```"
+
+
+RENDERERS = {"bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
