@@ -11,8 +11,9 @@ from experiments import stress as S
 from experiments.executors import SerialExecutor, make_executor
 
 
-def _check_rising(rows):
-    assert rows[0]["falls"] == 0  # flat ground: no falls
+def _check_rising(rows, flat_without_falls=True):
+    if flat_without_falls:  # the sim: θ0 never falls on flat ground
+        assert rows[0]["falls"] == 0
     for a, b in zip(rows, rows[1:]):
         assert b["fall_rate"] >= a["fall_rate_ci95"][0], (a, b)  # monotone within the intervals
     assert rows[-1]["fall_rate_ci95"][0] > rows[0]["fall_rate_ci95"][1], rows  # and clearly up
@@ -30,7 +31,11 @@ def test_theta0_fall_rate_rises_with_lumpy_amplitude(tmp_path):
 
 @pytest.mark.slow
 def test_theta0_fall_rate_rises_in_the_real_world(tmp_path):
+    """The "real" profile's random effects (latency, weak gains, backlash, low foot friction) make θ0
+    fall now and then even on flat ground (1 of these 6 trials; Table I's θ0 row on lumpy ground:
+    about half), so flat ground is not required to be fall-free here: only that the fall rate rises
+    with the bumps, beyond both Wilson intervals."""
     cfg = S.make_config(world="real", terrain="lumpy", amplitude="0,0.02,0.04", trials=6)
     with make_executor(2) as ex:
         res = S.run_stress(cfg, tmp_path / "run", executor=ex)
-    _check_rising(res["rows"])
+    _check_rising(res["rows"], flat_without_falls=False)
