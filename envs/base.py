@@ -85,6 +85,15 @@ def make_terrain(terrain) -> Heightfield | None:
     raise ValueError(f"terrain must be None, 'flat' or a terrain.Heightfield, got {terrain!r}")
 
 
+def ground_height(terrain: Heightfield | None, x, y) -> np.ndarray:
+    """Height [m] of ``terrain`` (None: the plane z = 0) at (x, y) [m], scalars or arrays; outside the
+    heightfield the nearest edge value."""
+    if terrain is None:
+        return np.zeros(np.broadcast(x, y).shape)
+    hx, hy = terrain.half_extent
+    return terrain.height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy))
+
+
 @dataclass
 class StepState:
     """Raw state an engine backend reports after a control step (all world frame, SI)."""
@@ -171,10 +180,7 @@ class NaoEnv(gym.Env):
 
     def terrain_height(self, x, y) -> np.ndarray:
         """Ground height [m] at (x, y); outside the heightfield the nearest edge value."""
-        if self._terrain is None:
-            return np.zeros(np.broadcast(x, y).shape)
-        hx, hy = self._terrain.half_extent
-        return self._terrain.height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy))
+        return ground_height(self._terrain, x, y)
 
     def validate_action(self, action) -> np.ndarray:
         """Return the action as float64 (23,) clipped to the joint limits.

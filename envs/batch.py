@@ -1,7 +1,8 @@
 """Many episodes of the MuJoCo sim in lock-step: one ``MjModel``, one ``MjData`` per episode.
 
-:class:`SimBatch` runs B episodes of a :class:`envs.NaoSimEnv` (the plain sim: no subclass that
-changes the model, the joint readings or the sensors) side by side. Every control step it applies B
+:class:`SimBatch` runs B episodes of a :class:`envs.NaoSimEnv` side by side (or of a subclass that
+says what it changes through ``batch_hooks()``: the identified sim's encoder offsets and series
+hinges). Every control step it applies B
 actions, advances each ``MjData`` by ``n_substeps`` (``mujoco.mj_step(m, d, nstep)``, one C call per
 episode, GIL released) and builds the B observations and ground-truth rows with the per-episode
 work cut to array reads, the contact force sums and three 3x3 products; the arithmetic is the same,
@@ -9,8 +10,9 @@ operation by operation, as :meth:`envs.NaoEnv.step`, so each episode's observati
 ground truth and fall decisions are **bit-identical** to stepping a ``NaoSimEnv`` alone
 (``tests/test_batch.py``). Episodes that end (a fall, an unstable simulation) leave the active set.
 
-Resets go through the template env itself (its ``data`` is swapped for each episode's), so the
-initial state is the env's by construction. The MuJoCo documentation recommends exactly this layout
+Resets go through the template env itself (a fresh ``MjData`` per episode, or the model the env
+builds for the episode's ground), so the initial state is the env's by construction; the template
+gets its own model and data back afterwards. The MuJoCo documentation recommends exactly this layout
 for parallel rollouts ("Python bindings > rollout": one model, one data per thread); the
 ``mujoco.rollout`` module itself is open loop and cannot host a controller in the loop.
 """
@@ -23,8 +25,10 @@ import mujoco
 import numpy as np
 
 from common.spatial import cross, quats_to_mats, roll_pitch
-from envs.base import FALL_TILT, FALL_TORSO_HEIGHT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, make_terrain
+from envs.base import (FALL_TILT, FALL_TORSO_HEIGHT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, ground_height,
+                       make_terrain)
 from envs.mujoco_world import NaoSimEnv, foot_contact_sums
+from envs.rollout import gt_row
 
 _COS_TILT = math.cos(FALL_TILT)
 
@@ -33,7 +37,8 @@ class SimBatch:
     """B lock-step episodes of the plain MuJoCo sim ``env`` (see the module docstring).
 
     Args:
-        env: a :class:`envs.NaoSimEnv` (exactly that class; its model and time steps are shared).
+        env: a :class:`envs.NaoSimEnv`, or a subclass with ``batch_hooks()`` (its time steps, robot and
+            lookups are shared; its model too unless an episode gets its own ground).
         size: the number of episodes B (>= 1).
 
     Attributes after :meth:`reset`: ``obs`` (B, n_obs) the latest observations, ``gt`` (B, 19) the
@@ -41,7 +46,8 @@ class SimBatch:
     applied actions, ``active`` (B,) bool, ``reason`` (list of fall reasons or None).
 
     Raises:
-        TypeError: ``env`` is not exactly a ``NaoSimEnv`` (a subclass may change the physics).
+        TypeError: a subclass of ``NaoSimEnv`` without ``batch_hooks()`` (it may change the physics in
+            ways the batch does not know), or another env.
         ValueError: size < 1.
     """
 
@@ -55,6 +61,7 @@ class SimBatch:
         self.model = env.model
         self.models = [env.model] * self.size
         self._fields = [env.terrain] * self.size
+        self._uneven = env.terrain is not None
         self.datas = [None] * self.size
         # what a subclass changes (NaoSimEnv.batch_hooks): targets minus ctrl_offset go to the servos;
         # the measured angle adds the series hinges (i, qpos address, qvel address); q_offset is added
@@ -111,26 +118,19 @@ class SimBatch:
                     raise RuntimeError("a terrain changed the robot's geom ids")  # pragma: no cover
                 self.models[i], self.datas[i], self._fields[i] = env.model, env.data, env.terrain
                 self.obs[i] = obs
-                self.gt[i] = _gt_row(info)
+                self.gt[i] = gt_row(info)
                 self._prev_acc_vel[i] = env._prev_accel_vel
                 self._warn[i] = env._warnings
                 self.applied[i] = env.last_applied
                 self.reason[i] = None
         finally:
             env.model, env.data, env._terrain = own
+        self._uneven = any(f is not None for f in self._fields)
         self.active[:] = True
 
     def terrain(self, i: int):
         """Episode i's heightfield (None: flat)."""
         return self._fields[i]
-
-    def _ground_height(self, i: int, x: float, y: float) -> float:
-        """:meth:`envs.NaoEnv.terrain_height` of episode i's ground at one point."""
-        hf = self._fields[i]
-        if hf is None:
-            return 0.0
-        hx, hy = hf.half_extent
-        return float(hf.height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy)))
 
     def step(self, actions: np.ndarray) -> None:
         """Apply ``actions`` (B, 23) [rad] to the active episodes for one control step.
@@ -215,10 +215,11 @@ class SimBatch:
             low = tilt = np.zeros(n, dtype=bool)
         else:
             with np.errstate(all="ignore"):
-                if any(self._fields[i] is not None for i in idx.tolist()):
-                    floor_z = np.array([self._ground_height(i, pos[j, 0], pos[j, 1]) for j, i in enumerate(idx.tolist())])
+                if self._uneven:  # per episode, as NaoEnv._fall_reason
+                    floor_z = np.array([float(ground_height(self._fields[i], pos[j, 0], pos[j, 1]))
+                                        for j, i in enumerate(idx.tolist())])
                 else:
-                    floor_z = env.terrain_height(pos[:, 0], pos[:, 1])
+                    floor_z = ground_height(None, pos[:, 0], pos[:, 1])
                 low = pos[:, 2] - floor_z < FALL_TORSO_HEIGHT
             tilt = ~low & (R[:, 2, 2] < _COS_TILT)
         # envs.NaoEnv._observe (the obs of an unstable episode stays the last one)
@@ -255,7 +256,3 @@ class SimBatch:
             self.active[i] = False
 
 
-def _gt_row(info: dict) -> np.ndarray:
-    """The ground-truth row :func:`envs.rollout.rollout` writes from a step's ``info``."""
-    return np.concatenate([info["base_pos"], info["base_quat"], info["base_linvel"], info["base_angvel"],
-                           info["com"], info["cop_world"] if info["cop_valid"] else np.full(3, np.nan)])

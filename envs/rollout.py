@@ -86,8 +86,7 @@ def rollout(env, controller: Controller | Callable[[np.ndarray], Any], seed: int
     k = 0
     for k in range(n):
         O[k] = obs
-        G[k, :19] = np.concatenate([info["base_pos"], info["base_quat"], info["base_linvel"], info["base_angvel"],
-                                    info["com"], info["cop_world"] if info["cop_valid"] else np.full(3, np.nan)])
+        G[k, :19] = gt_row(info)
         a = np.asarray(step(obs), dtype=np.float64)
         C[k] = a
         obs, _, terminated, truncated, info = env.step(a)
@@ -105,6 +104,13 @@ def rollout(env, controller: Controller | Callable[[np.ndarray], Any], seed: int
 GT_COLUMNS = ("gt.base.x", "gt.base.y", "gt.base.z", "gt.quat.w", "gt.quat.x", "gt.quat.y", "gt.quat.z",
               "gt.vel.x", "gt.vel.y", "gt.vel.z", "gt.angvel.x", "gt.angvel.y", "gt.angvel.z",
               "gt.com.x", "gt.com.y", "gt.com.z", "gt.cop.x", "gt.cop.y", "gt.cop.z")
+
+
+def gt_row(info: dict) -> np.ndarray:
+    """The ground-truth row (19,) of a step's ``info``, in :data:`GT_COLUMNS` order (the CoP NaN
+    without foot contact)."""
+    return np.concatenate([info["base_pos"], info["base_quat"], info["base_linvel"], info["base_angvel"],
+                           info["com"], info["cop_world"] if info["cop_valid"] else np.full(3, np.nan)])
 
 
 def assemble_recording(base, O: np.ndarray, C: np.ndarray, A: np.ndarray, G: np.ndarray, m: int, *, seed,

@@ -28,10 +28,10 @@ from envs.batch import SimBatch
 from envs.mujoco_world import NaoSimEnv
 from envs.rollout import assemble_recording
 from envs.wrappers import ActionMismatch
-from experiments.fitness import walk_fitness
+from experiments.fitness import walk_fitness, walk_meta
 from experiments.grounding import nao_spec
-from experiments.tasks import _transformer, _world, run_episode
-from walk_engine import GaitParams, WalkCommand
+from experiments.tasks import _transformer, _world, episode_result, run_episode
+from walk_engine import GaitParams
 from walk_engine.batch import BatchWalkEngine
 
 
@@ -79,15 +79,7 @@ def _run_sim_group(tasks: list[dict]) -> list[dict]:
     walks = lockstep_walks(env, [t["theta"] for t in tasks], [int(t["seed"]) for t in tasks],
                            float(tasks[0].get("seconds", EPISODE_SECONDS)),
                            action_noise=[float(t.get("action_noise", 0.0) or 0.0) for t in tasks], transformer=tr)
-    results = []
-    for t, (rec, res) in zip(tasks, walks):
-        rec.meta.update({"world": t["world"], **t.get("meta", {})})
-        out = res.to_dict()
-        out["seed"] = int(t["seed"])
-        if t.get("record"):
-            out["recording"] = (rec.columns, rec.meta)
-        results.append(out)
-    return results
+    return [episode_result(t, rec, res) for t, (rec, res) in zip(tasks, walks)]
 
 
 def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=None, action_noise=None,
@@ -123,6 +115,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
     # the wrappers of experiments.tasks._world, one per episode (their state is per episode)
     noise = [ActionMismatch(env, noise_std=s, index=nao_spec().action_index, seed=seeds[i]) if s > 0 else None
              for i, s in enumerate(sigma)]
+    noisy = np.array([x is not None for x in noise])
     tr = transformer
     grounded = tr is not None and not tr.is_identity
     if grounded:  # sgat.GroundedEnv per episode: its generator, its ensemble member, its state history
@@ -164,8 +157,9 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
             ai = spec.action_index
             act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
                                                None if Z is None else Z[idx, k])
-        for j, i in enumerate(idx):
-            actions[i] = act[j] if noise[i] is None else noise[i].perturb(act[j])
+        actions[idx] = act
+        for j in np.flatnonzero(noisy[idx]).tolist():
+            actions[idx[j]] = noise[idx[j]].perturb(act[j])
         sim.step(actions)
         A[idx, k] = sim.applied[idx]
         rows[idx] = k + 1
@@ -175,14 +169,11 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         if grounded:
             live = idx[sim.active[idx]]
             H[live] = np.concatenate([H[live, 1:], spec.states(sim.obs[live])[:, None]], axis=1)
-    cmd_meta = WalkCommand()
     out = []
     for i in range(B):
-        meta = {"params": params[i].to_dict(), "command": {"vx": cmd_meta.vx, "vy": cmd_meta.vy, "wz": cmd_meta.wz},
-                "controller": "walk_engine.WalkEngine"}
         rec = assemble_recording(env, O[i], C[i], A[i], G[i], int(rows[i]), seed=seeds[i], seconds=seconds,
                                  fell=sim.reason[i] is not None, reason=sim.reason[i], fall_time=fall_time[i],
-                                 meta=meta, terrain=sim.terrain(i))
+                                 meta=walk_meta(params[i]), terrain=sim.terrain(i))
         out.append((rec, walk_fitness(rec, seconds)))
     return out
 

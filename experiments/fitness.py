@@ -91,6 +91,13 @@ def walk_fitness(rec: Recording, seconds: float | None = None) -> WalkResult:
                       drift_m=abs(dy), distance_m=dx, seconds=T, steps=len(rec))
 
 
+def walk_meta(params: GaitParams, command: WalkCommand | None = None) -> dict:
+    """The metadata a walk recording carries: the gait, the command, the controller."""
+    cmd = command or WalkCommand()
+    return {"params": params.to_dict(), "command": {"vx": cmd.vx, "vy": cmd.vy, "wz": cmd.wz},
+            "controller": "walk_engine.WalkEngine"}
+
+
 def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0,
              seconds: float = EPISODE_SECONDS, profile="real", terrain: str | Heightfield | None = None,
              command: WalkCommand | None = None, env=None) -> tuple[Recording, WalkResult]:
@@ -130,10 +137,7 @@ def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0
     try:
         base = env.unwrapped
         engine = WalkEngine(base.robot, params, command, dt=base.control_dt)
-        cmd = command or WalkCommand()
-        meta = {"params": params.to_dict(), "command": {"vx": cmd.vx, "vy": cmd.vy, "wz": cmd.wz},
-                "controller": "walk_engine.WalkEngine"}
-        rec = rollout(env, engine, seed=seed, seconds=seconds, meta=meta)
+        rec = rollout(env, engine, seed=seed, seconds=seconds, meta=walk_meta(params, command))
     finally:
         if own:
             env.close()

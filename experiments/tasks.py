@@ -102,6 +102,12 @@ def run_episode(task: dict) -> dict:
     env = _world(task)
     params = GaitParams.from_array(np.asarray(task["theta"], dtype=float))
     rec, res = run_walk(params, seed=int(task["seed"]), seconds=float(task.get("seconds", EPISODE_SECONDS)), env=env)
+    return episode_result(task, rec, res)
+
+
+def episode_result(task: dict, rec, res) -> dict:
+    """What :func:`run_episode` returns for a finished walk: the fitness metrics, the seed, and the
+    recording (with the task's world and metadata) if the task asks for it."""
     rec.meta.update({"world": task["world"], **task.get("meta", {})})
     out = res.to_dict()
     out["seed"] = int(task["seed"])

@@ -145,7 +145,6 @@ def _load(sg: np.ndarray, q, c, F) -> list:
             tq(ay, nx, ny, nz), tq(ar, nx, ny, nz)]
 
 
-_KINDS = ("stand", "start", "ss", "ds", "stop")
 
 
 class BatchWalkEngine:
@@ -184,7 +183,6 @@ class BatchWalkEngine:
         self._load_comp = e0.load_compensation
         P = [e.params for e in self.engines]
         col = lambda f: np.array([f(p) for p in P], dtype=float)  # noqa: E731
-        self._com_height = col(lambda p: p.com_height)
         self._ox = np.array([p.com_x_offset - e.c_off[0] for p, e in zip(P, self.engines)])
         self._oy = np.array([-e.c_off[1] for e in self.engines])
         self._tz = np.array([p.com_height - e.c_off[2] for p, e in zip(P, self.engines)])
@@ -247,24 +245,13 @@ class BatchWalkEngine:
         engine computes them per tick)."""
         if ph is self._ph_obj[i]:
             return
-        if ph.kind not in _KINDS:  # pragma: no cover - the planner's phases
-            raise ValueError(f"unknown phase kind {ph.kind!r}")
         self._ph_obj[i] = ph
         v = self._ph[i]
         ss = ph.kind == "ss"
         swing = ph.swing
         sL = 1.0 if ph.support == "L" else 0.0
-        if ss:
-            c0, c1 = sL, 0.0
-        elif ph.kind == "stand":
-            c0, c1 = 0.5, 0.0
-        elif ph.kind == "start":
-            c0, c1 = 0.5, sL - 0.5
-        elif ph.kind == "stop":
-            c0, c1 = sL, 0.5 - sL
-        else:
-            c0, c1 = 1.0 - sL, 2.0 * sL - 1.0
-        frac = not ss and math.isfinite(ph.t1) and ph.t1 > ph.t0
+        c0, c1 = ph.weight_line()
+        frac = math.isfinite(ph.t1) and ph.t1 > ph.t0  # else footsteps._frac is 1
         v[0], v[1], v[17] = ph.t0, (ph.t1 - ph.t0) if math.isfinite(ph.t1) else 1.0, ph.t1
         v[2], v[3], v[4] = float(ss), c0, c1
         v[5] = float(frac)

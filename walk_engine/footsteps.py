@@ -103,21 +103,24 @@ class Phase:
         """The swing foot of an ``ss`` phase ('' otherwise)."""
         return ("R" if self.support == "L" else "L") if self.kind == "ss" else ""
 
+    def weight_line(self) -> tuple[float, float]:
+        """The left-foot weight share as ``c0 + c1 * s``, s the phase fraction in [0, 1]
+        (:meth:`weight_left`; constant in ``ss`` and ``stand``, c1 = 0)."""
+        w = 1.0 if self.support == "L" else 0.0
+        if self.kind == "ss":
+            return w, 0.0
+        if self.kind == "stand":
+            return 0.5, 0.0
+        if self.kind == "start":  # support = the foot that gets the weight
+            return 0.5, w - 0.5
+        if self.kind == "stop":  # support = the foot that had the weight
+            return w, 0.5 - w
+        return 1.0 - w, 2.0 * w - 1.0  # ds: the weight moves to `support`
+
     def weight_left(self, t: float) -> float:
         """Planned share of the weight on the left foot at time t (0..1), from the ZMP schedule."""
-        if self.kind == "ss":
-            return 1.0 if self.support == "L" else 0.0
-        s = _frac(self, t)
-        if self.kind == "stand":
-            return 0.5
-        if self.kind == "start":
-            w1 = 1.0 if self.support == "L" else 0.0
-            return 0.5 + (w1 - 0.5) * s
-        if self.kind == "stop":  # support = foot that had the weight
-            w0 = 1.0 if self.support == "L" else 0.0
-            return w0 + (0.5 - w0) * s
-        w1 = 1.0 if self.support == "L" else 0.0  # ds: weight moves to `support`
-        return (1.0 - w1) + (2.0 * w1 - 1.0) * s
+        c0, c1 = self.weight_line()
+        return c0 + c1 * _frac(self, t)
 
 
 def _frac(ph: Phase, t: float) -> float:
