@@ -39,7 +39,8 @@ from robots import RobotModel, nao_h25
 from terrain import Heightfield
 
 GRAVITY = 9.81
-#: Fall thresholds (a project choice): torso origin lower than this above the terrain [m] ...
+#: Fall thresholds (a project choice): torso origin lower than this above the terrain [m] (the NAO's;
+#: other robots: ``RobotModel.fall_height``) ...
 FALL_TORSO_HEIGHT = 0.20
 #: ... or torso tilted more than this from upright [rad].
 FALL_TILT = math.radians(45.0)
@@ -114,7 +115,8 @@ class NaoEnv(gym.Env):
 
     Args:
         robot: the robot (default :func:`robots.nao_h25`).
-        fixed_base: hang the torso at ``hang_height`` [m] (actuator tests); no falls then.
+        fixed_base: hang the torso at ``hang_height`` [m] (actuator tests; default the robot's
+            ``RobotModel.hang_height``); no falls then.
         physics_dt, control_dt: [s]; ``control_dt`` must be a multiple of ``physics_dt``.
         initial_pose: a :meth:`RobotModel.pose` name the robot starts in (standing on the ground).
         max_episode_seconds: truncate after this long (None: never).
@@ -127,7 +129,7 @@ class NaoEnv(gym.Env):
     world = "abstract"
 
     def __init__(self, robot: RobotModel | None = None, *, fixed_base: bool = False, physics_dt: float = PHYSICS_DT,
-                 control_dt: float = CONTROL_DT, initial_pose: str = "crouch", hang_height: float = 0.6,
+                 control_dt: float = CONTROL_DT, initial_pose: str = "crouch", hang_height: float | None = None,
                  max_episode_seconds: float | None = None):
         self.robot = robot or nao_h25()
         n_sub = control_dt / physics_dt
@@ -135,7 +137,8 @@ class NaoEnv(gym.Env):
             raise ValueError(f"control_dt ({control_dt}) must be a positive multiple of physics_dt ({physics_dt})")
         self.physics_dt, self.control_dt, self.n_substeps = float(physics_dt), float(control_dt), int(round(n_sub))
         self.fixed_base = bool(fixed_base)
-        self.hang_height = float(hang_height)
+        self.hang_height = float(self.robot.hang_height if hang_height is None else hang_height)
+        self.fall_height = float(self.robot.fall_height)
         self.initial_pose = initial_pose
         self.q0 = self.robot.pose(initial_pose)
         self.max_episode_seconds = max_episode_seconds
@@ -243,7 +246,7 @@ class NaoEnv(gym.Env):
             return "unstable"
         if self.fixed_base:
             return None
-        if st.base_pos[2] - float(self.terrain_height(st.base_pos[0], st.base_pos[1])) < FALL_TORSO_HEIGHT:
+        if st.base_pos[2] - float(self.terrain_height(st.base_pos[0], st.base_pos[1])) < self.fall_height:
             return "torso_low"
         R = quat_to_mat(st.base_quat)
         if R[2, 2] < math.cos(FALL_TILT):

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from common.spatial import cross, quats_to_mats, roll_pitch
-from envs.base import (FALL_TILT, FALL_TORSO_HEIGHT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, ground_height,
+from envs.base import (FALL_TILT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, ground_height,
                        make_terrain)
 from envs.mujoco_world import NaoSimEnv, foot_contact_sums
 from envs.rollout import gt_row
@@ -62,6 +62,7 @@ class SimBatch:
         self.models = [env.model] * self.size
         self._fields = [env.terrain] * self.size
         self._uneven = env.terrain is not None
+        self._fall_height = env.fall_height
         self.datas = [None] * self.size
         # what a subclass changes (NaoSimEnv.batch_hooks): targets minus ctrl_offset go to the servos;
         # the measured angle adds the series hinges (i, qpos address, qvel address); q_offset is added
@@ -220,7 +221,7 @@ class SimBatch:
                                         for j, i in enumerate(idx.tolist())])
                 else:
                     floor_z = ground_height(None, pos[:, 0], pos[:, 1])
-                low = pos[:, 2] - floor_z < FALL_TORSO_HEIGHT
+                low = pos[:, 2] - floor_z < self._fall_height
             tilt = ~low & (R[:, 2, 2] < _COS_TILT)
         # envs.NaoEnv._observe (the obs of an unstable episode stays the last one)
         ok = ~unstable

@@ -102,7 +102,8 @@ class NaoRealEnv(NaoEnv):
     Args:
         robot, fixed_base, physics_dt, control_dt, initial_pose, hang_height, max_episode_seconds:
             see :class:`envs.base.NaoEnv`.
-        profile: effect profile name (``"real"`` default, ``"none"``), dict of ranges or
+        profile: effect profile name (``"real"`` default, scaled to the robot's actuators by
+            :func:`envs.effects.real_profile_for`; ``"none"``), dict of ranges or
             :class:`envs.effects.RealProfile`.
         terrain: ``"lumpy"`` (default: a fresh lumpy heightfield per episode drawn from the episode
             seed, amplitude from the profile's ``terrain_amplitude``), ``"flat"``/None (plane at 0),
@@ -119,7 +120,7 @@ class NaoRealEnv(NaoEnv):
     def __init__(self, robot: RobotModel | None = None, *, profile="real", terrain="lumpy",
                  solver_iterations: int = 50, **kwargs):
         super().__init__(robot, **kwargs)
-        self.profile: RealProfile = get_profile(profile)
+        self.profile: RealProfile = get_profile(profile, self.robot)
         if not (terrain == "lumpy" or terrain is None or terrain == "flat" or isinstance(terrain, Heightfield)):
             raise ValueError(f"terrain must be 'lumpy', 'flat', None or a Heightfield, got {terrain!r}")
         self.terrain_spec = terrain
@@ -198,10 +199,11 @@ class NaoRealEnv(NaoEnv):
         self._com_local_base = np.array(info[3])
         self._base_inertial_conj = np.zeros(4)
         mujoco.mju_negQuat(self._base_inertial_conj, _xyzw_to_wxyz(info[4]))
-        # HipYawPitch coupling: a gear constraint keeps both angles equal (MuJoCo's equality).
-        li, ri = names["LHipYawPitch"], names["RHipYawPitch"]
-        c = p.createConstraint(b, li, b, ri, pybullet.JOINT_GEAR, [1, 0, 0], [0, 0, 0], [0, 0, 0])
-        p.changeConstraint(c, gearRatio=-1.0, maxForce=1000.0)
+        # Mimic joints (the NAO's HipYawPitch): a gear constraint keeps both angles equal (MuJoCo's equality).
+        for follower, leader in r.mimic.items():
+            c = p.createConstraint(b, names[leader], b, names[follower], pybullet.JOINT_GEAR, [1, 0, 0], [0, 0, 0],
+                                   [0, 0, 0])
+            p.changeConstraint(c, gearRatio=-1.0, maxForce=1000.0)
         # motors: velocity motors only as Coulomb friction, else off
         p.setJointMotorControlArray(b, self._jidx, pybullet.VELOCITY_CONTROL, targetVelocities=[0.0] * len(self._jidx),
                                     forces=self.effects.coulomb_friction_nm.tolist())

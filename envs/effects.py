@@ -187,8 +187,43 @@ PROFILES: dict[str, RealProfile] = {
 }
 
 
-def get_profile(profile: str | dict | RealProfile) -> RealProfile:
+#: The "real" profile per actuator class, for the robots other than the NAO (estimates, not
+#: measurements): the Unitree G1's quasi-direct-drive joints (low-ratio planetary gears) have little
+#: backlash and more latency between command and torque (its low-level command loop runs through the
+#: motor drivers' current loops); PAL Talos' harmonic drives have no backlash to speak of and a 1 kHz
+#: EtherCAT loop (Stasse et al., "TALOS: A new humanoid research platform targeted for industrial
+#: applications", Humanoids 2017). Coulomb friction scales with the robot's median leg effort (the
+#: NAO's 0.02-0.06 N m is 1-2 % of its 3 N m leg motors); everything else is the NAO's "real" profile.
+ACTUATOR_CLASS: dict[str, dict[str, Range]] = {
+    "g1": {"latency_s": (0.015, 0.030), "backlash_rad": (0.0003, 0.001)},
+    "talos": {"latency_s": (0.003, 0.008), "backlash_rad": (0.0, 0.0003)},
+}
+#: The NAO's median leg effort [N m] (``robots.nao``), the reference of the friction scaling.
+NAO_LEG_EFFORT = 3.023
+
+
+def real_profile_for(robot) -> RealProfile:
+    """The "real" profile scaled to ``robot``'s actuator class (:data:`ACTUATOR_CLASS`); the NAO's
+    own profile for the NAO.
+
+    Args:
+        robot: a ``robots.RobotModel``.
+    """
+    base = PROFILES["real"]
+    if robot.name not in ACTUATOR_CLASS:
+        return base
+    legs = robot.joint_index(robot.groups["legs"])
+    k = float(np.median(robot.effort[legs])) / NAO_LEG_EFFORT
+    lo, hi = base.coulomb_friction_nm
+    return dataclasses.replace(base, name="real", coulomb_friction_nm=(lo * k, hi * k), **ACTUATOR_CLASS[robot.name])
+
+
+def get_profile(profile: str | dict | RealProfile, robot=None) -> RealProfile:
     """A profile by name (``"none"``, ``"real"``), from a dict of ranges, or passed through.
+
+    Args:
+        robot: the ``robots.RobotModel`` the profile is for; ``"real"`` is then scaled to its
+            actuators (:func:`real_profile_for`). None: the NAO's.
 
     Raises:
         ValueError: unknown profile name, or invalid ranges.
@@ -199,4 +234,6 @@ def get_profile(profile: str | dict | RealProfile) -> RealProfile:
         return RealProfile.from_dict(profile)
     if profile not in PROFILES:
         raise ValueError(f"unknown profile {profile!r}; known profiles: {', '.join(PROFILES)}")
+    if profile == "real" and robot is not None:
+        return real_profile_for(robot)
     return PROFILES[profile]

@@ -10,7 +10,8 @@ from robots import RobotModel
 
 def chirp_with_holds(robot: RobotModel, seconds: float = 6.0, f0: float = 0.3, f1: float = 4.0,
                      amplitude: float = 0.25, hold: float = 1.0, pose: str = "crouch",
-                     control_dt: float = CONTROL_DT, joints: list[str] | None = None) -> np.ndarray:
+                     control_dt: float = CONTROL_DT, joints: list[str] | None = None,
+                     margin: float = 0.01) -> np.ndarray:
     """Joint targets [rad], shape (round(seconds / control_dt), 23): hold ``pose`` for ``hold``
     seconds, a linear chirp from ``f0`` to ``f1`` Hz of ``amplitude`` rad around the pose, then hold
     again for the last ``hold`` seconds.
@@ -18,7 +19,8 @@ def chirp_with_holds(robot: RobotModel, seconds: float = 6.0, f0: float = 0.3, f
     Each actuated joint gets the chirp scaled by ``cos(phi_j)`` with phases spread over [0, pi]
     (joints move with different amplitudes and signs, so the replay is not a symmetric motion);
     ``joints`` restricts the motion to the named joints. Targets are kept 0.01 rad inside the
-    joint limits.
+    joint limits by default (``margin`` [rad]; PD overshoot can still touch a limit, where the two
+    engines' limit constraints differ).
 
     Raises:
         ValueError: ``seconds <= 2 * hold`` or non-positive frequencies/amplitude.
@@ -36,6 +38,6 @@ def chirp_with_holds(robot: RobotModel, seconds: float = 6.0, f0: float = 0.3, f
     if joints is not None:
         mask = np.isin(robot.actuated_joint_names, joints)
         w = np.where(mask, w, 0.0)
-    lo = robot.lower[robot.actuated_index] + 0.01
-    hi = robot.upper[robot.actuated_index] - 0.01
+    lo = robot.lower[robot.actuated_index] + margin
+    hi = robot.upper[robot.actuated_index] - margin
     return np.clip(q0[None] + amplitude * s[:, None] * w[None], lo, hi)

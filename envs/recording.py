@@ -49,7 +49,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from robots import RobotModel, nao_h25
+from robots import ROBOT_NAMES, RobotModel, get_robot, nao_h25
 from common.files import atomic_path
 
 SCHEMA_VERSION = 1
@@ -104,9 +104,18 @@ class Recording:
 
     @property
     def robot(self) -> RobotModel:
-        if self.meta.get("robot") != "nao_h25":
-            raise RecordingError(f"recording is of robot {self.meta.get('robot')!r}; this package models 'nao_h25'")
-        return nao_h25()
+        """The robot named by ``meta["robot"]`` (``nao_h25``, ``g1``, ``talos``; ``robots.get_robot``).
+
+        Raises:
+            RecordingError: an unknown robot name.
+        """
+        name = self.meta.get("robot")
+        if name == "nao_h25":
+            return nao_h25()
+        if name not in ROBOT_NAMES:
+            raise RecordingError(f"recording is of robot {name!r}; this package models nao_h25, "
+                                 f"{', '.join(n for n in ROBOT_NAMES if n != 'nao')}")
+        return get_robot(name)
 
     def has(self, group: str) -> bool:
         """Whether a column group (``"dq"``, ``"gyro"``, ``"gt.base"``, ...) is present."""

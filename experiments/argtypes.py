@@ -151,11 +151,21 @@ def in_path(text: str) -> str:
     return text
 
 
+def add_robot(parser: argparse.ArgumentParser) -> None:
+    """Add ``--robot nao|g1|talos`` (default nao): the robot both worlds and the walk engine use
+    (``robots.get_robot``; g1 and talos come from the installed example-robot-data)."""
+    from robots import ROBOT_NAMES  # lazy: argtypes is imported by every command's parser
+
+    parser.add_argument("--robot", choices=ROBOT_NAMES, default="nao",
+                        help="robot: nao (the NAO-like H25, default), g1 (Unitree G1) or talos (PAL Talos), "
+                             "the last two from example-robot-data")
+
+
 def fail(prog: str, message: str) -> int:
     """Print ``<prog>: error: <message>`` as one line on stderr; returns 2 (the exit status)."""
     print(f"{prog}: error: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
     return 2
 
 
-__all__ = ["Number", "Parser", "count", "fail", "fraction", "in_file", "in_path", "out_dir", "out_file", "real",
+__all__ = ["Number", "Parser", "add_robot", "count", "fail", "fraction", "in_file", "in_path", "out_dir", "out_file", "real",
            "seconds", "seed", "workers"]

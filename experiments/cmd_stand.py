@@ -21,7 +21,7 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("stand", help="hold a pose in the sim and/or real world (demo of the two worlds)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--world", default="sim,real", help="sim, real or sim,real (default: both)")
-    p.add_argument("--pose", default="crouch", help="robot pose to hold (zero, stand, crouch, deep_crouch)")
+    p.add_argument("--pose", default="crouch", help="robot pose to hold (zero, stand, crouch; the NAO also deep_crouch)")
     p.add_argument("--seconds", type=A.seconds, default=10.0, help="duration [s] (default 10)")
     p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
     p.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
@@ -31,6 +31,7 @@ def register(sub) -> argparse.ArgumentParser:
                    help="terrain amplitude with --terrain: bump/step height [m], slope grade, gaussian RMS height [m] "
                         "(default 0.01)")
     p.add_argument("--fixed-base", action="store_true", help="hang the robot in the air (actuator tests)")
+    A.add_robot(p)
     p.add_argument("--record", type=A.out_file, metavar="PATH", help="write recordings; '{world}' in PATH is replaced "
                    "(default PATH for two worlds: PATH with _sim/_real before the suffix)")
     return p
@@ -47,6 +48,10 @@ def _record_path(path: str, world: str, n_worlds: int) -> str:
 
 def run(args) -> dict:
     from envs import HoldPose, make_world, rollout  # lazy: engines load only when the command runs
+    from robots import get_robot  # lazy: g1/talos parse their URDFs
+
+    robot = get_robot(args.robot)
+    robot.pose(args.pose)  # KeyError naming the known poses, before any world is built
 
     worlds = [w.strip() for w in args.world.split(",") if w.strip()]
     for w in worlds:
@@ -60,7 +65,7 @@ def run(args) -> dict:
         hf = make(args.terrain, seed=args.seed, amplitude=amp)
     results = []
     for w in worlds:
-        kw = {"fixed_base": args.fixed_base}
+        kw = {"fixed_base": args.fixed_base, "robot": robot}
         if w == "real":
             kw.update(profile=args.profile, terrain=hf if hf is not None else "lumpy")
         else:
@@ -89,7 +94,7 @@ def run(args) -> dict:
         env.close()
     if not args.json:
         print(format_stand(results))
-    return {"pose": args.pose, "seed": args.seed, "worlds": results}
+    return {"robot": args.robot, "pose": args.pose, "seed": args.seed, "worlds": results}
 
 
 def format_stand(results: list[dict]) -> str:

@@ -84,19 +84,23 @@ class Geom:
     """A primitive collision geometry in the link frame.
 
     kind: "box" (size = full extents x, y, z), "capsule" (size = radius, length of the
-    cylindrical part; axis along the local z of the geom), "sphere" (size = radius).
+    cylindrical part; axis along the local z of the geom), "sphere" (size = radius), "mesh"
+    (size = scale x, y, z; ``mesh`` = absolute path of the mesh file).
     rpy: roll, pitch, yaw of the geom frame [rad].
+    collide: False for a visual-only geom (written as URDF ``<visual>`` alone).
     """
 
     kind: str
     size: tuple[float, ...]
     xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    collide: bool = True
+    mesh: str | None = None
 
     def mirrored(self) -> "Geom":
         x, y, z = self.xyz
         r, p, yw = self.rpy
-        return Geom(self.kind, self.size, (x, -y, z), (-r, p, -yw))
+        return Geom(self.kind, self.size, (x, -y, z), (-r, p, -yw), self.collide, self.mesh)
 
 
 @dataclass(frozen=True)
@@ -121,6 +125,7 @@ class JointSpec:
     inertial: Inertial
     geoms: tuple[Geom, ...] = ()
     mimic: str | None = None
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)  # joint origin rotation (URDF ``<origin rpy>``)
 
 
 @dataclass(frozen=True)
@@ -254,13 +259,14 @@ POSES = {
 
 @dataclass
 class RobotModel:
-    """The NAO-like robot as both engines see it.
+    """A humanoid as both engines see it: the NAO-like H25 (:func:`nao_h25`) or a humanoid of
+    ``example-robot-data`` (:mod:`robots.urdf_robots`).
 
-    Attributes (arrays are ordered like :attr:`joint_names`, 24 hinges):
+    Attributes (arrays are ordered like :attr:`joint_names`; the NAO has 24 hinges):
         joint_names: NAO joint names in URDF order.
-        lower, upper: joint position limits [rad], shape (24,).
-        effort: torque limits [N m], shape (24,).  velocity: speed limits [rad/s], shape (24,).
-        kp [N m/rad], kd [N m s/rad]: PD gains, shape (24,).
+        lower, upper: joint position limits [rad], shape (n,).
+        effort: torque limits [N m], shape (n,).  velocity: speed limits [rad/s], shape (n,).
+        kp [N m/rad], kd [N m s/rad]: PD gains, shape (n,).
         groups: ``{"legs", "arms", "head", "left_leg", "right_leg"}`` -> joint names.
         frames: named rigid frames (``l_sole``, ``r_sole``, ``gyro``, ``accel``, FSRs).
         mimic: ``{follower: leader}`` (``RHipYawPitch`` follows ``LHipYawPitch``).
@@ -275,6 +281,14 @@ class RobotModel:
     root_geoms: tuple[Geom, ...] = TORSO_GEOMS
     frames: dict[str, Frame] = field(default_factory=dict)
     poses: dict[str, dict[str, float]] = field(default_factory=dict)
+    #: torso (root) origin lower than this above the terrain [m] is a fall (``envs.base``)
+    fall_height: float = 0.20
+    #: height [m] of the root origin when the base is fixed (actuator tests, excitation logs)
+    hang_height: float = 0.6
+    #: ``{"legs", "left_leg", "right_leg", "arms", "head"}`` -> joint names; None: NAO naming
+    group_names: dict[str, tuple[str, ...]] | None = None
+    #: where the description comes from (URDF path, or the NAO spec)
+    source: str = "robots.nao (ros-naoqi V50 URDF)"
 
     def __post_init__(self) -> None:
         self.joint_names = tuple(j.name for j in self.joints)
@@ -291,6 +305,9 @@ class RobotModel:
         self.actuated_to_joint = np.array(
             [self.actuated_joint_names.index(self.mimic.get(n, n)) for n in self.joint_names])
         self.actuated_index = np.array([idx[n] for n in self.actuated_joint_names])
+        if self.group_names is not None:
+            self.groups = {k: tuple(v) for k, v in self.group_names.items()}
+            return
         legs = [n for n in self.joint_names if any(k in n for k in ("Hip", "Knee", "Ankle"))]
         self.groups = {
             "legs": tuple(legs),
@@ -364,10 +381,13 @@ def _geom_xml(g: Geom) -> str:
         shape = f'<sphere radius="{g.size[0]:.9g}"/>'
     elif g.kind == "capsule":
         shape = f'<capsule radius="{g.size[0]:.9g}" length="{g.size[1]:.9g}"/>'
+    elif g.kind == "mesh":
+        shape = f'<mesh filename="{escape(g.mesh)}" scale="{_fmt(g.size)}"/>'
     else:  # pragma: no cover - spec error
         raise ValueError(f"unknown geom kind {g.kind!r}")
     body = f'<origin xyz="{_fmt(g.xyz)}" rpy="{_fmt(g.rpy)}"/><geometry>{shape}</geometry>'
-    return f"    <collision>{body}</collision>\n    <visual>{body}</visual>\n"
+    visual = f"    <visual>{body}</visual>\n"
+    return (f"    <collision>{body}</collision>\n" + visual) if g.collide else visual
 
 
 def _urdf_text(robot: RobotModel) -> str:
@@ -381,7 +401,7 @@ def _urdf_text(robot: RobotModel) -> str:
         out.append("  </link>\n")
         out.append(
             f'  <joint name="{j.name}" type="revolute"><parent link="{j.parent}"/><child link="{j.child}"/>'
-            f'<origin xyz="{_fmt(j.xyz)}" rpy="0 0 0"/><axis xyz="{_fmt(j.axis)}"/>'
+            f'<origin xyz="{_fmt(j.xyz)}" rpy="{_fmt(j.rpy)}"/><axis xyz="{_fmt(j.axis)}"/>'
             f'<limit lower="{j.lower:.9g}" upper="{j.upper:.9g}" effort="{j.effort:.9g}" velocity="{j.velocity:.9g}"/>'
             + (f'<mimic joint="{j.mimic}" multiplier="1" offset="0"/>' if j.mimic else "")
             + "</joint>\n")
