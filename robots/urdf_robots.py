@@ -15,7 +15,8 @@ load (MuJoCo ``MjSpec.from_file``, PyBullet ``loadURDF``), so the two engines se
   meshes are visual only (Rerun shows them; MuJoCo's URDF import discards visuals).
 * **Contact geometry is the documented sole only**: a box per foot, from the URDF's own foot
   collision primitives (G1: the box around its four 5 mm contact spheres; Talos: its
-  ``leg_*_6_link`` collision box). The sole frame is the centre of the box's bottom face.
+  ``leg_*_6_link`` collision box). The sole frame is the ankle's projection on the box's bottom
+  face (the NAO's convention: the walk engine's ZMP offsets and footsteps refer to it).
   Mesh collisions elsewhere are dropped in both engines (the NAO has no self-collision either).
 * **PD gains per joint family** from the effort limit and the explicit-PD stability bound at the
   physics step: kp = min(effort / 0.1 rad, 0.2 I/dt²), kd = min(2·0.8·sqrt(kp·I), 0.5 I/dt), where I
@@ -49,7 +50,7 @@ from robots.nao import Frame, Geom, Inertial, JointSpec, RobotModel
 #: Max PD error [rad] that saturates a motor (the NAO's rule, ``robots.nao.GAINS``).
 SATURATING_ERROR = 0.1
 #: Explicit-PD stability bounds at the physics step (``robots.nao.GAINS``).
-KP_BOUND, KD_BOUND, DAMPING_RATIO = 0.2, 0.5, 0.8
+KP_BOUND, KD_BOUND, DAMPING_RATIO = 2.0, 1.0, 0.8
 #: Fall threshold as a fraction of the root's height above the soles in the crouch pose (the NAO's
 #: 0.20 m is 0.64 of its 0.31 m).
 FALL_HEIGHT_FRACTION = 0.6
@@ -215,7 +216,8 @@ def _geoms(b: _Body, sole: Geom | None) -> tuple[Geom, ...]:
 
 
 def _sole_box(b: _Body, foot: str, how: str) -> tuple[Geom, tuple[float, float, float]]:
-    """The foot's contact box and its sole point (centre of the bottom face) in the foot frame.
+    """The foot's contact box and its sole point (the foot origin's projection on the bottom face) in
+    the foot frame.
 
     how: ``"spheres"``: the box around the foot's collision spheres (bottom at their lowest point);
     ``"box"``: the foot's lowest collision box as it is."""
@@ -237,7 +239,7 @@ def _sole_box(b: _Body, foot: str, how: str) -> tuple[Geom, tuple[float, float, 
             raise ValueError(f"{foot}: the sole box must be axis-aligned with the foot frame")
         size, centre = g.size, tuple(p)
     geom = Geom("box", tuple(float(v) for v in size), tuple(float(v) for v in centre))
-    sole = (float(centre[0]), float(centre[1]), float(centre[2] - size[2] / 2))
+    sole = (0.0, 0.0, float(centre[2] - size[2] / 2))  # the ankle's projection on the sole plane
     return geom, sole
 
 

@@ -56,7 +56,7 @@ def test_massless_links_add_nothing_in_pybullet():
 
 
 @pytest.mark.parametrize("name", ["g1", "talos"])
-def test_feet_are_the_only_contact_boxes_and_soles_sit_on_their_bottom(name):
+def test_feet_are_the_only_contact_boxes_and_soles_sit_below_the_ankle_on_their_bottom(name):
     robot = get_robot(name)
     env = NaoSimEnv(robot)
     m, d = env.model, env.data
@@ -67,8 +67,13 @@ def test_feet_are_the_only_contact_boxes_and_soles_sit_on_their_bottom(name):
         body = m.body(m.geom_bodyid[g]).name
         sole = "l_sole" if body == robot.frames["l_sole"].link else "r_sole"
         assert body == robot.frames[sole].link
-        bottom = d.geom_xpos[g] - d.geom_xmat[g].reshape(3, 3)[:, 2] * m.geom_size[g][2]
-        np.testing.assert_allclose(bottom, d.site_xpos[m.site(sole).id], atol=1e-9)
+        R = d.geom_xmat[g].reshape(3, 3)
+        local = R.T @ (d.site_xpos[m.site(sole).id] - d.geom_xpos[g])  # the sole point in the box frame
+        assert local[2] == pytest.approx(-m.geom_size[g][2], abs=1e-9)  # on the bottom face
+        assert np.all(np.abs(local[:2]) < m.geom_size[g][:2])  # inside it
+        b = m.geom_bodyid[g]  # straight below the ankle (the foot origin): x = y = 0 in the foot frame
+        in_foot = d.xmat[b].reshape(3, 3).T @ (d.site_xpos[m.site(sole).id] - d.xpos[b])
+        np.testing.assert_allclose(in_foot[:2], 0.0, atol=1e-12)
 
 
 @pytest.mark.parametrize("world", ["sim", "real"])

@@ -45,7 +45,8 @@ from robots import RobotModel, nao_h25
 from walk_engine.footsteps import FootstepPlanner, Phase, SupportPolygon, WalkCommand, zmp_reference
 from walk_engine.kinematics import (LEG_JOINTS, BodyModel, _fixed_scalar, _fixed_t, _free_hyp, _free_hyp_t,
                                     _load_scalar, _target_scalar, rot_y)
-from walk_engine.params import GaitParams
+from walk_engine.legs import LegChain
+from walk_engine.params import GaitParams, params_for
 from walk_engine.preview import ZmpPreview
 from walk_engine.swing import min_jerk, swing_pose
 
@@ -128,12 +129,44 @@ def _nominal_stance(robot: RobotModel, com_height, feet_spacing, torso_pitch):
     return c_off, q
 
 
+_GENERIC_STANCES: dict = {}
+
+
+def _nominal_stance_legs(robot: RobotModel, legs: dict, com_height, feet_spacing, torso_pitch):
+    """:func:`_nominal_stance` for a robot without the NAO's shared HipYawPitch (each leg solved by
+    its own :class:`walk_engine.legs.LegChain`); cached per robot and stance."""
+    key = (robot.name, com_height, feet_spacing, torso_pitch)
+    if key in _GENERIC_STANCES:
+        return _GENERIC_STANCES[key]
+    body = BodyModel(robot)
+    q = robot.pose("crouch").copy()
+    idx = {s: robot.joint_index(legs[s].joint_names) for s in "LR"}
+    Rt = rot_y(torso_pitch)
+    pt = np.array([0.0, 0.0, com_height + 0.05])
+    h = feet_spacing / 2.0
+    for _ in range(50):
+        for s, y in (("L", h), ("R", -h)):
+            q[idx[s]] = legs[s].ik(Rt.T @ (np.array([0.0, y, 0.0]) - pt), Rt.T, q[idx[s]])
+        com = pt + Rt @ body.com(q)
+        err = com - np.array([0.0, 0.0, com_height])
+        err[1] = 0.0
+        pt = pt - err
+        if np.abs(err).max() < 1e-10:
+            break
+    c_off = pt + Rt @ body.com(q) - pt
+    c_off.setflags(write=False)
+    q.setflags(write=False)
+    _GENERIC_STANCES[key] = (c_off, q)
+    return c_off, q
+
+
 class WalkEngine:
-    """ZMP preview-control walk engine for the NAO-like robot (see module docstring).
+    """ZMP preview-control walk engine (see module docstring) for the NAO-like robot and any humanoid
+    whose legs :class:`walk_engine.legs.LegChain` reads (Unitree G1, PAL Talos).
 
     Args:
         robot: the robot (default :func:`robots.nao_h25`).
-        params: the 16 gait parameters (default θ0).
+        params: the 16 gait parameters of that robot (default its θ0, :func:`walk_engine.params_for`).
         command: the velocity command (default: forward at ``step_length / step_period``).
         dt: control period [s] (must match the world's ``control_dt``, 10 ms).
         load_compensation: offset the support legs' targets by the static sag -τ_ext/kp (stage 8).
@@ -145,7 +178,8 @@ class WalkEngine:
     controller (``reset(obs, info)`` ignores ``info``: the engine never reads ground truth).
 
     Raises:
-        ValueError: params not a :class:`GaitParams`; non-positive dt; negative torso_angle_gain.
+        ValueError: params not a :class:`GaitParams` of this robot; non-positive dt; negative
+            torso_angle_gain; a leg the engine cannot read (:class:`walk_engine.legs.LegChain`).
     """
 
     def __init__(self, robot: RobotModel | None = None, params: GaitParams | None = None,
@@ -153,9 +187,12 @@ class WalkEngine:
                  torso_angle_gain: float = 0.0):
         self.robot = robot or nao_h25()
         if params is None:
-            params = GaitParams()
+            params = params_for(self.robot)()
         if not isinstance(params, GaitParams):
             raise ValueError(f"params must be a GaitParams, got {type(params).__name__}")
+        if type(params).robot != self.robot.name:
+            raise ValueError(f"gait parameters of robot {type(params).robot!r} given for robot {self.robot.name!r} "
+                             f"(use walk_engine.params_for(robot))")
         if not (dt > 0):
             raise ValueError(f"dt must be positive, got {dt}")
         if not (math.isfinite(torso_angle_gain) and torso_angle_gain >= 0):
@@ -166,8 +203,21 @@ class WalkEngine:
         r = self.robot
         self._obs = observation_slices(r)
         act = r.actuated_joint_names
-        self._iL = np.array([act.index("L" + j) for j in LEG_JOINTS])
-        self._iR = np.array([act.index("R" + j) for j in LEG_JOINTS[1:]])  # RHipYawPitch follows
+        # The NAO's legs share HipYawPitch (closed form of walk_engine.kinematics); any other robot's
+        # 6-DoF legs are solved one by one (walk_engine.legs: closed form or damped least squares).
+        self._generic = "LHipYawPitch" not in r.joint_names
+        if self._generic:
+            self._legs = {s: LegChain(r, s) for s in "LR"}
+            leg_names = {s: self._legs[s].joint_names for s in "LR"}
+            self._iL = np.array([act.index(n) for n in leg_names["L"]])
+            self._iR = np.array([act.index(n) for n in leg_names["R"]])
+            lg = self._legs["L"]
+            self._fb = (lg.hip_roll, lg.ankle_pitch, lg.ankle_roll)
+        else:
+            leg_names = {s: [s + j for j in LEG_JOINTS] for s in "LR"}
+            self._iL = np.array([act.index("L" + j) for j in LEG_JOINTS])
+            self._iR = np.array([act.index("R" + j) for j in LEG_JOINTS[1:]])  # RHipYawPitch follows
+            self._fb = (1, 4, 5)
         self._lo = r.lower[r.actuated_index]
         self._hi = r.upper[r.actuated_index]
         self._base_list = r.pose("crouch", actuated=True).tolist()  # arms and head
@@ -176,11 +226,15 @@ class WalkEngine:
         self._alpha = 1.0 - math.exp(-2.0 * math.pi * GYRO_CUTOFF_HZ * self.dt)
         self.load_compensation = bool(load_compensation)
         self.torso_angle_gain = float(torso_angle_gain)
-        self._inv_kp = {s: (1.0 / r.kp[r.joint_index([s + j for j in LEG_JOINTS])]).tolist() for s in "LR"}
+        self._inv_kp = {s: (1.0 / r.kp[r.joint_index(leg_names[s])]).tolist() for s in "LR"}
         self._mass = r.total_mass
-        self._sole = SupportPolygon()
+        self._sole = SupportPolygon.for_robot(r)
         stance = (params.com_height, params.feet_spacing, params.torso_pitch)
-        if r is nao_h25():
+        if self._generic:
+            self.c_off, self.q_nominal = _nominal_stance_legs(r, self._legs, *stance)
+            idx = {s: r.joint_index(leg_names[s]) for s in "LR"}
+            self._q_leg0 = {s: np.array(self.q_nominal[idx[s]]) for s in "LR"}
+        elif r is nao_h25():
             self.c_off, self.q_nominal = nominal_stance(r.name, *stance)  # cached
         else:
             self.c_off, self.q_nominal = _nominal_stance(r, *stance)
@@ -219,6 +273,8 @@ class WalkEngine:
             self._q_start = np.asarray(obs, float)[self._obs["q"]][self.robot.actuated_index].tolist()
         self._log: list[tuple] = []
         self.last_targets = None
+        if self._generic:
+            self._q_leg = {s: self._q_leg0[s].copy() for s in "LR"}  # warm starts of the leg IK
 
     # ------------------------------------------------------------------ planning helpers
     def _extend_zmp(self, upto_k: int) -> None:
@@ -324,40 +380,48 @@ class WalkEngine:
             # Ry(pitch)^T Rz(a)
             rows = ((cp * ca, -cp * sa, -sp), (sa, ca, 0.0), (sp * ca, -sp * sa, cp))
             targets.append((pos, rows))
-        tL = _target_scalar("L", *targets[0])
-        tR = _target_scalar("R", *targets[1])
-        hyp = wL * _free_hyp_t("L", tL) + (1.0 - wL) * _free_hyp_t("R", tR)
-        qL = _fixed_t("L", tL, hyp)
-        qR = _fixed_t("R", tR, hyp)
+        if self._generic:
+            hyp = 0.0
+            legs, ql = self._legs, self._q_leg
+            ql["L"] = legs["L"].ik(targets[0][0], targets[0][1], ql["L"])
+            ql["R"] = legs["R"].ik(targets[1][0], targets[1][1], ql["R"])
+            qL, qR = ql["L"].tolist(), ql["R"].tolist()
+        else:
+            tL = _target_scalar("L", *targets[0])
+            tR = _target_scalar("R", *targets[1])
+            hyp = wL * _free_hyp_t("L", tL) + (1.0 - wL) * _free_hyp_t("R", tR)
+            qL = _fixed_t("L", tL, hyp)
+            qR = _fixed_t("R", tR, hyp)
         if self.load_compensation:
             self._compensate(qL, qR, wL, x, fL, fR, tx, ty, tz, cy, sy, cp, sp)
         # feedback (as in rUNSWift Walk2014 and the B-Human walk): + pitch rate -> + ankle pitch, + roll rate -> + rolls
         gx, gy = gf[0], gf[1]
         wR = 1.0 - wL
+        hr, ap, ar = self._fb  # hip roll, ankle pitch, ankle roll in the leg vectors
         if self.torso_angle_gain:
             ang = obs[self._obs["angle"]]
             er, ep = self.torso_angle_gain * ang[0], self.torso_angle_gain * (ang[1] - p.torso_pitch)
-            qL[4] += wL * ep
-            qR[4] += wR * ep
-            qL[5] += wL * er
-            qR[5] += wR * er
-        qL[4] += wL * p.gyro_ankle_pitch_gain * gy
-        qR[4] += wR * p.gyro_ankle_pitch_gain * gy
-        qL[5] += wL * p.gyro_ankle_roll_gain * gx
-        qR[5] += wR * p.gyro_ankle_roll_gain * gx
-        qL[1] += wL * p.gyro_hip_roll_gain * gx
-        qR[1] += wR * p.gyro_hip_roll_gain * gx
+            qL[ap] += wL * ep
+            qR[ap] += wR * ep
+            qL[ar] += wL * er
+            qR[ar] += wR * er
+        qL[ap] += wL * p.gyro_ankle_pitch_gain * gy
+        qR[ap] += wR * p.gyro_ankle_pitch_gain * gy
+        qL[ar] += wL * p.gyro_ankle_roll_gain * gx
+        qR[ar] += wR * p.gyro_ankle_roll_gain * gx
+        qL[hr] += wL * p.gyro_hip_roll_gain * gx
+        qR[hr] += wR * p.gyro_hip_roll_gain * gx
         if ph.kind == "ss" and p.support_hip_roll_comp != 0.0:
             s = (t - ph.t0) / (ph.t1 - ph.t0)
             ramp = min_jerk(min(s, 1.0 - s) / HIP_COMP_RAMP)
             if ph.support == "L":
-                qL[1] += p.support_hip_roll_comp * ramp
+                qL[hr] += p.support_hip_roll_comp * ramp
             else:
-                qR[1] -= p.support_hip_roll_comp * ramp
+                qR[hr] -= p.support_hip_roll_comp * ramp
         out = self._base_list.copy()
         for i, v in zip(self._iL_list, qL):
             out[i] = v
-        for i, v in zip(self._iR_list, qR[1:]):
+        for i, v in zip(self._iR_list, qR if self._generic else qR[1:]):
             out[i] = v
         if self._q_start is not None and t < BLEND_TIME:
             s = min_jerk(t / BLEND_TIME)
@@ -395,11 +459,18 @@ class WalkEngine:
             cop = (cp * ux - sp * uz, uy, sp * ux + cp * uz)
             gx, gy = cy * F[0] + sy * F[1], -sy * F[0] + cy * F[1]
             Ft = (cp * gx - sp * F[2], gy, sp * gx + cp * F[2])
-            tau = _load_scalar(side, q, cop, Ft)
             ik = self._inv_kp[side]
+            if self._generic:  # every leg joint has its own motor
+                tau = self._legs[side].load_torques(q, cop, Ft).tolist()
+                for j in range(6):
+                    q[j] -= tau[j] * ik[j]
+                continue
+            tau = _load_scalar(side, q, cop, Ft)
             for j in range(1, 6):
                 q[j] -= tau[j] * ik[j]
             hyp += tau[0] * ik[0]
+        if self._generic:
+            return
         qL[0] -= hyp
         qR[0] -= hyp
 

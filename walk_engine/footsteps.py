@@ -34,7 +34,8 @@ from walk_engine.params import GaitParams
 
 #: Semi-axes of the per-step displacement ellipsoid: backward dx [m], sideways dy [m] (average per
 #: step; the moving foot travels twice that), turn dθ [rad] (average per step). The forward semi-axis
-#: is the gait's ``step_length``.
+#: is the gait's ``step_length``. Lengths are the NAO's; other robots scale them by their
+#: ``GaitParams.length_scale`` (here and in :data:`STEP_CHANGE`).
 STEP_LIMITS = {"dx_back": 0.03, "dy": 0.025, "dtheta": 0.15}
 #: Largest change of (dx [m], dy [m], dθ [rad]) from one step to the next (start/stop ramps).
 STEP_CHANGE = (0.02, 0.01, 0.10)
@@ -180,8 +181,9 @@ class FootstepPlanner:
         c = self.command
         vx = self.p.step_length / self.T if c.vx is None else c.vx
         d = np.array([vx * self.T, c.vy * self.T, c.wz * self.T])
-        ax = self.p.step_length if d[0] >= 0 else STEP_LIMITS["dx_back"]
-        semi = np.array([max(ax, 1e-9), STEP_LIMITS["dy"], STEP_LIMITS["dtheta"]])
+        k = type(self.p).length_scale  # 1 for the NAO; other robots' leg length / the NAO's
+        ax = self.p.step_length if d[0] >= 0 else STEP_LIMITS["dx_back"] * k
+        semi = np.array([max(ax, 1e-9), STEP_LIMITS["dy"] * k, STEP_LIMITS["dtheta"]])
         r = math.sqrt(float(np.sum((d / semi) ** 2)))
         return d / r if r > 1.0 else d
 
@@ -209,7 +211,8 @@ class FootstepPlanner:
     def _plan_step(self, swing: str) -> dict:
         """Advance the centre for a step of ``swing`` and return the new foot poses."""
         want = self.target_step()
-        ch = np.array(STEP_CHANGE)
+        k = type(self.p).length_scale
+        ch = np.array([STEP_CHANGE[0] * k, STEP_CHANGE[1] * k, STEP_CHANGE[2]])
         self.step = self.step + np.clip(want - self.step, -ch, ch)
         dx, dy, dth = (float(v) for v in self.step)
         sgn = 1.0 if swing == "L" else -1.0
@@ -318,6 +321,26 @@ class SupportPolygon:
     back: float = -0.050
     inner: float = 0.03878
     outer: float = 0.05002
+
+    @classmethod
+    def for_robot(cls, robot) -> "SupportPolygon":
+        """The sole rectangle of ``robot`` (a ``robots.RobotModel``): the NAO's defaults, else the
+        left foot's collision box seen from the ``l_sole`` frame.
+
+        Raises:
+            ValueError: the left foot has no collision box.
+        """
+        if robot.name == "nao_h25":
+            return cls()
+        sole = robot.frames["l_sole"]
+        foot = next(j for j in robot.joints if j.child == sole.link)
+        boxes = [g for g in foot.geoms if g.kind == "box" and g.collide]
+        if not boxes:
+            raise ValueError(f"{robot.name}: the left foot {sole.link} has no collision box")
+        g = boxes[0]
+        cx, cy = g.xyz[0] - sole.offset[0], g.xyz[1] - sole.offset[1]
+        return cls(front=cx + g.size[0] / 2, back=cx - g.size[0] / 2, inner=-(cy - g.size[1] / 2),
+                   outer=cy + g.size[1] / 2)
 
     def foot_corners(self, side: str, pose) -> np.ndarray:
         """Corners (4, 2) [m] of the sole of foot ``side`` at ``pose`` (x, y, yaw)."""

@@ -335,22 +335,27 @@ class BodyModel:
         self.robot = robot
         self.total_mass = robot.total_mass
         self._joints = []
+        self._rpy = {}
         for j in robot.joints:
             ax = np.array(j.axis, float)
             self._joints.append((j.parent, j.child, np.array(j.xyz, float), ax / np.linalg.norm(ax),
                                  j.inertial.mass, np.array(j.inertial.com, float)))
+            if any(j.rpy):  # joint origins rotated (URDFs of example-robot-data; the NAO has none)
+                self._rpy[j.child] = rot_z(j.rpy[2]) @ rot_y(j.rpy[1]) @ rot_x(j.rpy[0])
         self._root = robot.root
         self._root_mass = robot.root_inertial.mass
         self._root_com = np.array(robot.root_inertial.com, float)
 
     def com(self, q: np.ndarray) -> np.ndarray:
-        """Whole-body CoM [m] in the torso frame for joint angles ``q`` [rad], shape (24,)
+        """Whole-body CoM [m] in the torso frame for joint angles ``q`` [rad], shape (n joints,)
         (``robot.joint_names`` order). Returns shape (3,)."""
         frames = {self._root: (np.zeros(3), np.eye(3))}
         acc = self._root_mass * self._root_com
         for (parent, child, xyz, axis, mass, com), a in zip(self._joints, q):
             p0, R0 = frames[parent]
             p = p0 + R0 @ xyz
+            if child in self._rpy:
+                R0 = R0 @ self._rpy[child]
             R = R0 @ _axis_rot(axis, float(a))
             frames[child] = (p, R)
             acc = acc + mass * (p + R @ com)

@@ -30,10 +30,12 @@ handles the box; N. Hansen et al., pycma, https://github.com/CMA-ES/pycma).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 from common.files import atomic_write_text
@@ -105,9 +107,11 @@ def spec(name: str) -> ParamSpec:
     return _SPEC[name]
 
 
-def _check(values: dict) -> None:
-    """Raise one ValueError naming every missing, extra, non-numeric, non-finite or out-of-bounds value."""
+def _check(values: dict, specs: tuple[ParamSpec, ...] = SPECS) -> None:
+    """Raise one ValueError naming every missing, extra, non-numeric, non-finite or out-of-bounds value
+    (bounds of ``specs``: the NAO's, or a robot's, :func:`params_for`)."""
     problems = []
+    by_name = {s.name: s for s in specs}
     missing = [n for n in NAMES if n not in values]
     extra = [str(k) for k in values if k not in _SPEC]
     if missing:
@@ -126,7 +130,7 @@ def _check(values: dict) -> None:
         if not math.isfinite(v):
             nonfinite.append(f"{n}={v}")
             continue
-        s = _SPEC[n]
+        s = by_name[n]
         if not (s.low - 1e-12 <= v <= s.high + 1e-12):
             oob.append(f"{n}={v:g} {s.unit} not in [{s.low:g}, {s.high:g}]")
     if bad_type:
@@ -144,9 +148,17 @@ class GaitParams:
     """The 16 gait parameters θ of the walk engine (SI units; see :data:`SPECS` for units,
     θ0 and bounds). Construction validates: every value finite and within its bounds.
 
+    The class is the NAO's; :func:`params_for` gives each other robot a subclass with its own θ0
+    and bounds (class attributes ``robot``, ``specs``, ``length_scale``).
+
     Raises:
         ValueError: naming each non-finite, non-numeric or out-of-bounds parameter.
     """
+
+    robot: ClassVar[str] = "nao_h25"
+    specs: ClassVar[tuple[ParamSpec, ...]] = SPECS
+    #: leg length of the robot / the NAO's (the footstep planner scales its step limits by it)
+    length_scale: ClassVar[float] = 1.0
 
     step_period: float = _SPEC["step_period"].init
     double_support_ratio: float = _SPEC["double_support_ratio"].init
@@ -167,7 +179,7 @@ class GaitParams:
 
     def __post_init__(self) -> None:
         vals = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        _check(vals)
+        _check(vals, type(self).specs)
         for k, v in vals.items():
             object.__setattr__(self, k, float(v))
 
@@ -186,7 +198,7 @@ class GaitParams:
         """
         if not isinstance(d, dict):
             raise ValueError(f"gait parameters must be a mapping of the 16 names to numbers, got {type(d).__name__}")
-        _check(d)
+        _check(d, cls.specs)
         return cls(**{n: float(d[n]) for n in NAMES})
 
     def to_dict(self) -> dict[str, float]:
@@ -211,7 +223,8 @@ class GaitParams:
 
     def to_vector(self) -> np.ndarray:
         """Normalised vector u = (θ - low) / (high - low) in [0, 1]^16 (the space CMA-ES searches)."""
-        return (self.to_array() - LOW) / (HIGH - LOW)
+        low, high = _bounds(type(self))
+        return (self.to_array() - low) / (high - low)
 
     @classmethod
     def from_vector(cls, u, clip: bool = False) -> "GaitParams":
@@ -238,7 +251,8 @@ class GaitParams:
             if out:
                 raise ValueError(f"normalised gait vector outside [0, 1]: {', '.join(out)}")
             u = np.clip(u, 0.0, 1.0)
-        return cls.from_array(LOW + u * (HIGH - LOW))
+        low, high = _bounds(cls)
+        return cls.from_array(low + u * (high - low))
 
     def replace(self, **changes) -> "GaitParams":
         """A copy with some parameters changed (validated)."""
@@ -251,7 +265,9 @@ class GaitParams:
     def save(self, path: str | os.PathLike) -> str:
         """Write ``{"params": {name: value}, "units": {...}}`` as JSON atomically; returns the path."""
         path = os.fspath(path)
-        doc = {"params": self.to_dict(), "units": {s.name: s.unit for s in SPECS}}
+        doc = {"params": self.to_dict(), "units": {s.name: s.unit for s in self.specs}}
+        if self.robot != "nao_h25":
+            doc["robot"] = self.robot
         atomic_write_text(path, json.dumps(doc, indent=2) + "\n")
         return path
 
@@ -273,6 +289,8 @@ class GaitParams:
             raise ValueError(f"{path!r} is not valid JSON: {exc}") from None
         except OSError as exc:
             raise ValueError(f"cannot read {path!r}: {exc}") from None
+        if isinstance(doc, dict) and doc.get("robot", cls.robot) != cls.robot:
+            raise ValueError(f"{path!r} holds gait parameters of robot {doc['robot']!r}, not {cls.robot!r}")
         if isinstance(doc, dict) and isinstance(doc.get("params"), dict):
             doc = doc["params"]
         if not isinstance(doc, dict):
@@ -284,5 +302,91 @@ class GaitParams:
 
     def describe(self) -> str:
         """A human-readable table: name, value, unit, bounds."""
-        rows = [f"{s.name:24s} {getattr(self, s.name):10.4g} {s.unit:12s} [{s.low:g}, {s.high:g}]" for s in SPECS]
+        rows = [f"{s.name:24s} {getattr(self, s.name):10.4g} {s.unit:12s} [{s.low:g}, {s.high:g}]" for s in self.specs]
         return "\n".join(rows)
+
+
+def _bounds(cls) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) arrays (16,) of a :class:`GaitParams` class (the module's LOW/HIGH for the NAO)."""
+    if cls.specs is SPECS:
+        return LOW, HIGH
+    return np.array([s.low for s in cls.specs]), np.array([s.high for s in cls.specs])
+
+
+#: How each parameter scales with the robot (:func:`scaled_specs`): stride lengths with the leg,
+#: offsets inside the footprint with the foot.
+LENGTHS = ("step_length", "step_height")
+FOOT_LENGTHS = ("com_x_offset", "zmp_offset_x", "zmp_offset_y")
+TIMES = ("step_period", "gyro_ankle_pitch_gain", "gyro_ankle_roll_gain", "gyro_hip_roll_gain")
+#: The NAO's reference geometry [m] (robots.nao): leg length hip -> sole, hip width, and the
+#: whole-body CoM above the soles in the crouch and straight (zero-leg) poses.
+NAO_LEG_LENGTH = 0.085 + 0.100 + 0.1029 + 0.04511 - 0.085
+NAO_HIP_WIDTH = 0.100
+NAO_FOOT_LENGTH = 0.160
+NAO_COM_CROUCH, NAO_COM_STRAIGHT = 0.263, 0.283
+
+
+def scaled_specs(leg_length: float, hip_width: float, com_crouch: float, com_straight: float,
+                 foot_length: float = NAO_FOOT_LENGTH) -> tuple[tuple[ParamSpec, ...], float]:
+    """The 16 parameters for another robot, scaled from the NAO's (dynamic similarity: lengths with
+    the leg length ratio λ, times with sqrt(λ) at equal Froude number v²/(g l); Alexander & Jayes,
+    "A dynamic similarity hypothesis for the gaits of quadrupedal mammals", J. Zool. 201, 1983,
+    the scaling biped walk engines inherit):
+
+    * stride lengths (:data:`LENGTHS`) × λ; offsets inside the footprint (:data:`FOOT_LENGTHS`:
+      where the CoM and the ZMP sit over the sole) × the foot length ratio (a G1's sole is 1.1× the
+      NAO's, its leg 2.8×: offsets scaled with the leg put the CoM at the toes); the step period and
+      the gyro gains (rad per rad/s) × sqrt(λ);
+    * ``feet_spacing``: θ0 = the robot's hip width, bounds at the NAO's ratios (0.85, 1.4);
+    * ``com_height``: placed between the robot's crouch and straight-leg CoM heights as the NAO's
+      θ0 and bounds are (θ0 = crouch + 0.1·(straight − crouch), low = crouch − 1.9·(...), high =
+      crouch + 0.6·(...));
+    * angles and ratios unchanged.
+
+    Args:
+        leg_length: hip joint to sole with straight legs [m]; hip_width: distance between the soles
+            with straight legs [m]; com_crouch, com_straight: CoM height above the soles [m] in the
+            two poses; foot_length: sole length [m].
+
+    Returns:
+        (specs, λ).
+    """
+    lam = leg_length / NAO_LEG_LENGTH
+    span = com_straight - com_crouch
+    out = []
+    for s in SPECS:
+        if s.name in LENGTHS or s.name in FOOT_LENGTHS:
+            k = lam if s.name in LENGTHS else foot_length / NAO_FOOT_LENGTH
+            s = dataclasses.replace(s, init=s.init * k, low=s.low * k, high=s.high * k)
+        elif s.name in TIMES:
+            k = math.sqrt(lam)
+            s = dataclasses.replace(s, init=s.init * k, low=s.low * k, high=s.high * k)
+        elif s.name == "feet_spacing":
+            s = dataclasses.replace(s, init=hip_width, low=hip_width * 0.85, high=hip_width * 1.4)
+        elif s.name == "com_height":
+            s = dataclasses.replace(s, init=com_crouch + 0.1 * span, low=com_crouch - 1.9 * span,
+                                    high=com_crouch + 0.6 * span, note="scaled from the NAO's (scaled_specs)")
+        out.append(dataclasses.replace(s, init=float(f"{s.init:.6g}"), low=float(f"{s.low:.6g}"),
+                                       high=float(f"{s.high:.6g}")))
+    return tuple(out), lam
+
+
+@functools.lru_cache(maxsize=None)
+def _params_class(robot_name: str, specs: tuple[ParamSpec, ...], lam: float) -> type:
+    fields = [(s.name, float, dataclasses.field(default=s.init)) for s in specs]
+    cls = dataclasses.make_dataclass(f"GaitParams_{robot_name}", fields, bases=(GaitParams,), frozen=True)
+    cls.robot, cls.specs, cls.length_scale = robot_name, specs, lam
+    cls.__doc__ = f"The 16 gait parameters for {robot_name} (θ0 and bounds scaled from the NAO's: scaled_specs)."
+    return cls
+
+
+def params_for(robot) -> type[GaitParams]:
+    """The :class:`GaitParams` class of ``robot`` (a ``robots.RobotModel``): :class:`GaitParams` itself
+    for the NAO, else a subclass whose θ0 and bounds come from :func:`scaled_specs` with the robot's
+    geometry (leg length, hip width and CoM heights measured on its model; ``walk_engine.legs``)."""
+    if robot.name == "nao_h25":
+        return GaitParams
+    from walk_engine.legs import robot_geometry  # lazy: legs imports the robot kinematics
+
+    specs, lam = scaled_specs(*robot_geometry(robot))
+    return _params_class(robot.name, specs, lam)
