@@ -36,7 +36,8 @@ from walk_engine.batch import BatchWalkEngine
 
 
 def _batchable(task: dict) -> bool:
-    return task["world"] in ("sim", "grounded", "identified")
+    # BatchWalkEngine vectorizes the NAO's closed-form legs; other robots' episodes run one by one
+    return task["world"] in ("sim", "grounded", "identified") and task.get("robot", "nao") == "nao"
 
 
 def _group_key(task: dict) -> tuple:

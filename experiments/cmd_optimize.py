@@ -66,6 +66,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", help="run episodes on a Ray cluster (e.g. auto, local, ray://host:10001)")
     p.add_argument("--rerun", action="store_true", help="log selected candidates and real trials as .rrd files")
+    A.add_robot(p)
     return p
 
 
@@ -91,7 +92,8 @@ def run(args) -> dict:
             raise FileNotFoundError(f"--resume: no run directory {run_dir!r}")
     else:
         cfg = config_from_args(args)
-        run_dir = args.out or os.path.join("runs", f"optimize_{'-'.join(cfg.methods)}_{time.strftime('%Y%m%d-%H%M%S')}")
+        who = "" if cfg.robot == "nao" else f"{cfg.robot}_"
+        run_dir = args.out or os.path.join("runs", f"optimize_{who}{'-'.join(cfg.methods)}_{time.strftime('%Y%m%d-%H%M%S')}")
 
     def log(msg: str) -> None:  # progress and stage lines on stderr (stdout: the table, or the JSON)
         print(msg, file=sys.stderr, flush=True)

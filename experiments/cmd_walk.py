@@ -14,7 +14,7 @@ import time
 
 from experiments.fitness import EPISODE_SECONDS, run_walk
 from terrain import TERRAINS, check_amplitude, make
-from walk_engine import GaitParams, WalkCommand
+from walk_engine import WalkCommand, params_for
 import experiments.argtypes as A
 
 
@@ -38,11 +38,18 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--vy", type=A.real(-0.5, 0.5, unit='m/s'), default=0.0, help="sideways speed command [m/s], + left")
     p.add_argument("--wz", type=A.real(-2.0, 2.0, unit='rad/s'), default=0.0, help="turn rate command [rad/s], + left")
     p.add_argument("--record", type=A.out_file, metavar="PATH", help="write the rollout as a Parquet recording")
+    A.add_robot(p)
     return p
 
 
 def run(args) -> dict:
-    params = GaitParams.load(args.params) if args.params else GaitParams()
+    from robots import get_robot  # lazy: g1/talos parse their URDFs
+
+    robot = get_robot(args.robot)
+    P = params_for(robot)
+    params = P.load(args.params) if args.params else P.initial()
+    if args.world == "identified" and args.robot != "nao":
+        raise ValueError("--world identified models the NAO only (sgatwalk diagnose identifies the NAO's physics)")
     if args.world != "real" and args.profile is not None:
         raise ValueError("--profile applies to the real world only (use --world real)")
     if (args.world == "identified") != bool(args.report):
@@ -62,9 +69,9 @@ def run(args) -> dict:
         env = IdentifiedSimEnv.from_reports(args.report, terrain=None if terrain in (None, "flat") else terrain)
     t0 = time.perf_counter()
     rec, res = run_walk(params, world=args.world, seed=args.seed, seconds=args.seconds, profile=profile,
-                        terrain=terrain, command=command, env=env)
+                        terrain=terrain, command=command, env=env, robot=robot if env is None else None)
     wall = time.perf_counter() - t0
-    out = {"world": args.world, "seed": args.seed, **res.to_dict(),
+    out = {"robot": args.robot, "world": args.world, "seed": args.seed, **res.to_dict(),
            "profile": rec.meta.get("profile"),
            "terrain": rec.meta["terrain"]["name"] if rec.meta.get("terrain") else "flat",
            "params": params.to_dict(), "wall_s": wall}
@@ -78,7 +85,8 @@ def run(args) -> dict:
 def format_walk(out: dict) -> str:
     """The line ``sgatwalk walk`` prints, from its ``--json`` result."""
     fall = f"fell ({out['fall_reason']} at {out['fall_time_s']:.2f} s)" if out["fell"] else "did not fall"
-    return (f"{out['world']} seed {out['seed']} [{out['terrain']}{', profile ' + out['profile'] if out['profile'] else ''}]: "
+    who = f"{out['robot']}, " if out.get("robot", "nao") != "nao" else ""
+    return (f"{who}{out['world']} seed {out['seed']} [{out['terrain']}{', profile ' + out['profile'] if out['profile'] else ''}]: "
             f"speed {out['speed_cm_s']:.2f} cm/s, {fall}, drift {100 * out['drift_m']:.1f} cm, "
             f"distance {100 * out['distance_m']:.1f} cm, fitness {out['fitness']:.2f}"
             + (f"  -> {out['recording']}" if out.get("recording") else ""))

@@ -21,7 +21,7 @@ import numpy as np
 from common.defaults import EPISODE_SECONDS, FALL_PENALTY  # noqa: F401 - re-exported: experiments.fitness.FALL_PENALTY
 from envs import Recording, make_world, rollout
 from terrain import Heightfield
-from walk_engine import GaitParams, WalkCommand, WalkEngine
+from walk_engine import GaitParams, WalkCommand, WalkEngine, params_for
 
 
 
@@ -100,7 +100,7 @@ def walk_meta(params: GaitParams, command: WalkCommand | None = None) -> dict:
 
 def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0,
              seconds: float = EPISODE_SECONDS, profile="real", terrain: str | Heightfield | None = None,
-             command: WalkCommand | None = None, env=None) -> tuple[Recording, WalkResult]:
+             command: WalkCommand | None = None, env=None, robot=None) -> tuple[Recording, WalkResult]:
     """One walking episode of the ZMP engine with ``params`` and its fitness.
 
     Args:
@@ -113,6 +113,7 @@ def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0
             only) or a :class:`terrain.Heightfield`.
         command: walking command (default: forward at the gait's speed).
         env: an existing world (or wrapper, e.g. ``sgat.GroundedEnv``) to reuse.
+        robot: the ``robots.RobotModel`` of a new world (default the NAO); params default to its θ0.
 
     Returns:
         (recording with ``meta["params"]`` and ``meta["command"]``, :class:`WalkResult`). A fall
@@ -121,12 +122,14 @@ def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0
     Raises:
         ValueError: unknown world/profile/terrain, non-positive seconds, params not GaitParams.
     """
-    params = params or GaitParams()
+    if env is not None:
+        robot = env.unwrapped.robot
+    params = params or (params_for(robot)() if robot is not None else GaitParams())
     if not isinstance(params, GaitParams):
         raise ValueError(f"params must be a GaitParams, got {type(params).__name__}")
     own = env is None
     if own:
-        kw = {}
+        kw = {} if robot is None else {"robot": robot}
         if world == "real":
             kw.update(profile=profile, terrain="lumpy" if terrain is None else terrain)
         elif world == "sim":

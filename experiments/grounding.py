@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 
-from robots import nao_h25
+from robots import get_robot
 from sgat.grounding import GroundingConfig, GroundingFit, fit_grounding, recording_transitions
 from sgat.transformer import GroundingSpec
 
@@ -39,10 +39,10 @@ GROUNDING_STATES = ("legs", "legs+imu")
 
 
 def grounding_spec(env, state: str = "legs", history: int = 1) -> GroundingSpec:
-    """The NAO's grounding spec for a NAO env (``envs.NaoEnv`` or a wrapper of one): the state is
-    ``q.*`` and ``dq.*`` of the 12 leg joints (``"legs+imu"``: plus ``gyro.*``, ``angle.roll``,
-    ``angle.pitch``), the grounded actions are the 11 actuated leg targets (the shared HipYawPitch
-    counts once); arms and head pass through.
+    """The grounding spec of a world (``envs.NaoEnv`` or a wrapper of one): the state is ``q.*`` and
+    ``dq.*`` of the 12 leg joints (``"legs+imu"``: plus ``gyro.*``, ``angle.roll``, ``angle.pitch``),
+    the grounded actions are the actuated leg targets (the NAO: 11, its shared HipYawPitch counts
+    once; G1, Talos: 12); arms, waist and head pass through.
 
     Raises:
         ValueError: unknown state variant, or history < 1.
@@ -57,15 +57,17 @@ def grounding_spec(env, state: str = "legs", history: int = 1) -> GroundingSpec:
         names += ["gyro.x", "gyro.y", "gyro.z", "angle.roll", "angle.pitch"]
     acts = list(robot.actuated_joint_names)
     return GroundingSpec.from_names(base.layout.names, names, acts, [j for j in acts if j in legs],
-                                    base.action_space.low, base.action_space.high, history, f"nao-{state}")
+                                    base.action_space.low, base.action_space.high, history,
+                                    f"{'nao' if robot.name == 'nao_h25' else robot.name}-{state}")
 
 
 @functools.lru_cache(maxsize=8)
-def nao_spec(state: str = "legs", history: int = 1) -> GroundingSpec:
-    """The NAO grounding spec (:func:`grounding_spec`) of the MuJoCo sim."""
+def nao_spec(state: str = "legs", history: int = 1, robot: str = "nao") -> GroundingSpec:
+    """The grounding spec (:func:`grounding_spec`) of the MuJoCo sim of ``robot`` (a
+    ``robots.get_robot`` name; default the NAO)."""
     from envs import NaoSimEnv  # lazy: loads the engines
 
-    env = NaoSimEnv()
+    env = NaoSimEnv(get_robot(robot))
     try:
         return grounding_spec(env, state, history)
     finally:
@@ -73,7 +75,7 @@ def nao_spec(state: str = "legs", history: int = 1) -> GroundingSpec:
 
 
 def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str = "legs", history: int = 1,
-                      seed: int = 0) -> GroundingFit:
+                      seed: int = 0, robot: str = "nao") -> GroundingFit:
     """Fit the action transformer of a grounding step on NAO walk recordings.
 
     Args:
@@ -81,6 +83,7 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
         sim_recs: walks in the sim the transformer will ground, with exploration noise on the
             applied leg targets (``app`` columns) and the clean commands (``cmd``).
         cfg: the model settings; ``state``/``history``: the grounding state (:func:`nao_spec`).
+        robot: the robot the recordings are of (``robots.get_robot`` name; default the NAO).
         seed: seed of the fits.
 
     Raises:
@@ -88,7 +91,7 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
     """
     from envs import ObservationLayout  # lazy: loads the engines
 
-    spec = nao_spec(state, history)
-    layout = ObservationLayout(nao_h25())
+    spec = nao_spec(state, history, robot)
+    layout = ObservationLayout(get_robot(robot))
     return fit_grounding(recording_transitions(real_recs, layout, spec), recording_transitions(sim_recs, layout, spec),
                          spec, cfg, seed=seed)

@@ -74,7 +74,8 @@ from experiments.grounding import (DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_
 from experiments.identify import calibrate_engines, identify_real
 from sgat.algorithm import grounding_loop, new_progress
 from sgat.grounding import GroundingConfig
-from walk_engine import GaitParams
+from robots import ROBOT_NAMES, get_robot
+from walk_engine import params_for
 from walk_engine.params import NAMES as PARAM_NAMES
 
 METHODS = ("sgat", "gat", "none", "ane", "identified", "hybrid", "real")
@@ -113,9 +114,14 @@ class OptimizeConfig:
     aggregate: bool = True
     seed: int = 0
     params: str | None = None
+    robot: str = "nao"
 
     def validate(self) -> None:
         """Raises ValueError naming the bad setting."""
+        if self.robot not in ROBOT_NAMES:
+            raise ValueError(f"unknown robot {self.robot!r}; choose from {', '.join(ROBOT_NAMES)}")
+        if self.robot != "nao" and any(m in ("identified", "hybrid") for m in self.methods):
+            raise ValueError("methods identified and hybrid model the NAO only (sgatwalk diagnose identifies the NAO)")
         bad = [m for m in self.methods if m not in METHODS]
         if bad or not self.methods:
             raise ValueError(f"unknown method(s) {bad or '(none given)'}; choose from {', '.join(METHODS)}")
@@ -193,6 +199,11 @@ class Optimizer:
             os.makedirs(os.path.join(run_dir, sub), exist_ok=True)
         self.state: dict = {}
 
+    @property
+    def params_class(self):
+        """The run robot's :class:`walk_engine.GaitParams` class (``walk_engine.params_for``)."""
+        return params_for(get_robot(self.cfg.robot))
+
     # ---------------------------------------------------------------- checkpoint
     @property
     def state_path(self) -> str:
@@ -236,6 +247,8 @@ class Optimizer:
     def _tasks(self, world: str, theta, seeds, **kw) -> list[dict]:
         base = {"world": world, "theta": list(map(float, theta)), "seconds": self.cfg.seconds,
                 "profile": self.cfg.profile}
+        if self.cfg.robot != "nao":
+            base["robot"] = self.cfg.robot
         return [{**base, "seed": s, **kw} for s in seeds]
 
     def _map(self, tasks: list[dict], desc: str) -> list[dict]:
@@ -286,7 +299,7 @@ class Optimizer:
             used[f"{_theta_key(list(r.meta['params'].values()))}_{r.meta['seed']}"] = len(r) * r.meta["control_dt"]
         t0 = time.perf_counter()
         fit = fit_nao_grounding(real, sim, self.grounding_config(method), state=cfg.grounding_state,
-                                history=cfg.history, seed=cfg.seed + step)
+                                history=cfg.history, seed=cfg.seed + step, robot=cfg.robot)
         fit.transformer.save(out)
         self.log(f"[{method} step {step}] grounded on {fit.info['n_real']} real / {fit.info['n_sim']} sim transitions "
                  f"(forward val loss {fit.forward_report.val_loss:.3f}, inverse {fit.inverse_report.val_loss:.3f}, "
@@ -324,7 +337,7 @@ class Optimizer:
         cfg = self.cfg
         world, kw = self._world_kw(method, step)
         if prog.get("es") is None:
-            x0 = GaitParams.from_array(prog["policy"]).to_vector()
+            x0 = self.params_class.from_array(prog["policy"]).to_vector()
             r = cfg.trust_region  # the models are fitted on θ_i's data: search near θ_i
             lo, hi = np.clip(x0 - r, 0.0, 1.0), np.clip(x0 + r, 0.0, 1.0)
             opts = {"bounds": [lo.tolist(), hi.tolist()], "popsize": cfg.popsize, "verbose": -9, "verb_log": 0, "verb_disp": 0,
@@ -334,7 +347,7 @@ class Optimizer:
         es = prog["es"]
         n_ep = cfg.popsize * cfg.episodes_per_candidate
         est = expected_generation_seconds(n_ep, cfg.seconds, getattr(self.ex, "workers", 1),
-                                          batchable=world in ("sim", "grounded") and "identified" not in kw)
+                                          batchable=world in ("sim", "grounded") and "identified" not in kw and self.cfg.robot == "nao")
         self.log(f"[{method} step {step}] a generation is {cfg.popsize} candidates x {cfg.episodes_per_candidate} "
                  f"episode(s) of {cfg.seconds:g} s in the {world} world: expected ~{est['expected_s']:.0f} s on "
                  f"{getattr(self.ex, 'workers', 1)} worker(s) (physics limit {est['physics_limit_s']:.0f} s, bare mj_step "
@@ -347,7 +360,7 @@ class Optimizer:
             t0 = time.perf_counter()
             X = es.ask()
             seeds = _seeds(cfg, 4, step, gen, n=cfg.episodes_per_candidate)
-            thetas = [GaitParams.from_vector(x, clip=True).to_array() for x in X]
+            thetas = [self.params_class.from_vector(x, clip=True).to_array() for x in X]
             tasks = [t for th in thetas for t in self._tasks(world, th, seeds, **kw)]
             res = self._map(tasks, f"gen {gen}")
             k = cfg.episodes_per_candidate
@@ -389,8 +402,8 @@ class Optimizer:
         es = prog["es"]
         world, kw = self._world_kw(method, step)
         names = ["CMA-ES mean", "best candidate", "incumbent θ_i"]
-        cands = [GaitParams.from_vector(es.result.xfavorite, clip=True).to_array(),
-                 GaitParams.from_vector(es.result.xbest, clip=True).to_array(), np.asarray(prog["policy"], dtype=float)]
+        cands = [self.params_class.from_vector(es.result.xfavorite, clip=True).to_array(),
+                 self.params_class.from_vector(es.result.xbest, clip=True).to_array(), np.asarray(prog["policy"], dtype=float)]
         seeds = _seeds(cfg, 5, step, n=cfg.select_episodes)
         res = self._map([t for th in cands for t in self._tasks(world, th, seeds, **kw)], "select")
         n = len(seeds)
@@ -450,7 +463,7 @@ class Optimizer:
         else:
             if os.path.exists(self.state_path):
                 raise ValueError(f"{self.run_dir!r} already holds a run; use --resume {self.run_dir} or another --out")
-            theta0 = (GaitParams.load(self.cfg.params) if self.cfg.params else GaitParams.initial()).to_array()
+            theta0 = (self.params_class.load(self.cfg.params) if self.cfg.params else self.params_class.initial()).to_array()
             self.state = {"config": self.cfg.to_dict(), "cma_version": cma.__version__, "theta0": theta0.tolist(),
                           "rows": [], "evals": [], "generations": [],
                           "progress": {m: {**new_progress(theta0.tolist()), "es": None, "gen": 0}
@@ -485,7 +498,7 @@ class Optimizer:
         """Real trials of θ_{i+1}, its θ file and its Table I row; then the CMA-ES state is dropped."""
         theta = np.asarray(theta, dtype=float)
         ev = self._evaluate(theta, step, method)
-        GaitParams.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
+        self.params_class.from_array(theta).save(os.path.join(self.run_dir, "thetas", f"{method}_step{step}.json"))
         self.state["rows"].append({"method": method, "step": step, **ev, "theta": theta.tolist(),
                                    "select_scores": prog.get("select_scores")})
         if ev["trials"]:

@@ -20,6 +20,7 @@ key                   meaning
                       or the base of a grounded one: hybrid grounding)
 ``identified_terms``  False: leave the deterministic effects out (ablation; default True)
 ``identified_ground`` False: leave the identified uneven ground out (ablation; default True)
+``robot``             ``robots.get_robot`` name (default ``"nao"``; the identified worlds are the NAO's)
 ``record``            return the recording too (columns + metadata)
 ``meta``              extra metadata for the recording
 ====================  =====================================================================
@@ -36,6 +37,7 @@ import time
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
+from robots import get_robot
 
 _WORLDS: dict = {}
 _TRANSFORMERS: dict = {}
@@ -64,25 +66,29 @@ def _world(task: dict):
     if world == "identified" and not reports:
         raise ValueError("the identified world needs the diagnosis reports (task['identified'])")
     parts = (bool(task.get("identified_terms", True)), bool(task.get("identified_ground", True)))
-    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports, parts)
+    robot_name = task.get("robot", "nao")
+    if reports and robot_name != "nao":
+        raise ValueError("the identified worlds model the NAO only")
+    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports, parts, robot_name)
     if key not in _WORLDS:
         if len(_WORLDS) >= 8:  # a fidelity sweep builds one identified world per draw: keep a few
             for env in _WORLDS.values():
                 env.close()
             _WORLDS.clear()
+        robot = get_robot(robot_name)
         if world == "real":
-            _WORLDS[key] = NaoRealEnv(profile=task.get("profile", "real"), terrain=task.get("terrain", "lumpy"))
+            _WORLDS[key] = NaoRealEnv(robot, profile=task.get("profile", "real"), terrain=task.get("terrain", "lumpy"))
         elif reports:
             from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
 
             terms, rms = load_identified(list(reports))
             _WORLDS[key] = IdentifiedSimEnv(terms if parts[0] else {}, rms if parts[1] else 0.0)
         else:
-            _WORLDS[key] = NaoSimEnv()
+            _WORLDS[key] = NaoSimEnv(robot)
     env = _WORLDS[key]
     sigma = float(task.get("action_noise", 0.0) or 0.0)
     if sigma > 0:
-        env = ActionMismatch(env, noise_std=sigma, index=nao_spec().action_index, seed=task["seed"])
+        env = ActionMismatch(env, noise_std=sigma, index=nao_spec(robot=robot_name).action_index, seed=task["seed"])
     if world == "grounded":
         env = GroundedEnv(env, _transformer(task["transformer"]))
     return env
@@ -97,10 +103,10 @@ def run_episode(task: dict) -> dict:
         ``task["record"]``. A NaN or exploding simulation counts as a fall ("unstable").
     """
     from experiments.fitness import run_walk  # lazy: loads the engines
-    from walk_engine import GaitParams  # lazy: scipy
+    from walk_engine import params_for  # lazy: scipy
 
     env = _world(task)
-    params = GaitParams.from_array(np.asarray(task["theta"], dtype=float))
+    params = params_for(env.unwrapped.robot).from_array(np.asarray(task["theta"], dtype=float))
     rec, res = run_walk(params, seed=int(task["seed"]), seconds=float(task.get("seconds", EPISODE_SECONDS)), env=env)
     return episode_result(task, rec, res)
 
@@ -135,7 +141,8 @@ def fit_grounding_task(task: dict) -> dict:
     cfg["hidden"] = tuple(cfg["hidden"])
     fit = fit_nao_grounding([Recording.from_parquet(p) for p in task["real"]],
                             [Recording.from_parquet(p) for p in task["sim"]], GroundingConfig(**cfg),
-                            state=task.get("state", "legs"), history=int(task.get("history", 1)), seed=int(task["seed"]))
+                            state=task.get("state", "legs"), history=int(task.get("history", 1)), seed=int(task["seed"]),
+                            robot=task.get("robot", "nao"))
     fit.transformer.save(task["out"])
     return {"out": task["out"], "forward_val": float(np.mean([r.val_loss for r in fit.forward_reports])),
             "inverse_val": float(np.mean([r.val_loss for r in fit.inverse_reports])), "n_real": fit.info["n_real"],
