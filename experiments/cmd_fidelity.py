@@ -33,8 +33,8 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("fidelity", help="how well each training world predicts real gait fitness",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = FidelityConfig()
-    p.add_argument("--worlds", nargs="+", default=list(DEFAULT_WORLDS), metavar="WORLD",
-                   help=f"training worlds (default: {' '.join(DEFAULT_WORLDS)})")
+    p.add_argument("--worlds", nargs="+", default=None, metavar="WORLD",
+                   help=f"training worlds (default: {' '.join(DEFAULT_WORLDS)}; other robots than the NAO: without identified, hybrid)")
     p.add_argument("--gaits", type=A.count(0, 1000), default=d.gaits, help=f"gaits drawn around θ0 besides θ0 (default {d.gaits})")
     p.add_argument("--box", type=A.real(0.0, 1.0, open_lo=True), default=d.box,
                    help=f"half-width of the box the gaits are drawn in, normalized (default {d.box}: optimize's trust region)")
@@ -52,6 +52,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--out", type=A.out_dir, help="run directory (default runs/fidelity-seed<seed>)")
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", help="run episodes on a Ray cluster")
+    A.add_robot(p)
     return p
 
 
@@ -59,12 +60,15 @@ def run(args) -> dict:
     for p in args.params:
         if not os.path.isfile(p):
             raise FileNotFoundError(f"--params: no such file {p!r}")
-    cfg = FidelityConfig(worlds=tuple(args.worlds), gaits=args.gaits, box=args.box, params=tuple(args.params),
+    worlds = args.worlds
+    if worlds is None:  # the identified worlds are the NAO's (sgatwalk diagnose identifies the NAO)
+        worlds = [w for w in DEFAULT_WORLDS if args.robot == "nao" or w not in ("identified", "hybrid")]
+    cfg = FidelityConfig(worlds=tuple(worlds), gaits=args.gaits, box=args.box, params=tuple(args.params),
                          real_trials=args.real_trials, data_seeds=args.data_seeds, episodes=args.episodes,
                          seconds=args.seconds, profile=args.profile,
-                         identify_budget_s=args.identify_budget, seed=args.seed)
+                         identify_budget_s=args.identify_budget, seed=args.seed, robot=args.robot)
     cfg.validate()
-    out = args.out or os.path.join("runs", f"fidelity-seed{args.seed}")
+    out = args.out or os.path.join("runs", f"fidelity-{'' if args.robot == 'nao' else args.robot + '-'}seed{args.seed}")
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731 - progress on stderr, also with --json
     with make_executor(args.workers, args.ray_address) as ex:
         res = Fidelity(cfg, out, ex, log=log, progress=not args.json).run()

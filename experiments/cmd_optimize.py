@@ -104,6 +104,7 @@ def run(args) -> dict:
     finally:
         ex.close()
     res["wall_s"] = time.perf_counter() - t0
+    res["robot"] = Optimizer.load_state(run_dir)["config"].get("robot", "nao")
     if not args.json:
         print(res["table"], flush=True)
         print(f"run directory: {run_dir} ({res['wall_s'] / 60:.1f} min)", flush=True)

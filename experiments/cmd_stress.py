@@ -44,6 +44,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--rerun", action="store_true", help="write .rrd files of the worst trial per policy and level")
     p.add_argument("--workers", type=A.workers, default=None, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", default=None, help="run the episodes on a Ray cluster (auto, local, ray://...)")
+    A.add_robot(p)
     return p
 
 
@@ -53,7 +54,7 @@ def run(args) -> dict:
     terrain = args.terrain if (args.terrain is not None or args.sweep is not None) else "lumpy"
     cfg = make_config(args.params, world=args.world, terrain=terrain, amplitude=args.amplitude,
                       trials=args.trials, seed=args.seed, profile=args.profile, sweep=args.sweep,
-                      seconds=args.seconds)
+                      seconds=args.seconds, robot=args.robot)
     log = None if args.json else print
     res = run_stress(cfg, args.out, workers=args.workers, ray_address=args.ray_address, rerun=args.rerun,
                      progress=not args.json, log=log)

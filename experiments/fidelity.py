@@ -62,7 +62,8 @@ from experiments.identify import calibrate_engines, identify_real
 from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
 from experiments.tasks import fit_grounding_task
 from sgat.grounding import GroundingConfig
-from walk_engine import GaitParams
+from robots import ROBOT_NAMES, get_robot
+from walk_engine import params_for
 
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid")
@@ -213,9 +214,12 @@ class FidelityConfig:
     identify_budget_s: float = 60.0
     bootstrap: int = 1000
     seed: int = 0
+    robot: str = "nao"
 
     def validate(self) -> list[WorldSpec]:
         """The parsed worlds; raises ValueError naming the bad setting."""
+        if self.robot not in ROBOT_NAMES:
+            raise ValueError(f"unknown robot {self.robot!r}; choose from {', '.join(ROBOT_NAMES)}")
         for name in ("real_trials", "data_seeds", "episodes", "bootstrap"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -234,6 +238,8 @@ class FidelityConfig:
         if self.identify_fixed_logs < 2 or self.identify_floating_logs < 0:
             raise ValueError("identification needs >= 2 fixed-base logs (a held-out split) and >= 0 stepping logs")
         specs = [parse_world(w) for w in self.worlds]
+        if self.robot != "nao" and any(sp.kind in ("identified", "hybrid") for sp in specs):
+            raise ValueError("the identified and hybrid worlds model the NAO only (sgatwalk diagnose identifies the NAO)")
         names = [s.name for s in specs]
         if not specs or len(set(names)) != len(names) or len({s.key for s in specs}) != len(specs):
             raise ValueError(f"worlds must be a non-empty list without repeats (also under other names), got {names}")
@@ -242,7 +248,18 @@ class FidelityConfig:
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
         d["worlds"], d["params"] = list(self.worlds), list(self.params)
+        if d["robot"] == "nao":  # runs from before --robot keep their config
+            del d["robot"]
         return d
+
+    @property
+    def params_class(self):
+        """The robot's :class:`walk_engine.GaitParams` class (``walk_engine.params_for``)."""
+        return params_for(get_robot(self.robot))
+
+    def task_robot(self) -> dict:
+        """What every episode task of this run carries about the robot (nothing for the NAO)."""
+        return {} if self.robot == "nao" else {"robot": self.robot}
 
 
 # ------------------------------------------------------------------------------------------ run
@@ -287,15 +304,16 @@ class Fidelity:
             with open(path) as f:
                 return json.load(f)["gaits"]
         cfg = self.cfg
-        th0 = GaitParams.initial()
+        P = cfg.params_class
+        th0 = P.initial()
         u0 = th0.to_vector()
         rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, _PANEL]))
         gaits = [{"name": "theta0", "theta": th0.to_array().tolist()}]
         for i in range(cfg.gaits):
             u = np.clip(u0 + rng.uniform(-cfg.box, cfg.box, len(u0)), 0.0, 1.0)
-            gaits.append({"name": f"box{i:02d}", "theta": GaitParams.from_vector(u).to_array().tolist()})
+            gaits.append({"name": f"box{i:02d}", "theta": P.from_vector(u).to_array().tolist()})
         for p in cfg.params:
-            gaits.append({"name": os.path.splitext(os.path.basename(p))[0], "theta": GaitParams.load(p).to_array().tolist()})
+            gaits.append({"name": os.path.splitext(os.path.basename(p))[0], "theta": P.load(p).to_array().tolist()})
         atomic_write_text(path, json.dumps({"gaits": gaits}, indent=1))
         return gaits
 
@@ -303,10 +321,11 @@ class Fidelity:
     def _data_gaits(self, n: int, draw: int) -> list[list[float]]:
         """The gaits grounding walks are made with: θ0, and ``n - 1`` gaits drawn in the box (their
         own seed stream, not the panel's)."""
-        u0 = GaitParams.initial().to_vector()
+        P = self.cfg.params_class
+        u0 = P.initial().to_vector()
         rng = np.random.default_rng(np.random.SeedSequence([self.cfg.seed, _DATA_GAITS, draw]))
         us = [u0] + [np.clip(u0 + rng.uniform(-self.cfg.box, self.cfg.box, len(u0)), 0, 1) for _ in range(n - 1)]
-        return [GaitParams.from_vector(u).to_array().tolist() for u in us]
+        return [P.from_vector(u).to_array().tolist() for u in us]
 
     def _walks(self, world: str, seeds: list[int], tag: str, thetas: list, **kw) -> list[str]:
         """Recordings in ``world`` on ``seeds`` under ``data/`` (cached), walk j with gait
@@ -318,7 +337,7 @@ class Fidelity:
         todo = [(j, s, p) for j, (s, p) in enumerate(zip(seeds, paths)) if not os.path.exists(p)]
         if todo:
             tasks = [{"world": world, "theta": thetas[j % len(thetas)], "seed": s, "seconds": self.cfg.seconds,
-                      "profile": self.cfg.profile, "record": True, **kw} for j, s, _ in todo]
+                      "profile": self.cfg.profile, "record": True, **self.cfg.task_robot(), **kw} for j, s, _ in todo]
             for (_, s, p), r in zip(todo, map_episodes(self.ex, tasks)):
                 Recording(*r["recording"]).to_parquet(p)
         return paths
@@ -381,7 +400,8 @@ class Fidelity:
                     mdir = self._model_dir(s, d)
                     fits.append({"real": real, "sim": sim, "out": mdir, "config": s.grounding.to_dict(),
                                  "state": s.state, "history": s.history,
-                                 "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d})
+                                 "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d,
+                                 **cfg.task_robot()})
                     info["transformer"] = mdir
                     info["real_walks"] = len(real)
                     info["real_seconds"] = float(sum(_rec_seconds(p) for p in real))
@@ -401,7 +421,7 @@ class Fidelity:
         cfg = self.cfg
         n = 1 if spec.kind == "sim" else cfg.episodes
         seeds = _seeds(cfg.seed, _WORLD, n=n)  # the same episode seeds for every world, draw and gait
-        base = {"seconds": cfg.seconds, "profile": cfg.profile}
+        base = {"seconds": cfg.seconds, "profile": cfg.profile, **cfg.task_robot()}
         if spec.kind in ("sim", "ane"):
             base["world"] = "sim"
             if spec.kind == "ane":
@@ -426,7 +446,7 @@ class Fidelity:
                   f"{', '.join(s.name for s in self.specs)}; {cfg.data_seeds} draws of the real data")
         real_seeds = _seeds(cfg.seed, _REAL, n=cfg.real_trials)
         self._run([{"world": "real", "theta": g["theta"], "seed": s, "seconds": cfg.seconds, "profile": cfg.profile,
-                    "key": f"real|{g['name']}|t{j}"} for g in gaits for j, s in enumerate(real_seeds)], "real trials")
+                    "key": f"real|{g['name']}|t{j}", **cfg.task_robot()} for g in gaits for j, s in enumerate(real_seeds)], "real trials")
         prep = self.prepare()
         tasks = []
         for spec in self.specs:

@@ -65,7 +65,8 @@ from common.parse import parse_values
 from experiments.executors import make_executor
 from experiments.stats import wilson_interval
 from terrain import make
-from walk_engine import GaitParams
+from robots import get_robot
+from walk_engine import params_for
 
 #: Terrain kinds a stress run sweeps (``terrain.TERRAINS`` without "flat": amplitude 0 is flat).
 TERRAIN_KINDS = ("lumpy", "fractal", "steps", "slope")
@@ -141,9 +142,10 @@ class Policy:
         return hashlib.sha1(json.dumps([float(v) for v in self.theta]).encode()).hexdigest()[:12]
 
 
-def load_policies(paths: Sequence[str | os.PathLike | None] | None) -> list[Policy]:
+def load_policies(paths: Sequence[str | os.PathLike | None] | None, robot: str = "nao") -> list[Policy]:
     """Gait parameter files -> policies labelled by file stem (θ0 as ``theta0`` for None or an
-    empty list); repeated labels get ``_2``, ``_3`` ...
+    empty list); repeated labels get ``_2``, ``_3`` ... The files are read as ``robot``'s gait
+    parameters (``walk_engine.params_for``).
 
     Raises:
         FileNotFoundError: a file that does not exist; ValueError: unreadable or invalid JSON
@@ -151,13 +153,14 @@ def load_policies(paths: Sequence[str | os.PathLike | None] | None) -> list[Poli
     """
     out: list[Policy] = []
     seen: dict[str, int] = {}
+    P = params_for(get_robot(robot))
     for p in (list(paths) if paths else [None]):
         if p is None:
-            params, label, src = GaitParams.initial(), "theta0", "θ0"
+            params, label, src = P.initial(), "theta0", "θ0"
         else:
             if os.path.isdir(p):
                 raise ValueError(f"cannot read gait parameters from {os.fspath(p)!r}: it is a directory")
-            params, label, src = GaitParams.load(p), Path(p).stem, os.fspath(p)
+            params, label, src = P.load(p), Path(p).stem, os.fspath(p)
         seen[label] = seen.get(label, 0) + 1
         if seen[label] > 1:
             label = f"{label}_{seen[label]}"
@@ -190,6 +193,7 @@ class StressConfig:
         seed: run seed (terrain and episode seeds, :func:`trial_seeds`).
         profile: real-world effect profile (``RealProfile.to_dict()``); None in the sim.
         seconds: episode length [s].
+        robot: ``robots.get_robot`` name (default the NAO).
     """
 
     policies: list[Policy]
@@ -203,8 +207,13 @@ class StressConfig:
     profile: dict | None
     seconds: float = EPISODE_SECONDS
 
+    robot: str = "nao"
+
     def invariants(self) -> dict:
-        return {k: getattr(self, k) for k in _INVARIANTS}
+        d = {k: getattr(self, k) for k in _INVARIANTS}
+        if self.robot != "nao":  # runs from before --robot (the NAO) keep their invariants
+            d["robot"] = self.robot
+        return d
 
     def to_dict(self) -> dict:
         d = self.invariants()
@@ -228,7 +237,7 @@ class StressConfig:
 def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, world: str = "real",
                 terrain: str | None = "lumpy", amplitude: str | float | Sequence[float] | None = None,
                 trials: int = 20, seed: int = 0, profile: str | dict | None = None, sweep: str | None = None,
-                seconds: float = EPISODE_SECONDS) -> StressConfig:
+                seconds: float = EPISODE_SECONDS, robot: str = "nao") -> StressConfig:
     """Validate the inputs of a stress run (bad input raises before any episode runs).
 
     Args:
@@ -242,6 +251,7 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
         profile: real-world profile name or dict (default ``"real"``); not allowed in the sim.
         sweep: ``EFFECT=lo:hi:n`` (:func:`parse_sweep`): sweep a real-world effect instead of terrain.
         seconds: episode length [s].
+        robot: ``robots.get_robot`` name; its "real" profile is scaled to its actuators.
 
     Raises:
         ValueError or FileNotFoundError naming what is wrong: unknown world/terrain/profile/effect,
@@ -261,7 +271,8 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
         raise ValueError(f"--seconds must be a positive number, got {seconds}")
     if world == "sim" and profile is not None:
         raise ValueError("--profile applies to the real world only (use --world real)")
-    prof = get_profile(profile or "real") if world == "real" else None
+    robot_model = get_robot(robot)
+    prof = get_profile(profile or "real", robot_model) if world == "real" else None
 
     if sweep is None:
         if terrain is None:
@@ -286,10 +297,10 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
             if len(vals) != 1 or vals[0] < 0:
                 raise ValueError(f"--amplitude: a sweep over {axis} takes one terrain amplitude >= 0, got {amplitude!r}")
             amp = vals[0]
-    policies = load_policies(params)
+    policies = load_policies(params, robot)
     return StressConfig(policies=policies, world=world, axis=axis, terrain=terrain, amplitude=amp,
                         levels=levels, trials=int(trials), seed=int(seed),
-                        profile=prof.to_dict() if prof is not None else None, seconds=float(seconds))
+                        profile=prof.to_dict() if prof is not None else None, seconds=float(seconds), robot=robot)
 
 
 def plan_tasks(cfg: StressConfig) -> list[dict]:
@@ -315,7 +326,7 @@ def plan_tasks(cfg: StressConfig) -> list[dict]:
                 tasks.append({"policy": p.label, "theta": list(p.theta), "theta_hash": p.theta_hash,
                               "world": cfg.world, "profile": profile, "terrain": terr, "level": level,
                               "trial": j, "terrain_seed": ts, "episode_seed": es, "seconds": cfg.seconds,
-                              "record": False})
+                              "record": False, **({"robot": cfg.robot} if cfg.robot != "nao" else {})})
     return tasks
 
 
@@ -332,16 +343,17 @@ def terrain_of(kind: str, seed: int, amplitude: float):
     return make(kind, seed=int(seed), amplitude=float(amplitude))
 
 
-def _world(world: str, profile: dict | None):
+def _world(world: str, profile: dict | None, robot: str = "nao"):
     from envs import NaoRealEnv, NaoSimEnv  # lazy: loads the engines
 
-    key = (world, json.dumps(profile, sort_keys=True))
+    key = (world, json.dumps(profile, sort_keys=True), robot)
     if key not in _ENVS:
         if len(_ENVS) >= 4:  # an effect sweep makes one world per value: keep a few
             for env in _ENVS.values():
                 env.close()
             _ENVS.clear()
-        _ENVS[key] = NaoRealEnv(profile=profile, terrain="lumpy") if world == "real" else NaoSimEnv()
+        r = get_robot(robot)
+        _ENVS[key] = NaoRealEnv(r, profile=profile, terrain="lumpy") if world == "real" else NaoSimEnv(r)
     return _ENVS[key]
 
 
@@ -365,12 +377,12 @@ def run_trial(task: dict) -> dict:
     from experiments.fitness import run_walk  # lazy: loads the engines
 
     t0 = time.perf_counter()
-    env = _world(task["world"], task["profile"])
+    env = _world(task["world"], task["profile"], task.get("robot", "nao"))
     hf = None
     if task["terrain"] is not None:
         hf = terrain_of(*task["terrain"])
         env = _with_terrain(env, hf)
-    params = GaitParams.from_array(np.asarray(task["theta"], dtype=float))
+    params = params_for(env.unwrapped.robot).from_array(np.asarray(task["theta"], dtype=float))
     rec, res = run_walk(params, seed=int(task["episode_seed"]), seconds=float(task["seconds"]), env=env)
     return _trial_row(task, hf, env.unwrapped, rec, res, time.perf_counter() - t0)
 
@@ -393,8 +405,9 @@ def _trial_row(task: dict, hf, base, rec, res, wall_s: float) -> dict:
 
 
 def _batch_key(task: dict):
-    """Sim-world trials of the same duration run in lock-step (:func:`run_trials`)."""
-    return ("sim", float(task["seconds"])) if task["world"] == "sim" else None
+    """Sim-world trials of the same duration run in lock-step (:func:`run_trials`; the batched walk
+    engine is the NAO's, other robots' trials run one by one)."""
+    return ("sim", float(task["seconds"])) if task["world"] == "sim" and task.get("robot", "nao") == "nao" else None
 
 
 def run_trials(tasks: list[dict]) -> list[dict]:
@@ -654,7 +667,8 @@ def _check_resume(out: Path, cfg: StressConfig) -> list[dict]:
         except (OSError, json.JSONDecodeError) as exc:
             raise ValueError(f"{cfg_path}: cannot read the settings of the run there ({exc})") from None
         new = json.loads(json.dumps(cfg.invariants()))
-        diff = [k for k in _INVARIANTS if old.get(k) != new[k]]
+        diff = [k for k in (*_INVARIANTS, "robot") if old.get(k, "nao" if k == "robot" else None)
+                != new.get(k, "nao" if k == "robot" else None)]
         if diff:
             raise ValueError(f"{out} holds a stress run with other settings ({', '.join(diff)}); "
                              "give another --out or remove it")
