@@ -31,6 +31,7 @@ from envs.wrappers import ActionMismatch
 from experiments.fitness import walk_fitness, walk_meta
 from experiments.grounding import nao_spec
 from experiments.tasks import _transformer, _world, episode_result, run_episode
+from robots import get_robot
 from walk_engine import GaitParams
 from walk_engine.batch import BatchWalkEngine
 
@@ -239,18 +240,30 @@ def map_episodes(ex, tasks: list[dict], progress=None, batch_size: int | None = 
 BATCHED_RATIO = 0.8
 
 
-def expected_generation_seconds(episodes: int, seconds: float, workers: int, batchable: bool = True) -> dict:
+#: Bare ``mj_step`` time / walk time of one episode at a time (:func:`expected_generation_seconds`).
+SINGLE_RATIO = {"closed-form": 0.4, "numerical": 0.15}
+
+
+def expected_generation_seconds(episodes: int, seconds: float, workers: int, batchable: bool = True,
+                                robot: str = "nao") -> dict:
     """How long a generation of ``episodes`` episodes of ``seconds`` should take on ``workers`` cores.
 
-    Times bare ``mj_step`` of the sim holding its stance for 100 control steps in this process
-    (about 20 ms), scales it to every control step of every episode (none falling), and divides by
-    the workers: the physics limit. The expectation is that divided by :data:`BATCHED_RATIO` for
-    worlds that run batched, by 0.4 for the others (one episode at a time).
+    Times bare ``mj_step`` of the sim of ``robot`` holding its stance for 100 control steps in this
+    process (about 20 ms), scales it to every control step of every episode (none falling), and
+    divides by the workers: the physics limit. The expectation is that divided by
+    :data:`BATCHED_RATIO` for worlds that run batched, by :data:`SINGLE_RATIO` for the others (one
+    episode at a time): 0.4 where the legs have a closed-form IK (the NAO, Talos), 0.15 where the
+    walk engine iterates a numerical one (the G1; θ0's 7.5 s sim episode against bare ``mj_step`` of
+    its own actions).
 
     Returns:
         ``{"physics_limit_s", "expected_s", "bare_step_us"}``.
     """
-    env = NaoSimEnv()
+    from walk_engine.legs import LegChain  # lazy: only to ask whether the legs are closed-form
+
+    r = get_robot(robot)
+    analytic = robot == "nao" or LegChain(r, "L").analytic
+    env = NaoSimEnv(r)
     env.reset(seed=0)
     m, d = env.model, env.data
     mujoco.mj_step(m, d, nstep=env.n_substeps)
@@ -261,5 +274,6 @@ def expected_generation_seconds(episodes: int, seconds: float, workers: int, bat
     env.close()
     steps = episodes * int(round(seconds / env.control_dt))
     limit = steps * per_step / max(1, workers)
-    return {"physics_limit_s": limit, "expected_s": limit / (BATCHED_RATIO if batchable else 0.4),
+    ratio = BATCHED_RATIO if batchable else SINGLE_RATIO["closed-form" if analytic else "numerical"]
+    return {"physics_limit_s": limit, "expected_s": limit / ratio,
             "bare_step_us": 1e6 * per_step}

@@ -6,9 +6,12 @@ Inputs, one of:
   real robot's log in the same schema (``envs/recording.py``);
 * a run directory (e.g. of ``sgatwalk optimize``): every ``*.parquet`` recording below it,
   recursively, labelled by the world in its metadata (other Parquet files are skipped);
-* nothing: a live rollout in each world of ``--world`` (sim, real, grounded) driven by the walk
-  engine with ``--params theta.json`` (default: the initial gait parameters) or holding
-  ``--pose``.
+* nothing: a live rollout of ``--robot`` (nao, g1, talos; default nao) in each world of
+  ``--world`` (sim, real, grounded; grounded: the NAO only) driven by the walk engine with
+  ``--params theta.json`` (default: the robot's initial gait parameters) or holding ``--pose``.
+
+With recordings the robot comes from each recording's metadata (all of one robot per file); the
+NAO is drawn from primitives, the G1 and Talos with their meshes (from example-robot-data).
 
 Writes one ``.rrd`` (``--save``, default ``sgatwalk.rrd``; headless, no viewer needed; open it
 with ``rerun sgatwalk.rrd``) or streams to a viewer (``--spawn``). ``--screenshot out.png`` also
@@ -43,8 +46,9 @@ def register(sub) -> argparse.ArgumentParser:
     live = p.add_argument_group("live rollout (when no PATH is given)")
     live.add_argument("--world", default="sim,real", help="comma-separated worlds: sim, real, grounded (default sim,real)")
     live.add_argument("--params", type=A.in_file, metavar="THETA.json", default=None,
-                      help="gait parameters for the walk engine (default: the initial θ0)")
-    live.add_argument("--pose", default=None, help="hold this pose instead of walking (zero, stand, crouch, deep_crouch)")
+                      help="gait parameters for the walk engine (default: the robot's initial θ0)")
+    live.add_argument("--pose", default=None,
+                      help="hold this pose instead of walking (zero, stand, crouch; the NAO also deep_crouch)")
     live.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise; default 0)")
     live.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help=f"rollout duration [s] (default {EPISODE_SECONDS:g})")
     live.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
@@ -52,6 +56,8 @@ def register(sub) -> argparse.ArgumentParser:
                       help="action transformer for the grounded world (sgat), when available")
     live.add_argument("--record", type=A.out_file, metavar="PATH", default=None,
                       help="also write the live recordings as Parquet; '{world}' in PATH is replaced")
+    A.add_robot(live)
+    p.set_defaults(robot=None)  # None: not given (nao for a live rollout; refused with recordings)
     return p
 
 
@@ -80,22 +86,32 @@ def _live(args) -> tuple[dict, dict, list[str]]:
             raise ValueError(f"unknown world {w!r}; choose from {', '.join(WORLDS)}")
     if len(set(worlds)) != len(worlds):
         raise ValueError(f"--world lists a world twice: {args.world!r}")
+    from robots import get_robot  # lazy: g1/talos parse their URDFs
+
+    robot = get_robot(args.robot or "nao")
+    if "grounded" in worlds and robot.name != "nao_h25":
+        raise ValueError(f"world 'grounded' is the NAO's only (its action transformers are fitted on the NAO); "
+                         f"drop it from --world for --robot {args.robot}")
+    if args.pose is not None and args.pose not in robot.poses:
+        raise ValueError(f"unknown pose {args.pose!r} for --robot {args.robot or 'nao'}; choose from "
+                         f"{', '.join(robot.poses)}")
     params = None
     if args.pose is None:
-        from walk_engine import GaitParams, WalkEngine  # lazy: scipy; keeps sgatwalk --help fast
+        from walk_engine import WalkEngine, params_for  # lazy: scipy; keeps sgatwalk --help fast
 
-        params = GaitParams.load(args.params) if args.params else GaitParams()
+        P = params_for(robot)
+        params = P.load(args.params) if args.params else P.initial()
     elif args.params:
         raise ValueError("give either --params (walk) or --pose (stand), not both")
     envs = {}
     try:
         for w in worlds:  # build all first: a bad world fails before any rollout runs
             if w == "real":
-                envs[w] = make_world("real", profile=args.profile)
+                envs[w] = make_world("real", robot=robot, profile=args.profile)
             elif w == "sim":
-                envs[w] = make_world("sim")
+                envs[w] = make_world("sim", robot=robot)
             else:
-                envs[w] = _grounded_env(make_world("sim"), args.transformer)
+                envs[w] = _grounded_env(make_world("sim", robot=robot), args.transformer)
         recs, terrains, notes = {}, {}, []
         for w, env in envs.items():
             robot = env.unwrapped.robot
@@ -129,7 +145,7 @@ def run(args) -> dict:
     skipped: list[str] = []
     terrains = None
     if args.inputs:
-        given = [a for a in ("params", "pose", "transformer", "record") if getattr(args, a)]
+        given = [a for a in ("params", "pose", "transformer", "record", "robot") if getattr(args, a)]
         if given:
             raise ValueError(f"--{given[0]} is for a live rollout; drop it or drop the recording paths")
         recs, skipped = find_recordings(args.inputs)

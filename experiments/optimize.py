@@ -347,7 +347,8 @@ class Optimizer:
         es = prog["es"]
         n_ep = cfg.popsize * cfg.episodes_per_candidate
         est = expected_generation_seconds(n_ep, cfg.seconds, getattr(self.ex, "workers", 1),
-                                          batchable=world in ("sim", "grounded") and "identified" not in kw and self.cfg.robot == "nao")
+                                          batchable=world in ("sim", "grounded") and "identified" not in kw and self.cfg.robot == "nao",
+                                          robot=self.cfg.robot)
         self.log(f"[{method} step {step}] a generation is {cfg.popsize} candidates x {cfg.episodes_per_candidate} "
                  f"episode(s) of {cfg.seconds:g} s in the {world} world: expected ~{est['expected_s']:.0f} s on "
                  f"{getattr(self.ex, 'workers', 1)} worker(s) (physics limit {est['physics_limit_s']:.0f} s, bare mj_step "

@@ -150,7 +150,16 @@ def _table1(res: dict) -> str:
 def _walk(res: dict) -> str:
     from experiments.cmd_walk import format_walk  # lazy: loads the engines
 
-    return f"```\n{format_walk(res)}\n```"
+    out = f"```\n{format_walk(res)}\n```"
+    if res.get("robot", "nao") != "nao":  # another robot's θ0 is scaled from the NAO's: show what it is
+        p = res["params"]
+        out += (f"\n\nIts θ0: step period {p['step_period']:.3f} s, step length {100 * p['step_length']:.1f} cm "
+                f"(speed {100 * p['step_length'] / p['step_period']:.1f} cm/s planned), feet spacing "
+                f"{100 * p['feet_spacing']:.1f} cm, CoM height {100 * p['com_height']:.1f} cm, step height "
+                f"{100 * p['step_height']:.1f} cm, CoM/ZMP offsets {100 * p['com_x_offset']:.1f}/"
+                f"{100 * p['zmp_offset_x']:.1f} cm, gyro gains {p['gyro_ankle_pitch_gain']:.3f}/"
+                f"{p['gyro_ankle_roll_gain']:.3f}/{p['gyro_hip_roll_gain']:.3f} s.")
+    return out
 
 
 def _stress(res: dict) -> str:

@@ -19,10 +19,14 @@ load (MuJoCo ``MjSpec.from_file``, PyBullet ``loadURDF``), so the two engines se
   face (the NAO's convention: the walk engine's ZMP offsets and footsteps refer to it).
   Mesh collisions elsewhere are dropped in both engines (the NAO has no self-collision either).
 * **PD gains per joint family** from the effort limit and the explicit-PD stability bound at the
-  physics step: kp = min(effort / 0.1 rad, 0.2 I/dt²), kd = min(2·0.8·sqrt(kp·I), 0.5 I/dt), where I
+  physics step: kp = min(effort / 0.1 rad, 2 I/dt²), kd = min(2·0.8·sqrt(kp·I), I/dt), where I
   is the joint's effective inertia 1/(M⁻¹)ᵢᵢ in the crouch pose (MuJoCo ``mj_fullM``), the smaller
   of the hanging robot's and the free-floating robot's (in flight the torso turns against the leg,
-  which lowers a hip's effective inertia below the hanging value), and the smallest of the family. The NAO's hand-set gains follow the same rule
+  which lowers a hip's effective inertia below the hanging value), and the smallest of the family.
+  Semi-implicit Euler keeps an undamped joint stable for ω·dt < 2 (kp·dt²/I < 4) and an explicit
+  damper for kd·dt/I < 2; these bounds keep half of that. The NAO's hand-set gains keep a tenth
+  (kp·dt²/I ≤ 0.2): with that margin the G1's light foot limits its ankle roll to 63 N m/rad, which
+  sags 0.25 rad under the body in single support. The NAO's hand-set gains follow the same rule
   (``robots.nao.GAINS``: a 0.1 rad error saturates the leg motors).
 * The IMU (``gyro``, ``accel`` frames) sits on the root link, whose frame is the base the worlds
   report (G1: ``imu_in_pelvis``; Talos: the root origin, its IMU being on the torso above two
@@ -49,7 +53,8 @@ from robots.nao import Frame, Geom, Inertial, JointSpec, RobotModel
 
 #: Max PD error [rad] that saturates a motor (the NAO's rule, ``robots.nao.GAINS``).
 SATURATING_ERROR = 0.1
-#: Explicit-PD stability bounds at the physics step (``robots.nao.GAINS``).
+#: Explicit-PD bounds at the physics step: kp·dt²/I and kd·dt/I (half the semi-implicit Euler
+#: stability limits 4 and 2, module docstring), and the damping ratio aimed at.
 KP_BOUND, KD_BOUND, DAMPING_RATIO = 2.0, 1.0, 0.8
 #: Fall threshold as a fraction of the root's height above the soles in the crouch pose (the NAO's
 #: 0.20 m is 0.64 of its 0.31 m).
@@ -315,8 +320,7 @@ def _family(name: str) -> str:
 
 def _gains(robot: RobotModel, physics_dt: float) -> dict[str, tuple[float, float]]:
     """Per-joint (kp, kd) by the rule of the module docstring (MuJoCo mass matrix, crouch pose,
-    fixed and floating base). Source of the bounds: explicit integration of a PD-controlled inertia is stable for
-    kp·dt²/I and kd·dt/I well below 1; NAO's gains (``robots.nao.GAINS``) use the same margins."""
+    fixed and floating base; bounds :data:`KP_BOUND`, :data:`KD_BOUND`)."""
     import mujoco  # lazy: robots stays importable without a physics engine (walk_engine's arrow)
 
     inertia = {n: math.inf for n in robot.joint_names}

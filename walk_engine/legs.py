@@ -52,6 +52,21 @@ def _axis_rot(a: np.ndarray, q: float) -> np.ndarray:
                      [z * x * C - y * s, z * y * C + x * s, c + z * z * C]])
 
 
+_EYE6 = np.eye(6)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (n, 3) arrays (``np.cross`` without its axis handling, which
+    costs more than the product for 3-vectors)."""
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
+def _jacobian(origins: np.ndarray, axes: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Geometric Jacobian (6, 6) of point ``p`` for revolute joints at ``origins`` with ``axes`` (6, 3)."""
+    return np.vstack([_cross(axes, p[None] - origins).T, axes.T])
+
+
 def _unit(v) -> tuple[float, float, float]:
     a = np.asarray(v, float)
     return tuple(a / np.linalg.norm(a))
@@ -110,16 +125,16 @@ class LegChain:
         self.analytic = self._kajita_form()
 
     # ------------------------------------------------------------------ forward
-    def frames(self, q) -> tuple[list[np.ndarray], list[np.ndarray], np.ndarray, np.ndarray]:
-        """Joint origins (6 × (3,)), joint axes (6 × (3,)) and the sole pose (p (3,), R (3, 3)) in the
-        root frame for leg angles ``q`` (6,) [rad]."""
+    def frames(self, q) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Joint origins (6, 3), joint axes (6, 3) and the sole pose (p (3,), R (3, 3)) in the root
+        frame for leg angles ``q`` (6,) [rad]."""
         p, R = np.zeros(3), np.eye(3)
-        origins, axes = [], []
-        for pi, Ri, a, qi in zip(self._p, self._R, self._a, q):
+        origins, axes = np.empty((6, 3)), np.empty((6, 3))
+        for i, (pi, Ri, a, qi) in enumerate(zip(self._p, self._R, self._a, q)):
             p = p + R @ pi
             R = R @ Ri
-            origins.append(p)
-            axes.append(R @ a)
+            origins[i] = p
+            axes[i] = R @ a
             R = R @ _axis_rot(a, float(qi))
         return origins, axes, p + R @ self._sole, R
 
@@ -131,11 +146,7 @@ class LegChain:
     def jacobian(self, q) -> np.ndarray:
         """Geometric Jacobian (6, 6) of the sole point (rows: linear, angular velocity; root frame)."""
         origins, axes, p, _ = self.frames(q)
-        J = np.empty((6, 6))
-        for i, (o, a) in enumerate(zip(origins, axes)):
-            J[:3, i] = np.cross(a, p - o)
-            J[3:, i] = a
-        return J
+        return _jacobian(origins, axes, p)
 
     # ------------------------------------------------------------------ inverse
     def ik(self, p_sole, R_sole, q0=None) -> np.ndarray:
@@ -156,15 +167,11 @@ class LegChain:
             origins, axes, p, R = self.frames(q)
             e = np.empty(6)
             e[:3] = p_sole - p
-            e[3:] = 0.5 * (np.cross(R[:, 0], R_sole[:, 0]) + np.cross(R[:, 1], R_sole[:, 1])
-                           + np.cross(R[:, 2], R_sole[:, 2]))
+            e[3:] = 0.5 * _cross(R.T, R_sole.T).sum(0)  # orientation error (small-angle, exact at 0)
             if np.abs(e).max() < IK_TOLERANCE:
                 break
-            J = np.empty((6, 6))
-            for i, (o, a) in enumerate(zip(origins, axes)):
-                J[:3, i] = np.cross(a, p - o)
-                J[3:, i] = a
-            q = q + J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(6), e)
+            J = _jacobian(origins, axes, p)
+            q = q + J.T @ np.linalg.solve(J @ J.T + lam2 * _EYE6, e)
         return q
 
     def _default_guess(self) -> np.ndarray:
@@ -217,7 +224,7 @@ class LegChain:
         neglected); a servo must supply the negative."""
         origins, axes, _, _ = self.frames(q)
         cop, force = np.asarray(cop, float), np.asarray(force, float)
-        return np.array([a @ np.cross(cop - o, force) for o, a in zip(origins, axes)])
+        return (axes * _cross(cop - origins, force[None])).sum(1)
 
 
 def robot_geometry(robot: RobotModel) -> tuple[float, float, float, float]:

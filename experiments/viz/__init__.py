@@ -17,11 +17,14 @@ entity                                      archetype         content
 ``/<label>``                                ViewCoordinates   static: right-handed, z up
 ``/<label>/terrain``                        Mesh3D            static: the heightfield (MuJoCo's triangle diagonal)
                                                               or a flat 6 m x 3 m quad at z = 0
-``/<label>/robot/<link>``                   Transform3D       world pose of each of the 25 links (own forward
+``/<label>/robot/<link>``                   Transform3D       world pose of each link (25 for the NAO; own forward
                                                               kinematics from ``q.*`` and ``gt.base``/``gt.quat``)
 ``/<label>/robot/<link>/geom``              Boxes3D,          static: the link's primitives (``RobotModel`` spec),
-                                            Capsules3D,       in the link frame
-                                            Ellipsoids3D
+                                            Capsules3D,       in the link frame (``geom/<kind>`` when a link has
+                                            Ellipsoids3D      several kinds)
+``/<label>/robot/<link>/mesh/<file>``       Transform3D,      static: each visual mesh of the link (G1, Talos; the
+                                            Asset3D           NAO has none): the geom's pose and scale in the link
+                                                              frame, the file's bytes (STL/OBJ/glTF) embedded
 ``/<label>/com``                            Points3D          measured (ground-truth) CoM ``gt.com.*``
 ``/<label>/com_trail``                      LineStrips3D      static: the whole CoM path
 ``/<label>/cop``                            Points3D          measured centre of pressure on the ground: ``gt.cop``
@@ -37,8 +40,9 @@ entity                                      archetype         content
 ``/<label>/events``                         TextLog           start (world, seed, terrain ...) and fall messages
 ``/<label>/ts/joints/<joint>/{cmd,app,q}``  Scalars           commanded, applied (after grounding; absent when the
                                                               recording has no ``app.*``) and measured angle [rad]
-                                                              of each of the 12 leg joints (``RHipYawPitch``'s
-                                                              command is ``LHipYawPitch``'s: one motor)
+                                                              of each of the 12 leg joints (the NAO's
+                                                              ``RHipYawPitch`` command is ``LHipYawPitch``'s: one
+                                                              motor)
 ``/<label>/ts/gyro/{x,y,z}``                Scalars           torso gyro [rad/s] (if present)
 ``/<label>/ts/angle/{roll,pitch}``          Scalars           torso roll/pitch estimate [rad] (if present)
 ``/<label>/ts/fsr/{L,R}``                   Scalars           foot normal force [N] (if present)
@@ -46,10 +50,16 @@ entity                                      archetype         content
 ``/legend``                                 TextDocument      static: how to read the views (markdown)
 ==========================================  ================  ===================================================
 
+The robot is the one named by each recording's ``meta["robot"]`` (``nao_h25``, ``g1``, ``talos``;
+one robot per file). The default camera and the footstep boxes follow the robot's size and sole.
+A G1 recording embeds its 35 STL meshes (about 9 MB in the .rrd per recording), a Talos one its 47
+(25 files, about 5 MB).
+
 Diagnostics convention (optional, shown when present): columns ``plan.com.x|y|z`` (planned CoM,
 world [m]), ``plan.zmp.x|y`` (ZMP reference), metadata ``footsteps``: a list of ``{"x", "y",
 "yaw", "side" ("L"/"R"), "t_start", "t_end"}`` where (x, y, yaw) is the planned sole frame
-(``l_sole``/``r_sole``: the ankle projected 45.11 mm down, world [m], [rad]).
+(``l_sole``/``r_sole``: the ankle projected onto the sole's bottom face, 45.11 mm down on the NAO;
+world [m], [rad]).
 
 Terrain heights are not stored in recordings; :func:`terrain_for` rebuilds them from the
 generator spec in the metadata (``terrain["spec"]``, :func:`terrain.from_spec`), or for older
@@ -68,18 +78,20 @@ Rerun and w, x, y, z in recordings.
 """
 
 from experiments.viz.inputs import _PART, _is_recording_file, check_recording, find_recordings, sanitize_label
-from experiments.viz.kinematics import _measured_cop, _xyzw, forward_kinematics, frame_positions, link_poses
+from experiments.viz.kinematics import (_measured_cop, _robot_scale, _sole_geometry, _xyzw, forward_kinematics,
+                                        frame_positions, link_poses)
 from experiments.viz.plan import footsteps_from_phases, plan_from_engine
-from experiments.viz.rerun_log import (EYE_OFFSET, LEGEND_MD, SOLE_BOX, SOLE_CENTER, _Logger, build_blueprint,
-                                       log_recording, log_rollouts_to_rrd)
+from experiments.viz.rerun_log import (EYE_OFFSET, LEGEND_MD, MESH_MEDIA_TYPES, SOLE_BOX, SOLE_CENTER, _Logger,
+                                       build_blueprint, log_recording, log_rollouts_to_rrd)
 from experiments.viz.screenshot import _quiet_child_output, screenshot_rrd, tempfile_dir
 from experiments.viz.style import PALETTE, STEP_TIMELINE, TIMELINE, WORLD_COLORS, _color, _pick_color
 from experiments.viz.terrain import FLAT_SIZE, _ground_z, _terrain_matches, terrain_for, terrain_mesh
 
-__all__ = ["EYE_OFFSET", "FLAT_SIZE", "LEGEND_MD", "PALETTE", "SOLE_BOX", "SOLE_CENTER", "STEP_TIMELINE", "TIMELINE",
-           "WORLD_COLORS", "build_blueprint", "check_recording", "find_recordings", "footsteps_from_phases",
-           "forward_kinematics", "frame_positions", "link_poses", "log_recording", "log_rollouts_to_rrd",
-           "plan_from_engine", "sanitize_label", "screenshot_rrd", "tempfile_dir", "terrain_for", "terrain_mesh",
+__all__ = ["EYE_OFFSET", "FLAT_SIZE", "LEGEND_MD", "MESH_MEDIA_TYPES", "PALETTE", "SOLE_BOX", "SOLE_CENTER",
+           "STEP_TIMELINE", "TIMELINE", "WORLD_COLORS", "build_blueprint", "check_recording", "find_recordings",
+           "footsteps_from_phases", "forward_kinematics", "frame_positions", "link_poses", "log_recording",
+           "log_rollouts_to_rrd", "plan_from_engine", "sanitize_label", "screenshot_rrd", "tempfile_dir", "terrain_for",
+           "terrain_mesh",
            # private helpers, re-exported for tests and benchmarks (benchmarks/bench_rerun.py: _xyzw)
            "_Logger", "_PART", "_color", "_ground_z", "_is_recording_file", "_measured_cop", "_pick_color",
-           "_quiet_child_output", "_terrain_matches", "_xyzw"]
+           "_quiet_child_output", "_robot_scale", "_sole_geometry", "_terrain_matches", "_xyzw"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import re
 
@@ -14,21 +15,54 @@ from experiments.viz.style import WORLD_COLORS
 def check_recording(rec: Recording, label: str = "recording") -> None:
     """Refuse what cannot be shown.
 
+    Any robot of :data:`robots.ROBOT_NAMES` can be drawn (``meta["robot"]``: ``nao_h25``, ``g1``,
+    ``talos``); the recording's joint columns must be that robot's.
+
     Raises:
-        RecordingError: a recording of another robot, an empty recording, or one that fails
+        RecordingError: a recording of an unknown robot, one without any joint angle column
+            (``q.<joint>``) of its robot (e.g. a NAO log labelled ``talos``), a robot whose model cannot
+            be loaded (``example-robot-data`` missing), an empty recording, or one that fails
             :meth:`envs.Recording.validate`; the message starts with ``label``.
     """
     if not isinstance(rec, Recording):
         raise RecordingError(f"{label}: expected an envs.Recording, got {type(rec).__name__}")
-    if rec.meta.get("robot") != "nao_h25":
-        raise RecordingError(f"{label}: recording is of robot {rec.meta.get('robot')!r}; "
-                             "the visualizer draws the 'nao_h25' model only")
+    name = rec.meta.get("robot")
+    try:
+        robot = rec.robot
+    except RecordingError as exc:  # unknown name: "recording is of robot ...; this package models ..."
+        raise RecordingError(f"{label}: {exc}") from None
+    except ModuleNotFoundError as exc:
+        raise RecordingError(f"{label}: recording is of robot {name!r}, whose model cannot be loaded: {exc}") from None
+    mismatch = _robot_mismatch(name, robot, rec.columns)
+    if mismatch:
+        raise RecordingError(f"{label}: {mismatch}")
     if "t" not in rec.columns or len(rec.columns["t"]) == 0:
         raise RecordingError(f"{label}: recording is empty (0 rows)")
     try:
         rec.validate()
     except RecordingError as exc:
         raise RecordingError(f"{label}: {exc}") from None
+
+
+def _robot_mismatch(name, robot, columns) -> str | None:
+    """Why columns ``columns`` (names) are not a recording of ``robot`` (named ``name`` in the
+    metadata): none of its ``q.<joint>`` columns; None when at least one is there."""
+    if any(f"q.{j}" in columns for j in robot.joint_names):
+        return None
+    return (f"recording is of robot {name!r} but has none of its joint angle columns (q.{robot.joint_names[0]}, "
+            "...); is it a recording of another robot?")
+
+
+def _mismatch_in_file(path: str) -> str | None:
+    """:func:`_robot_mismatch` of a Parquet recording read cheaply (schema only); None when the
+    file, its metadata or its robot cannot be read (the loader names that problem)."""
+    try:
+        schema = pq.read_schema(path)
+        meta = json.loads((schema.metadata or {})[META_KEY])
+        robot = Recording({}, meta).robot
+    except Exception:  # noqa: BLE001 - anything unreadable: Recording.from_parquet's message stands
+        return None
+    return _robot_mismatch(meta.get("robot"), robot, set(schema.names))
 
 
 _PART = re.compile(r"[^A-Za-z0-9_.\-]+")
@@ -70,8 +104,8 @@ def find_recordings(paths: list[str]) -> tuple[dict[str, Recording], list[str]]:
     Raises:
         FileNotFoundError: a path that does not exist; a directory without recordings.
         RecordingError: a file given explicitly that is not a valid recording, a malformed
-            recording in a directory, a recording of another robot, an empty recording
-            (the message names the file).
+            recording in a directory, a recording of an unknown robot or with another robot's
+            columns, an empty recording (the message names the file).
     """
     found: list[tuple[str, str]] = []  # (file, name used for the label)
     skipped: list[str] = []
@@ -96,7 +130,7 @@ def find_recordings(paths: list[str]) -> tuple[dict[str, Recording], list[str]]:
         try:
             rec = Recording.from_parquet(f)
         except RecordingError as exc:
-            msg = str(exc)
+            msg = _mismatch_in_file(f) or str(exc)  # another robot's columns: say so, not "lacks q.*"
             raise RecordingError(msg if f in msg else f"{f}: {msg}") from None
         check_recording(rec, f)
         loaded.append((f, name, rec))

@@ -17,13 +17,14 @@ def forward_kinematics(robot: RobotModel, q: np.ndarray, base_pos: np.ndarray, b
                        ) -> tuple[tuple[str, ...], np.ndarray, np.ndarray]:
     """World poses of all links from joint angles and the floating-base pose.
 
-    Uses the URDF spec of ``robot`` (joint origins ``xyz`` with zero rpy, hinge ``axis``), the same
-    kinematics both physics engines import.
+    Uses the URDF spec of ``robot`` (joint origins ``xyz`` [m] and ``rpy`` [rad], hinge ``axis`` in
+    the joint frame), the same kinematics both physics engines import: child pose = parent pose
+    * translation(xyz) * rotation(rpy) * rotation(axis, q).
 
     Args:
         robot: the model; its joints must list parents before children.
-        q: joint angles [rad], shape (T, 24) in ``robot.joint_names`` order.
-        base_pos: root link (torso) origin in the world [m], shape (T, 3).
+        q: joint angles [rad], shape (T, n) in ``robot.joint_names`` order (n = 24 for the NAO).
+        base_pos: root link origin (the NAO's torso, the G1's pelvis) in the world [m], shape (T, 3).
         base_quat: root orientation, unit quaternions (w, x, y, z), shape (T, 4).
 
     Returns:
@@ -52,6 +53,8 @@ def forward_kinematics(robot: RobotModel, q: np.ndarray, base_pos: np.ndarray, b
         ip, ic = index[j.parent], index[j.child]
         qp = quat[:, ip]
         pos[:, ic] = pos[:, ip] + quat_rotate(qp, np.broadcast_to(np.asarray(j.xyz, float), (T, 3)))
+        if any(j.rpy):  # joint origin rotation (URDF ``<origin rpy>``); the NAO has none
+            qp = quat_mul(qp, quat_from_rpy(*j.rpy))
         axis = np.asarray(j.axis, float)
         axis = axis / np.linalg.norm(axis)
         half = 0.5 * q[:, k]
@@ -114,6 +117,47 @@ def _measured_cop(rec: Recording, robot, links, pos, quat) -> np.ndarray:
         out = (f[:, :1] * pl + f[:, 1:] * pr) / tot[:, None]
     out[~(tot > 1e-3)] = np.nan
     return out
+
+
+#: The NAO's sole box for drawing footsteps: length, width [m] (``robots.nao``), 5 mm thick, and its
+#: centre ahead of / outward of the sole frame [m]; the fallback of :func:`_sole_geometry`.
+_NAO_SOLE_BOX = (0.160, 0.0888, 0.005)
+_NAO_SOLE_CENTER = (0.030, 0.00562)
+
+_HEIGHTS: dict[str, float] = {}
+
+
+def _root_height(robot: RobotModel) -> float:
+    """Height [m] of the root link's origin above the lower sole in the ``crouch`` pose (the zero
+    pose if the robot has none), base upright; cached by robot name."""
+    if robot.name not in _HEIGHTS:
+        q = robot.pose("crouch") if "crouch" in robot.poses else np.zeros(len(robot.joint_names))
+        links, pos, quat = forward_kinematics(robot, q[None], np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0, 0.0]]))
+        low = min(frame_positions(robot, links, pos, quat, f)[0, 2] for f in ("l_sole", "r_sole"))
+        _HEIGHTS[robot.name] = float(pos[0, 0, 2] - low)
+    return _HEIGHTS[robot.name]
+
+
+def _robot_scale(robot: RobotModel) -> float:
+    """The robot's size relative to the NAO's (root height above the soles in the crouch; exactly
+    1.0 for the NAO): scales the default camera and marker heights."""
+    from robots import nao_h25  # the NAO is the reference size
+
+    return _root_height(robot) / _root_height(nao_h25())
+
+
+def _sole_geometry(robot: RobotModel) -> tuple[tuple[float, float, float], tuple[float, float]]:
+    """(box (length, width, 0.005) [m], centre (ahead, outward) of the sole frame [m]) of the left
+    foot's lowest collision box (the NAO's: :data:`_NAO_SOLE_BOX`, :data:`_NAO_SOLE_CENTER`); the NAO's
+    values when the foot has no box."""
+    fr = robot.frames["l_sole"]
+    gs = robot.root_geoms if fr.link == robot.root else next(j.geoms for j in robot.joints if j.child == fr.link)
+    boxes = [g for g in gs if g.kind == "box" and g.collide]
+    if not boxes:
+        return _NAO_SOLE_BOX, _NAO_SOLE_CENTER
+    g = min(boxes, key=lambda b: b.xyz[2] - b.size[2] / 2)
+    return ((float(g.size[0]), float(g.size[1]), _NAO_SOLE_BOX[2]),
+            (float(g.xyz[0] - fr.offset[0]), float(g.xyz[1] - fr.offset[1])))
 
 
 def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:

@@ -18,17 +18,20 @@ import numpy as np
 from common.files import atomic_path
 from common.spatial import quat_from_rpy, quat_rotate
 from envs.recording import Recording, RecordingError
-from experiments.viz.inputs import check_recording, sanitize_label
-from experiments.viz.kinematics import _measured_cop, _xyzw, link_poses
+from experiments.viz.inputs import _PART, check_recording, sanitize_label
+from experiments.viz.kinematics import (_NAO_SOLE_BOX, _NAO_SOLE_CENTER, _measured_cop, _robot_scale, _sole_geometry,
+                                        _xyzw, link_poses)
 from experiments.viz.style import PALETTE, STEP_TIMELINE, TIMELINE, WORLD_COLORS, _color, _pick_color
 from experiments.viz.terrain import _ground_z, terrain_for, terrain_mesh
 from robots import RobotModel
 from terrain import Heightfield
 
-#: Footstep boxes: the NAO sole (robots/nao.py), 5 mm thick.
-SOLE_BOX = (0.160, 0.0888, 0.005)
-SOLE_CENTER = (0.030, 0.00562)  # sole centre ahead of / outward of the sole frame [m]
-#: Default 3D camera: this offset [m] from the point it looks at (behind-left, above).
+#: Footstep boxes: the NAO sole (robots/nao.py), 5 mm thick; other robots' footsteps use their own
+#: foot's collision box (:func:`experiments.viz.kinematics._sole_geometry`).
+SOLE_BOX = _NAO_SOLE_BOX
+SOLE_CENTER = _NAO_SOLE_CENTER  # sole centre ahead of / outward of the sole frame [m]
+#: Default 3D camera for the NAO: this offset [m] from the point it looks at (behind-left, above);
+#: scaled by the robot's size relative to the NAO's for other robots.
 EYE_OFFSET = np.array([-0.75, -1.15, 0.55])
 
 
@@ -68,6 +71,57 @@ class _Logger:
         self.columns(path, rr.Points3D.columns(positions=P[ok]).partition(ok.astype(np.int64)))
 
 
+def _primitives(rr, gs, col, link: str):
+    """One Rerun archetype for primitives ``gs`` of one kind (box, capsule, sphere) in the link frame.
+
+    Raises:
+        ValueError: an unknown kind.
+    """
+    kind = gs[0].kind
+    qs = [_xyzw(quat_from_rpy(*g.rpy)) for g in gs]
+    if kind == "box":
+        return rr.Boxes3D(centers=[g.xyz for g in gs], half_sizes=[[s / 2 for s in g.size] for g in gs],
+                          quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
+    if kind == "capsule":
+        # URDF capsule: centred, cylinder of `length` along local z; Rerun: from 0 to +length along z.
+        starts = [np.asarray(g.xyz) + quat_rotate(quat_from_rpy(*g.rpy), np.array([0.0, 0.0, -g.size[1] / 2]))
+                  for g in gs]
+        return rr.Capsules3D(lengths=[g.size[1] for g in gs], radii=[g.size[0] for g in gs], translations=starts,
+                             quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
+    if kind == "sphere":
+        return rr.Ellipsoids3D(centers=[g.xyz for g in gs], half_sizes=[[g.size[0]] * 3 for g in gs],
+                               colors=[col] * len(gs), fill_mode="solid")
+    raise ValueError(f"unknown geometry kind {kind!r} on link {link!r}")
+
+
+#: Mesh file formats Rerun's ``Asset3D`` draws (rerun-sdk 0.41: ``MediaType.guess_from_path``).
+MESH_MEDIA_TYPES = ("model/stl", "model/obj", "model/gltf-binary", "model/gltf+json")
+
+
+def _log_meshes(L: "_Logger", rr, link: str, meshes, color) -> list[str]:
+    """Log a link's visual meshes, static, at ``robot/<link>/mesh/<file stem>``: a Transform3D with
+    the geom's pose in the link frame (``xyz`` [m], ``rpy`` [rad], ``size`` = scale x, y, z) and an
+    ``Asset3D`` of the file (its bytes are embedded; tinted ``color``). Returns the mesh files not
+    drawn (missing, or a format Rerun cannot read, e.g. Collada)."""
+    from rerun.components import MediaType  # lazy: rerun
+
+    skipped, used = [], set()
+    for g in meshes:
+        media = MediaType.guess_from_path(g.mesh) if g.mesh else None
+        if not g.mesh or not os.path.isfile(g.mesh) or media is None or str(media) not in MESH_MEDIA_TYPES:
+            skipped.append(str(g.mesh))
+            continue
+        stem = _PART.sub("_", os.path.splitext(os.path.basename(g.mesh))[0]).strip("_") or "mesh"
+        name, k = stem, 2
+        while name in used:
+            name, k = f"{stem}_{k}", k + 1
+        used.add(name)
+        path = f"robot/{link}/mesh/{name}"
+        L.static(path, rr.Transform3D(translation=g.xyz, quaternion=_xyzw(quat_from_rpy(*g.rpy)), scale=g.size))
+        L.static(path, rr.Asset3D(path=g.mesh, media_type=media, albedo_factor=color))
+    return skipped
+
+
 def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | None = None,
                   terrain_note: str = "", color=None) -> dict[str, int]:
     """Log one recording under ``/<label>`` of an open ``rerun.RecordingStream``.
@@ -75,13 +129,18 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
     Args:
         stream: the Rerun recording stream (e.g. from :func:`log_rollouts_to_rrd`).
         label: entity path of the subtree (already sanitized, without leading '/').
-        rec: a checked recording (see :func:`check_recording`).
+        rec: a checked recording (see :func:`check_recording`); its robot (``rec.robot``) is drawn
+            from the model's primitives and, for the G1 and Talos, its visual meshes.
         terrain: the heightfield it ran on (None: flat plane at z = 0).
         terrain_note: where the terrain came from (shown in the events log).
         color: base RGB colour (default by world).
 
     Returns:
         {entity path: number of time-varying rows logged}.
+
+    Raises:
+        RecordingError: malformed ``footsteps`` metadata (message names the label).
+        ValueError: a robot geometry kind other than box, capsule, sphere or mesh.
     """
     import rerun as rr  # lazy: rerun
 
@@ -101,32 +160,20 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
     geoms = {robot.root: robot.root_geoms, **{j.child: j.geoms for j in robot.joints}}
     body_col = _color(color, 0.35)
     foot_col = _color(color, 0.0)
+    mesh_col = _color(color, 0.55)
+    feet = {robot.frames[f].link for f in ("l_sole", "r_sole")}  # their boxes: the soles, darker
+    skipped_meshes: list[str] = []
     for i, link in enumerate(links):
         L.columns(f"robot/{link}", rr.Transform3D.columns(translation=pos[:, i], quaternion=xyzw[:, i]))
         gs = geoms.get(link, ())
-        if not gs:
-            continue
-        col = foot_col if link.endswith("_ankle") else body_col
-        kinds = {g.kind for g in gs}
-        if len(kinds) != 1:  # pragma: no cover - the NAO model has one kind per link
-            raise ValueError(f"link {link!r} mixes geometry kinds {kinds}")
-        kind = kinds.pop()
-        qs = [_xyzw(quat_from_rpy(*g.rpy)) for g in gs]
-        if kind == "box":
-            arch = rr.Boxes3D(centers=[g.xyz for g in gs], half_sizes=[[s / 2 for s in g.size] for g in gs],
-                              quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
-        elif kind == "capsule":
-            # URDF capsule: centred, cylinder of `length` along local z; Rerun: from 0 to +length along z.
-            starts = [np.asarray(g.xyz) + quat_rotate(quat_from_rpy(*g.rpy), np.array([0.0, 0.0, -g.size[1] / 2]))
-                      for g in gs]
-            arch = rr.Capsules3D(lengths=[g.size[1] for g in gs], radii=[g.size[0] for g in gs], translations=starts,
-                                 quaternions=qs, colors=[col] * len(gs), fill_mode="solid")
-        elif kind == "sphere":
-            arch = rr.Ellipsoids3D(centers=[g.xyz for g in gs], half_sizes=[[g.size[0]] * 3 for g in gs],
-                                   colors=[col] * len(gs), fill_mode="solid")
-        else:  # pragma: no cover - spec error
-            raise ValueError(f"unknown geometry kind {kind!r} on link {link!r}")
-        L.static(f"robot/{link}/geom", arch)
+        prims = [g for g in gs if g.kind != "mesh"]
+        if prims:
+            col = foot_col if link in feet else body_col
+            kinds = list(dict.fromkeys(g.kind for g in prims))
+            for kind in kinds:  # one kind: "geom" (the NAO); several: "geom/<kind>"
+                path = f"robot/{link}/geom" if len(kinds) == 1 else f"robot/{link}/geom/{kind}"
+                L.static(path, _primitives(rr, [g for g in prims if g.kind == kind], col, link))
+        skipped_meshes += _log_meshes(L, rr, link, [g for g in gs if g.kind == "mesh"], mesh_col)
 
     # ---------------------------------------------------------------- balance markers
     balance: dict[str, np.ndarray] = {}
@@ -143,7 +190,7 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
         pc = np.column_stack([rec.columns["plan.com.x"], rec.columns["plan.com.y"],
                               rec.columns.get("plan.com.z", np.full(T, np.nan))])
         if not np.isfinite(pc[:, 2]).any():
-            pc[:, 2] = balance["com"][:, 2] if "com" in balance else 0.26
+            pc[:, 2] = balance["com"][:, 2] if "com" in balance else 0.26 * _robot_scale(robot)
         balance["plan_com"] = pc
         L.points("plan/com", pc, [250, 200, 0], 0.010)
         L.static("plan/com_trail", rr.LineStrips3D([pc[np.all(np.isfinite(pc), 1)]], colors=[[250, 200, 0]],
@@ -167,14 +214,15 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
         except (KeyError, TypeError, ValueError) as exc:
             raise RecordingError(f"{label}: metadata 'footsteps' must be a list of {{x, y, yaw, side, t_start, "
                                  f"t_end}}: {exc}") from None
+        sole_box, sole_center = _sole_geometry(robot)
         sgn = np.array([1.0 if s == "L" else -1.0 for s in side])
-        cx = fx + np.cos(fyaw) * SOLE_CENTER[0] - np.sin(fyaw) * sgn * SOLE_CENTER[1]
-        cy = fy + np.sin(fyaw) * SOLE_CENTER[0] + np.cos(fyaw) * sgn * SOLE_CENTER[1]
-        cz = _ground_z(terrain, cx, cy) + SOLE_BOX[2] / 2
+        cx = fx + np.cos(fyaw) * sole_center[0] - np.sin(fyaw) * sgn * sole_center[1]
+        cy = fy + np.sin(fyaw) * sole_center[0] + np.cos(fyaw) * sgn * sole_center[1]
+        cz = _ground_z(terrain, cx, cy) + sole_box[2] / 2
         centers = np.column_stack([cx, cy, cz])
         qs = np.column_stack([np.zeros((len(steps), 2)), np.sin(fyaw / 2), np.cos(fyaw / 2)])
         cols = np.array([[60, 60, 230] if s == "L" else [230, 60, 60] for s in side], np.uint8)
-        half = np.tile(np.asarray(SOLE_BOX) / 2, (len(steps), 1))
+        half = np.tile(np.asarray(sole_box) / 2, (len(steps), 1))
         labels = [f"{s}{k}" for k, s in enumerate(side)]
         L.static("plan/footsteps", rr.Boxes3D(centers=centers, half_sizes=half, quaternions=qs, colors=cols,
                                               labels=labels, show_labels=False, fill_mode="MajorWireframe"))
@@ -191,7 +239,9 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
     start_msg = (f"{world} rollout: {T} rows x {float(rec.meta['control_dt']) * 1e3:g} ms, seed {seed}"
                  + (f", profile {prof}" if prof else "") + f", terrain {tinfo.get('name', 'flat')}"
                  + (f" ({terrain_note})" if terrain_note else "")
-                 + ("" if grounded else "; no ground-truth base pose: robot drawn upright at the origin"))
+                 + ("" if grounded else "; no ground-truth base pose: robot drawn upright at the origin")
+                 + (f"; {len(skipped_meshes)} mesh file(s) not drawn (missing or not STL/OBJ/glTF): "
+                    f"{', '.join(skipped_meshes[:3])}" if skipped_meshes else ""))
     texts, levels, times = [start_msg], ["INFO"], [float(rec.t[0])]
     if rec.fell:
         ft = rec.meta.get("fall_time")
@@ -241,7 +291,8 @@ def build_blueprint(labels: list[str], robot: RobotModel, worlds: Mapping[str, s
     """The default layout: 3D views side by side on top, compare plots below (one timeline).
 
     Top: one 3D view per label (origin ``/<label>``), its camera looking at ``centers[label]``
-    (world [m], default the origin; e.g. the middle of the torso path) from behind-left; labels
+    (world [m], default 0.2 m above the origin; e.g. the middle of the torso path) from behind-left,
+    distance and default height scaled by ``robot``'s size relative to the NAO's; labels
     of the same world (``worlds[label]``) share a column as tabs; a second tab overlays all robots
     on the first label's terrain. ``active``: the initially shown (3D tab, plot tab) indices.
     Bottom tabs: left leg and right leg (one plot per joint: every label's cmd/app/q), IMU (gyro,
@@ -254,10 +305,11 @@ def build_blueprint(labels: list[str], robot: RobotModel, worlds: Mapping[str, s
 
     worlds = dict(worlds or {})
     centers = dict(centers or {})
+    scale = _robot_scale(robot)  # camera distance and height follow the robot's size (1.0: the NAO)
 
     def eye(label):
-        c = np.asarray(centers.get(label, (0.0, 0.0, 0.2)), float)
-        return rrb.EyeControls3D(position=tuple(c + EYE_OFFSET), look_target=tuple(c))
+        c = np.asarray(centers.get(label, (0.0, 0.0, 0.2 * scale)), float)
+        return rrb.EyeControls3D(position=tuple(c + EYE_OFFSET * scale), look_target=tuple(c))
 
     def view3d(label):
         return rrb.Spatial3DView(origin=f"/{label}", name=label, contents=[f"/{label}/**", f"- /{label}/ts/**"],
@@ -324,9 +376,10 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
     (e.g. ``{"gen_005/best": rec, "gen_005/median": rec, "eval/real_seed_3": rec}``).
 
     Args:
-        recordings: label -> recording. A label becomes the entity path ``/<label>`` ('/' nests;
-            characters outside [A-Za-z0-9_.-] become '_'); labels must stay distinct and none may be
-            a prefix path of another.
+        recordings: label -> recording, all of one robot (``meta["robot"]``: ``nao_h25``, ``g1`` or
+            ``talos``). A label becomes the entity path ``/<label>`` ('/' nests; characters outside
+            [A-Za-z0-9_.-] become '_'); labels must stay distinct and none may be a prefix path of
+            another.
         path: the ``.rrd`` to write (atomically: a temporary file, then rename); required unless
             ``spawn``.
         terrains: label -> heightfield (None = flat) for recordings whose terrain is known;
@@ -341,8 +394,9 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
         ``seconds`` (total), ``bytes`` (file size, 0 when spawning).
 
     Raises:
-        ValueError: no recordings, clashing labels, no path; RecordingError (a ValueError) for a
-            recording of another robot, an empty or malformed one (message names the label).
+        ValueError: no recordings, clashing labels, no path, recordings of different robots;
+            RecordingError (a ValueError) for a recording of an unknown robot, one whose columns are not
+            its robot's, an empty or malformed one (message names the label).
     """
     import rerun as rr  # lazy: rerun
 
@@ -365,6 +419,11 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
             raise ValueError(f"label {orig[a]!r} is a prefix of {orig[b]!r}; rename one")
     terrains = dict(terrains or {})
     robot = next(iter(labels.values())).robot
+    others = {r.robot.name for r in labels.values()} - {robot.name}
+    if others:
+        raise ValueError(f"recordings of different robots ({robot.name} and {', '.join(sorted(others))}) cannot share "
+                         "one view; visualize each robot's recordings separately")
+    scale = _robot_scale(robot)
     t_start = time.perf_counter()
     stream = rr.RecordingStream(application_id, recording_id=recording_id)
     if not stream.is_enabled():
@@ -375,7 +434,7 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
         for k, r in labels.items():
             if r.has("gt.base"):
                 b = r.group("gt.base")
-                centers[k] = (0.5 * (b[:, 0].min() + b[:, 0].max()), 0.5 * (b[:, 1].min() + b[:, 1].max()), 0.2)
+                centers[k] = (0.5 * (b[:, 0].min() + b[:, 0].max()), 0.5 * (b[:, 1].min() + b[:, 1].max()), 0.2 * scale)
         bp = build_blueprint(list(labels), robot, {k: str(r.meta.get("world", k)) for k, r in labels.items()}, centers)
     rows: dict[str, int] = {}
     notes: dict[str, str] = {}
