@@ -8,6 +8,8 @@ noise floor), each effect found in physics words with where it is and its value 
 interval, what was considered and rejected, what this data cannot tell apart (and which
 experiment would), and the residual left. Writes ``report.json``, ``report.txt``, plots and
 ``identified_model.xml`` (the sim with the effects, MJCF) into ``--out``. Input files are only read.
+The robot is the recordings' (``meta["robot"]``: the NAO, Unitree G1 or PAL Talos); all recordings
+must be of one robot.
 
 ``--calibrate`` treats the recordings as logs of a real world with no injected effects (profile
 "none") and writes ``calibration.json``: the engine gap that later diagnoses (``--calibration
@@ -30,7 +32,11 @@ def register(sub) -> argparse.ArgumentParser:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--real", type=A.in_path, required=True, nargs="+", metavar="DIR_OR_FILE",
                    help="recordings of the real robot: Parquet files and/or folders of them")
-    p.add_argument("--sim", default="nao", choices=("nao",), help="sim model to diagnose (default nao: the NAO H25 MuJoCo sim)")
+    from robots import ROBOT_NAMES  # lazy: the parser is built for every command
+
+    p.add_argument("--sim", default="auto", choices=("auto",) + tuple(ROBOT_NAMES),
+                   help="sim model to diagnose: auto (default: the MuJoCo sim of the recordings' robot, "
+                        "meta['robot']) or a robot name, which must be the recordings' robot")
     p.add_argument("--out", type=A.out_dir, required=True, metavar="REPORT_DIR", help="folder for the report")
     p.add_argument("--calibration", type=A.in_file, metavar="FILE", help="engine-gap calibration (from --calibrate on 'none' logs)")
     p.add_argument("--calibrate", action="store_true", help="the recordings have no injected effects: write "
@@ -52,10 +58,16 @@ def run(args) -> dict:
     from sysid.report import format_report, public_json, write_report  # lazy: loads the engines; keeps sgatwalk --help fast
 
     logs = load_logs(args.real)
+    robot = logs[0].robot
+    if args.sim != "auto":
+        from robots import get_robot  # lazy: g1/talos parse their URDFs
+
+        if get_robot(args.sim).name != robot.name:
+            raise ValueError(f"--sim {args.sim}: the recordings are of robot {robot.name!r}")
     say = None if args.json else (lambda s: print(s, file=sys.stderr))
     os.makedirs(args.out, exist_ok=True)
     if args.calibrate:
-        cal = calibrate(logs)
+        cal = calibrate(logs, robot=robot)
         p = os.path.join(args.out, "calibration.json")
         atomic_write_text(p, json.dumps(public_json(cal), indent=1))
         if not args.json:
@@ -79,6 +91,10 @@ def run(args) -> dict:
         if bool(cal.get("fixed_base")) != logs[0].fixed_base:
             raise ValueError(f"{args.calibration}: calibrated on {'fixed' if cal.get('fixed_base') else 'floating'}-base "
                              "logs; the recordings are not")
+        missing = [n for n in robot.joint_names if n not in cal.get("gap_rms", {})]
+        if missing:
+            raise ValueError(f"{args.calibration}: calibrated on another robot's logs (no engine gap for joint "
+                             f"{missing[0]} of {robot.name})")
     fams = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
     base = None
     if args.base_report:
@@ -92,8 +108,13 @@ def run(args) -> dict:
                 base = terms_from_labels({**prev.get("base_model", {}), **prev["model"]})
             except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
                 raise ValueError(f"{args.base_report}: not a report.json of sgatwalk diagnose ({exc})") from None
+        alien = [t.label() for t in base if t.target is not None and t.target not in robot.joint_names
+                 and t.target not in robot.links]
+        if alien:
+            raise ValueError(f"{args.base_report}: effect {alien[0]} is not on a joint or link of {robot.name} "
+                             "(a report of another robot)")
     rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
-                   time_budget_s=args.time_budget or None)
+                   time_budget_s=args.time_budget or None, robot=robot)
     paths = write_report(rep, logs, args.out, plots=not args.no_plots)
     if not args.json:
         print(format_report(rep))

@@ -5,7 +5,9 @@ a gait-like pattern and a 0.3-4 Hz chirp; for a floating base: legs pushed apart
 together in double support so the feet slide on a slippery floor, then stepping and weight shifts) for
 ``--logs`` trajectories and writes one Parquet recording per trajectory into ``--out``. In the
 real world the profile's effects are drawn once (from ``--seed``) and kept for every log, like one
-physical robot; sensor noise differs per log. ``sgatwalk diagnose --real OUT`` reads the folder.
+physical robot; sensor noise differs per log. ``--robot`` picks the robot (NAO, Unitree G1, PAL
+Talos); the recordings name it (``meta["robot"]``), and ``sgatwalk diagnose --real OUT`` reads the
+folder and replays that robot.
 """
 
 from __future__ import annotations
@@ -13,7 +15,6 @@ from __future__ import annotations
 import argparse
 import time
 
-from robots import nao_h25
 import experiments.argtypes as A
 
 
@@ -21,7 +22,9 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("excite", help="record system-identification excitation logs (for sgatwalk diagnose)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--world", default="real", choices=("real", "sim"), help="world to record in (default real)")
-    p.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
+    A.add_robot(p)
+    p.add_argument("--profile", default="real", help="real-world effect profile: real (default; scaled to the "
+                   "robot's actuators) or none")
     p.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                    help="override one profile effect with a fixed value, e.g. latency_s=0.02 (repeatable)")
     p.add_argument("--fixed-base", action="store_true", help="hang the robot in the air (actuator tests; recommended first)")
@@ -41,12 +44,13 @@ def run(args) -> dict:
     from envs import make_world  # lazy: loads the engines; keeps sgatwalk --help fast
     from envs.effects import get_profile  # lazy: loads the engines; keeps sgatwalk --help fast
     from sysid.worlds import freeze, record_excitation, rough_ground  # lazy: loads the engines; keeps sgatwalk --help fast
+    from robots import get_robot  # lazy: g1/talos parse their URDFs
 
-    robot = nao_h25()
-    kw = {"fixed_base": args.fixed_base}
+    robot = get_robot(args.robot)
+    kw = {"fixed_base": args.fixed_base, "robot": robot}
     ground = None
     if args.world == "real":
-        prof = get_profile(args.profile)
+        prof = get_profile(args.profile, robot)
         for item in args.effect:
             if "=" not in item:
                 raise ValueError(f"--effect expects NAME=VALUE, got {item!r}")
@@ -73,5 +77,5 @@ def run(args) -> dict:
     if not args.json:
         print(f"wrote {len(paths)} log(s) of {args.seconds:g} s to {args.out} in {wall:.1f} s; "
               f"next: sgatwalk diagnose --real {args.out} --out REPORT_DIR")
-    return {"world": args.world, "profile": args.profile if args.world == "real" else None,
+    return {"robot": robot.name, "world": args.world, "profile": args.profile if args.world == "real" else None,
             "fixed_base": args.fixed_base, "recordings": paths, "wall_s": wall}

@@ -30,6 +30,13 @@ damping off the output, so the two differ in the 1-4 Hz band of the chirp and in
 settles. A compliance below 1 / :func:`sysid.model.spring_stiffness_max` (a spring stiffer than the
 1 ms step integrates) is modelled at that bound.
 
+The probes, bounds and smallest reported effects above are the NAO's (the robot this library was
+tuned on). For another robot the families whose unit carries the actuators' size are scaled by a
+ratio of medians over the leg joints, robot / NAO (:func:`family_for`): Coulomb friction by the
+effort limit, viscous damping by the servo damping kd, armature by the joints' effective inertia,
+joint compliance by 1 / kp (its probe is per joint already: :func:`term_probe`). The others are
+dimensionless (x kp, x effort, x mass), angles or times, the same for any robot.
+
 ``terrain_roughness`` is *stochastic*: uneven ground is a random surface nobody measured, so it has
 no deterministic replay and no screening column. :mod:`sysid.roughness` fits the RMS height (Sq) of a
 distribution of random heightfields by matching the residual statistics of simulated logs on
@@ -47,7 +54,7 @@ import numpy as np
 
 from envs.effects import NOMINAL_FOOT_FRICTION
 from envs.mujoco_world import GROUND_TIMECONST
-from robots import RobotModel, nao_h25
+from robots import RobotModel, get_robot
 
 #: Every family name the report may use (issue 8).
 FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
@@ -73,6 +80,8 @@ class Family:
         min_effect: smallest departure from nominal the report names (in ``unit``): a fitted term
             closer to nominal is rejected as "below the smallest reported effect" (it is within
             what the noise and the other terms' errors move a fit, not physics worth acting on).
+        scale: how probe, probe2, bounds and min_effect scale from the NAO to another robot
+            (:data:`SCALES`, :func:`family_for`); None: the same for every robot.
     """
 
     name: str
@@ -89,6 +98,7 @@ class Family:
     probe2: float | None = None
     min_effect: float = 0.0
     stochastic: bool = False
+    scale: str | None = None
 
     def fmt(self, v: float) -> str:
         """Value in report units, e.g. '24.8 ms', 'x0.78', '0.197 N m'."""
@@ -111,20 +121,22 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
     Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05,
            min_effect=0.002),
     Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
-           probe2=0.2, min_effect=0.01),
-    Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05, min_effect=0.005),
+           probe2=0.2, min_effect=0.01, scale="effort"),
+    Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05, min_effect=0.005,
+           scale="kd"),
     Family("pd_gain", "servo stiffness (kp) mismatch", "joint", "x kp", 1.0, 0.3, 2.0, 0.85, min_effect=0.03),
     Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False,
            min_effect=0.03),
     Family("link_mass", "link mass error", "link", "x mass", 1.0, 0.3, 3.0, 1.3, min_effect=0.03),
-    Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002, min_effect=2e-4),
+    Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002, min_effect=2e-4,
+           scale="inertia"),
     Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005, min_effect=5e-4),
     Family("foot_friction", "foot-ground friction", "global", "", NOMINAL_FOOT_FRICTION, 0.05, 1.5, 0.4,
            smooth=False, contact=True, min_effect=0.02),
     Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", GROUND_TIMECONST, 0.002,
            0.1, 0.025, smooth=False, contact=True, min_effect=0.002),
     Family("joint_compliance", "series joint compliance (elastic transmission)", "joint", "rad/(N m)", 0.0, 0.0,
-           4.0, 0.0059, min_effect=0.002),
+           4.0, 0.0059, min_effect=0.002, scale="1/kp"),
     Family("terrain_roughness", "uneven ground (random surface, RMS height)", "global", "m", 0.0, 0.0, 0.015, 0.003,
            contact=True, min_effect=0.0006, stochastic=True),
 )}
@@ -154,33 +166,104 @@ class Term:
         return self.label()
 
 
+#: The robot whose actuators the families' numbers were set for.
+REFERENCE_ROBOT = "nao_h25"
+#: Family scalings (:attr:`Family.scale`) -> what is compared between a robot and the NAO (a median
+#: over the leg joints; all joints when a robot has no ``legs`` group).
+SCALES = {"effort": "effort limit [N m]", "kd": "servo damping kd [N m s/rad]",
+          "inertia": "effective joint inertia of the hanging robot at the zero pose [kg m^2]",
+          "1/kp": "inverse servo stiffness 1/kp [rad/(N m)]"}
+
+
+def _leg_median(robot: RobotModel, kind: str) -> float:
+    idx = robot.joint_index(robot.groups.get("legs") or robot.joint_names)
+    if kind == "effort":
+        v = robot.effort[idx]
+    elif kind == "kd":
+        v = robot.kd[idx]
+    elif kind == "1/kp":
+        v = 1.0 / robot.kp[idx]
+    elif kind == "inertia":
+        from sysid.model import joint_inertia
+
+        inertia = joint_inertia(robot.name)
+        v = np.array([inertia[robot.joint_names[i]] for i in idx])
+    else:
+        raise ValueError(f"unknown family scaling {kind!r}; known: {', '.join(SCALES)}")
+    return float(np.median(v))
+
+
+@functools.lru_cache(maxsize=32)
+def robot_scale(robot_name: str, kind: str) -> float:
+    """Ratio robot / NAO of the quantity :data:`SCALES` names for ``kind`` (exactly 1 for the NAO).
+
+    Raises:
+        ValueError: unknown ``kind``.  KeyError: unknown robot.
+    """
+    if kind not in SCALES:
+        raise ValueError(f"unknown family scaling {kind!r}; known: {', '.join(SCALES)}")
+    if robot_name == REFERENCE_ROBOT:
+        return 1.0
+    return _leg_median(get_robot(robot_name), kind) / _leg_median(get_robot(REFERENCE_ROBOT), kind)
+
+
+def family_for(name: str, robot: RobotModel | None = None) -> Family:
+    """Family ``name`` with its probe, probe2, bounds and smallest reported effect scaled to ``robot``
+    (:attr:`Family.scale`, :func:`robot_scale`); the family as listed for the NAO, for a family without
+    scaling and for ``robot`` None.
+
+    Raises:
+        KeyError: unknown family.
+    """
+    fam = FAMILIES[name]
+    if robot is None or fam.scale is None or robot.name == REFERENCE_ROBOT:
+        return fam
+    return _scaled_family(name, robot.name)
+
+
+@functools.lru_cache(maxsize=64)
+def _scaled_family(name: str, robot_name: str) -> Family:
+    fam = FAMILIES[name]
+    k = robot_scale(robot_name, fam.scale)
+    return dataclasses.replace(fam, lo=fam.lo * k, hi=fam.hi * k, probe=fam.probe * k,
+                               probe2=None if fam.probe2 is None else fam.probe2 * k,
+                               min_effect=fam.min_effect * k)
+
+
 def term_probe(term: Term, robot: RobotModel) -> float:
-    """Screening probe value of ``term``: the family's ``probe``, except for ``joint_compliance``,
-    whose probe is the compliance that statically softens that joint like a kp x0.85,
-    (1 / 0.85 - 1) / kp [rad/(N m)] (kp spans 1-30 N m/rad across NAO's joints)."""
+    """Screening probe value of ``term``: the family's ``probe`` (scaled to ``robot``: :func:`family_for`),
+    except for ``joint_compliance``, whose probe is the compliance that statically softens that joint
+    like a kp x0.85, (1 / 0.85 - 1) / kp [rad/(N m)] (kp spans 1-30 N m/rad across NAO's joints,
+    50-1390 across the G1's)."""
     if term.family == "joint_compliance":
         kp = float(robot.kp[robot.joint_index([term.target])[0]])
         return (1.0 / 0.85 - 1.0) / kp
-    return term.fam.probe
+    return family_for(term.family, robot).probe
 
 
-@functools.lru_cache(maxsize=1)
-def _robot() -> RobotModel:
-    """The robot whose kp the joint-scaled compliance bounds refer to."""
-    return nao_h25()
+def term_min_effect(term: Term, robot: RobotModel | None = None) -> float:
+    """Smallest departure from nominal the report names for ``term`` (the family's ``min_effect``
+    scaled to ``robot``: :func:`family_for`), in the family's unit."""
+    return family_for(term.family, robot).min_effect
 
 
-def term_bounds(term: Term) -> tuple[float, float]:
-    """(low, high) of ``term``'s value: the family's bounds, except for a joint compliance: from
-    1 / :func:`sysid.model.spring_stiffness_max` of its joint (the stiffest spring the replay
-    integrates; below it the candidate is that spring, so a fit never reports less) to 4 / kp (a
-    spring that leaves x0.2 of the servo stiffness)."""
-    fam = term.fam
+def term_bounds(term: Term, robot: RobotModel | None = None) -> tuple[float, float]:
+    """(low, high) of ``term``'s value: the family's bounds (scaled to ``robot``: :func:`family_for`),
+    except for a joint compliance: from 1 / :func:`sysid.model.spring_stiffness_max` of its joint
+    (the stiffest spring the replay integrates; below it the candidate is that spring, so a fit never
+    reports less) to 4 / kp (a spring that leaves x0.2 of the servo stiffness).
+
+    Args:
+        robot: the robot the term is of; None: the NAO (the robot of :data:`REFERENCE_ROBOT`).
+    """
+    fam = family_for(term.family, robot)
     if term.family == "joint_compliance":
         from sysid.model import spring_stiffness_max
 
-        k = min(spring_stiffness_max(True)[term.target], spring_stiffness_max(False)[term.target])
-        kp = float(_robot().kp[_robot().joint_index([term.target])[0]])
+        robot = robot or get_robot(REFERENCE_ROBOT)
+        k = min(spring_stiffness_max(True, robot_name=robot.name)[term.target],
+                spring_stiffness_max(False, robot_name=robot.name)[term.target])
+        kp = float(robot.kp[robot.joint_index([term.target])[0]])
         return max(fam.lo, 1.0 / k), min(fam.hi, 4.0 / kp)
     return fam.lo, fam.hi
 
@@ -196,7 +279,8 @@ def term_allowed(term: Term, robot: RobotModel) -> bool:
 
 
 def all_terms(robot: RobotModel, families=FIXED_BASE_FAMILIES, joints=None, links=None) -> list[Term]:
-    """Every term of ``families`` over ``joints`` (default all 24) and ``links`` (default all but the root)."""
+    """Every term of ``families`` over ``joints`` (default all n of ``robot``) and ``links`` (default all
+    but the root)."""
     joints = robot.joint_names if joints is None else joints
     links = [ln for ln in robot.links if ln != robot.root] if links is None else links
     out = []
@@ -243,7 +327,7 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
         values: term -> physical value.
 
     Returns:
-        (24,) measurement offsets [rad] (sensor bias terms; zeros otherwise).
+        (n,) measurement offsets [rad], n = the robot's joint count (sensor bias terms; zeros otherwise).
 
     Raises:
         ValueError: a backlash (compliance) term on a joint without a play (spring) hinge in
@@ -289,7 +373,7 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
         elif f == "joint_compliance":
             if tg not in rm.spring_jnt:
                 raise ValueError(f"joint compliance term on {tg} needs a replay model with a series spring there")
-            k_max = spring_stiffness_max(rm.structure.fixed_base, rm.structure.physics_dt)[tg]
+            k_max = spring_stiffness_max(rm.structure.fixed_base, rm.structure.physics_dt, robot.name)[tg]
             m.jnt_stiffness[rm.spring_jnt[tg]] = min(1.0 / max(v, 1e-12), k_max)
         elif f == "foot_friction":
             m.geom_friction[:, 0] = v

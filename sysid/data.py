@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from envs.recording import Recording, RecordingError
+from robots import RobotModel, get_robot
 
 #: Shortest log a replay can use [s] (a few servo time constants plus a 0.1 s window).
 MIN_SECONDS = 1.0
@@ -24,13 +25,15 @@ class Log:
 
     Attributes:
         name: file stem.  path: source file (None for in-memory).
-        t: (N,) sample times [s].  cmd: (N, 24) joint targets (``app``, or ``cmd`` when absent;
-            the mimic joint copies its leader) [rad].  q: (N, 24) measured angles [rad].
-        dq: (N, 24) measured velocities [rad/s] or None.
+        t: (N,) sample times [s].  cmd: (N, n) joint targets, n = the robot's joint count (``app``,
+            or ``cmd`` when absent; a mimic joint copies its leader) [rad].  q: (N, n) measured
+            angles [rad].
+        dq: (N, n) measured velocities [rad/s] or None.
         control_dt, physics_dt: [s].  fixed_base: bool.
         imu: dict with ``angle`` (N, 2) [rad], ``gyro`` (N, 3) [rad/s] when recorded.
         fsr: (N, 2) foot forces [N] or None.  gt: dict of ground-truth groups present.
-        meta: the recording's metadata (read-only use).
+        meta: the recording's metadata (read-only use); ``meta["robot"]`` names the robot
+            (:attr:`robot`; ``"nao_h25"`` when absent).
     """
 
     name: str
@@ -58,13 +61,28 @@ class Log:
     def seconds(self) -> float:
         return len(self.t) * self.control_dt
 
+    @property
+    def robot_name(self) -> str:
+        """The robot's name, ``meta["robot"]`` (``"nao_h25"``, ``"g1"``, ``"talos"``; ``"nao_h25"`` when absent)."""
+        return str(self.meta.get("robot") or "nao_h25")
+
+    @property
+    def robot(self) -> RobotModel:
+        """The robot the log is of (``robots.get_robot(robot_name)``, cached there; read-only).
+
+        Raises:
+            KeyError: an unknown robot name.
+        """
+        return get_robot(self.robot_name)
+
 
 def from_recording(rec: Recording, name: str = "log", path: str | None = None) -> Log:
     """Convert a validated :class:`Recording` into a :class:`Log`.
 
     Raises:
-        RecordingError: robot is not ``nao_h25``; shorter than :data:`MIN_SECONDS`; sample times
-            not on the ``control_dt`` grid; ``control_dt`` not a multiple of ``physics_dt``.
+        RecordingError: robot is not one of ``robots.ROBOT_NAMES`` (``nao_h25``, ``g1``, ``talos``);
+            shorter than :data:`MIN_SECONDS`; sample times not on the ``control_dt`` grid;
+            ``control_dt`` not a multiple of ``physics_dt``.
     """
     robot = rec.robot  # raises RecordingError on a mismatched robot
     dt = float(rec.meta["control_dt"])
@@ -94,8 +112,10 @@ def from_recording(rec: Recording, name: str = "log", path: str | None = None) -
     fixed = rec.meta.get("fixed_base")
     if fixed is None:  # infer: a hanging robot has no foot forces
         fixed = bool(rec.has("fsr") and np.all(rec.group("fsr") < 1e-6))
+    meta = dict(rec.meta)
+    meta["robot"] = robot.name  # canonical ("nao" -> "nao_h25"): logs of one robot compare equal
     return Log(name=name, t=t.copy(), cmd=cmd, q=q, dq=dq, control_dt=dt, physics_dt=pdt, fixed_base=bool(fixed),
-               path=path, imu=imu, fsr=rec.group("fsr") if rec.has("fsr") else None, gt=gt, meta=dict(rec.meta))
+               path=path, imu=imu, fsr=rec.group("fsr") if rec.has("fsr") else None, gt=gt, meta=meta)
 
 
 def find_files(inputs: list[str] | str) -> list[str]:
@@ -144,7 +164,7 @@ def load_logs(inputs: list[str] | str) -> list[Log]:
 
 
 def check_consistent(logs: list[Log]) -> None:
-    """All logs share control_dt, physics_dt and base mode.
+    """All logs share robot, control_dt, physics_dt and base mode.
 
     Raises:
         RecordingError: naming the first log that differs.
@@ -153,7 +173,7 @@ def check_consistent(logs: list[Log]) -> None:
         raise RecordingError("no recordings given")
     ref = logs[0]
     for lg in logs[1:]:
-        for attr in ("control_dt", "physics_dt", "fixed_base"):
+        for attr in ("robot_name", "control_dt", "physics_dt", "fixed_base"):
             if getattr(lg, attr) != getattr(ref, attr):
                 raise RecordingError(f"{lg.name}: {attr} = {getattr(lg, attr)} differs from {ref.name}'s "
                                      f"{getattr(ref, attr)}; diagnose logs of one setup together")

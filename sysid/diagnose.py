@@ -26,10 +26,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sysid.candidates import (CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above, term_allowed,
-                              term_probe)
+                              term_min_effect, term_probe)
 from sysid.data import Log, split_by_trajectory
 from sysid.identify import FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen
-from sysid.replay import Window, predict, whole_logs, windows
+from sysid.replay import IMU_CHANNELS, Window, predict, whole_logs, windows
 from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
 from sysid.stats import integrated_autocorr, localisation, noise_sigma
 
@@ -70,9 +70,10 @@ def _experiment(a: str, b: str) -> str:
 
 
 def _channel_names(robot, with_imu: bool) -> list[str]:
+    """The robot's n joint names, then :data:`sysid.replay.IMU_CHANNELS` with an IMU."""
     n = list(robot.joint_names)
     if with_imu:
-        n += ["angle.roll", "angle.pitch", "gyro.x", "gyro.y", "gyro.z"]
+        n += list(IMU_CHANNELS)
     return n
 
 
@@ -82,16 +83,17 @@ def _floor(logs: list[Log], wins: list[Window], nominal: list[np.ndarray], with_
 
     res = [measured(logs[w.log], w, with_imu) - p[0] for w, p in zip(wins, nominal)]
     cmds = [logs[w.log].cmd[w.k0:w.k1] for w in wins]
-    sig = noise_sigma([r[:, :24] for r in res], cmds)
+    nj = len(robot.joint_names)
+    sig = noise_sigma([r[:, :nj] for r in res], cmds)
     sigma = {"encoders": float(max(np.median(sig), MIN_FLOOR))}
-    k = 24 + (5 if with_imu else 0)
+    k = nj + (len(IMU_CHANNELS) if with_imu else 0)
     floor = np.full(k, sigma["encoders"])
     if with_imu:
-        s_imu = noise_sigma([r[:, 24:] for r in res])
+        s_imu = noise_sigma([r[:, nj:] for r in res])
         sigma["angle"] = float(max(np.median(s_imu[:2]), MIN_FLOOR))
         sigma["gyro"] = float(max(np.median(s_imu[2:]), 1e-4))
-        floor[24:26] = sigma["angle"]
-        floor[26:29] = sigma["gyro"]
+        floor[nj:nj + 2] = sigma["angle"]
+        floor[nj + 2:nj + 5] = sigma["gyro"]
     gap = np.zeros(k)
     if calibration:
         g = calibration.get("gap_rms", {})
@@ -99,7 +101,7 @@ def _floor(logs: list[Log], wins: list[Window], nominal: list[np.ndarray], with_
             gap[i] = float(g.get(nm, 0.0))
         cal_sigma = calibration.get("sigma", {}).get("encoders")
         if cal_sigma:  # a sensor spec known from calibration is a better floor than a noisy estimate
-            floor[:24] = max(float(cal_sigma), sigma["encoders"] * 0.8)
+            floor[:nj] = max(float(cal_sigma), sigma["encoders"] * 0.8)
     floor = np.sqrt(floor ** 2 + gap ** 2)
     return np.maximum(floor, MIN_FLOOR), {"sigma": sigma, "gap": gap}
 
@@ -115,15 +117,16 @@ def _bic(problem: Problem, values: dict, n_params: int) -> float:
     return n_eff * math.log(max(float(R @ R) * n_eff / n, 1e-300) / n_eff) + n_params * math.log(n_eff)
 
 
-def _below_min_effect(values: dict) -> list[Term]:
-    """Terms whose value is within their family's ``min_effect`` of nominal."""
-    return [t for t, v in values.items() if abs(float(v) - t.fam.nominal) < t.fam.min_effect]
+def _below_min_effect(values: dict, robot=None) -> list[Term]:
+    """Terms whose value is within their family's ``min_effect`` (scaled to ``robot``:
+    :func:`sysid.candidates.term_min_effect`) of nominal."""
+    return [t for t, v in values.items() if abs(float(v) - t.fam.nominal) < term_min_effect(t, robot)]
 
 
-def _small_entry(t: Term, v: float) -> dict:
+def _small_entry(t: Term, v: float, robot=None) -> dict:
     return {"term": t.label(), "family": t.family, "value": float(v),
-            "reason": f"{t.fam.fmt(v)} is within the smallest reported effect ({t.fam.min_effect:g} {t.fam.unit}) "
-                      "of the sim's value"}
+            "reason": f"{t.fam.fmt(v)} is within the smallest reported effect ({term_min_effect(t, robot):g} "
+                      f"{t.fam.unit}) of the sim's value"}
 
 
 def _entry(t: Term, v: float, ci, robot) -> dict:
@@ -201,6 +204,20 @@ def _trajectory_spread(problem: Problem, model: dict) -> dict:
     return {t: float(np.std(v, ddof=1)) if len(v) > 1 else 0.0 for t, v in ests.items()}
 
 
+def _robot_of(logs: list[Log], robot=None):
+    """The logs' robot (``Log.robot``, from the recordings' ``meta["robot"]``), or ``robot`` if it is that one.
+
+    Raises:
+        ValueError: no logs; ``robot`` is another robot than the logs'.
+    """
+    if not logs:
+        raise ValueError("no logs to diagnose")
+    own = logs[0].robot
+    if robot is not None and robot.name != own.name:
+        raise ValueError(f"the logs are of robot {own.name!r}, not {robot.name!r}")
+    return robot or own
+
+
 def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
     """Engine-gap baseline from logs of a real world with no injected effects.
 
@@ -216,10 +233,14 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
         model without noise [rad]), ``rms`` (channel -> raw residual RMS), ``baseline_model``
         (term label -> value), ``n_logs``, ``fixed_base``; and ``screen`` (the terms a plain
         screening picks on these logs, for the record).
-    """
-    from robots import nao_h25
 
-    robot = robot or nao_h25()
+    Args:
+        logs: recordings of one robot (``Log.robot``, n joints).  robot: that robot (default the logs').
+
+    Raises:
+        ValueError: ``robot`` is not the logs' robot.
+    """
+    robot = _robot_of(logs, robot)
     with_imu = not logs[0].fixed_base and all("angle" in lg.imu and "gyro" in lg.imu for lg in logs)
     base_model = {}
     if baseline and len(logs) > 1:
@@ -237,7 +258,8 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
         sq += (e ** 2).sum(axis=0)
         n += len(e)
     rms = np.sqrt(sq / n)
-    sig = np.array([info["sigma"]["encoders"]] * 24 + ([info["sigma"].get("angle", 0)] * 2 + [info["sigma"].get("gyro", 0)] * 3 if with_imu else []))
+    sig = np.array([info["sigma"]["encoders"]] * len(robot.joint_names)
+                   + ([info["sigma"].get("angle", 0)] * 2 + [info["sigma"].get("gyro", 0)] * 3 if with_imu else []))
     gap = np.sqrt(np.maximum(rms ** 2 - sig ** 2, 0.0))
     problem = Problem(logs, wins, wins, floor, with_imu)
     fams = FIXED_BASE_FAMILIES if logs[0].fixed_base else CONTACT_FAMILIES
@@ -262,7 +284,9 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     and :func:`_roughness_effect`, :func:`_after` (residual left), :func:`_verdict`, :func:`_report`.
 
     Args:
-        logs: recordings of the real robot (>= 2 for a held-out split by trajectory).
+        logs: recordings of the real robot (>= 2 for a held-out split by trajectory), all of one robot
+            (``Log.robot``, from ``meta["robot"]``; n joints: the report has n per-joint channels).
+        robot: that robot (``robots.RobotModel``); default the logs' own.
         calibration: output of :func:`calibrate` on "none" logs (engine gap: its baseline model
             is replayed under everything, its gap widens the noise floor), or None.
         families: family names to consider (default: the actuator families for fixed-base logs,
@@ -283,13 +307,11 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         ``model`` (term label -> value), ``runtime_s``, ``rollouts``.
 
     Raises:
-        ValueError: a name in ``families`` is not a candidate family.
+        ValueError: a name in ``families`` is not a candidate family; ``robot`` is not the logs' robot.
     """
-    from robots import nao_h25
-
     clock = _Clock(time.perf_counter(), time_budget_s)
     say = progress or (lambda s: None)
-    robot = robot or nao_h25()
+    robot = _robot_of(logs, robot)
     setup = _prepare(logs, families, calibration, base_model, say)
     base = _baseline(logs, setup, calibration, robot)
     loc = _localise(logs, setup, base)
@@ -349,8 +371,8 @@ class _Baseline:
     nominal: list[np.ndarray]  # per window of ``all_windows``: (1, L, k) predictions [rad, rad/s]
     floor: np.ndarray  # (k,) noise floor per channel [rad or rad/s], engine gap included when calibrated
     sigma: dict  # noise levels: encoders [rad], angle [rad], gyro [rad/s] (the latter two with an IMU)
-    names: list[str]  # k channel names: 24 joints, then the IMU channels if any
-    noise_floor: float  # RMS of the 24 joint floors [rad]
+    names: list[str]  # k channel names: the robot's n joints, then the IMU channels if any
+    noise_floor: float  # RMS of the n joint floors [rad]
     floor_sq: float  # mean squared joint floor [rad²] (the gap-closed reference)
 
 
@@ -362,7 +384,7 @@ class _Before:
     energy_train: np.ndarray  # (k,) training residual energy per channel [floor²]
     energy_heldout: np.ndarray  # (k,) held-out residual energy per channel [floor²]
     rms: float  # held-out joint RMS [rad]
-    per_joint: np.ndarray  # (24,) held-out RMS per joint [rad]
+    per_joint: np.ndarray  # (n,) held-out RMS per joint [rad]
     bic0: float  # training BIC of the empty model
     nothing: bool  # no joint's energy exceeds FLAG_ENERGY on training or held-out logs: nothing to explain
 
@@ -425,7 +447,7 @@ class _After:
     """The residual left by the final model."""
 
     rms: float  # held-out joint RMS [rad]
-    per_joint: np.ndarray  # (24,) held-out RMS per joint [rad]
+    per_joint: np.ndarray  # (n,) held-out RMS per joint [rad]
     energy: np.ndarray  # (k,) held-out residual energy per channel [floor²]
     gap_closed: float | None  # share of the excess mean-square over the floor removed; None at the floor
     localisation: dict  # :func:`sysid.stats.localisation` of all windows under base + model (no gravity)
@@ -489,8 +511,9 @@ def _baseline(logs: list[Log], setup: _Setup, calibration: dict | None, robot) -
     """
     nominal = predict(logs, setup.all_windows, [setup.base_model], with_imu=setup.with_imu)
     floor, finfo = _floor(logs, setup.all_windows, nominal, setup.with_imu, calibration, robot)
+    nj = len(robot.joint_names)
     return _Baseline(nominal=nominal, floor=floor, sigma=finfo["sigma"], names=_channel_names(robot, setup.with_imu),
-                     noise_floor=float(np.sqrt(np.mean(floor[:24] ** 2))), floor_sq=float(np.mean(floor[:24] ** 2)))
+                     noise_floor=float(np.sqrt(np.mean(floor[:nj] ** 2))), floor_sq=float(np.mean(floor[:nj] ** 2)))
 
 
 def _localise(logs: list[Log], setup: _Setup, base: _Baseline) -> dict:
@@ -498,7 +521,7 @@ def _localise(logs: list[Log], setup: _Setup, base: _Baseline) -> dict:
     (:func:`sysid.stats.localisation`, with gravity torques from a replay model), for the report."""
     from sysid.model import Structure, replay_model
 
-    rm = replay_model(Structure(fixed_base=setup.fixed, physics_dt=logs[0].physics_dt))
+    rm = replay_model(Structure(fixed_base=setup.fixed, physics_dt=logs[0].physics_dt, robot=logs[0].robot_name))
     return localisation(logs, setup.all_windows, [p[0] for p in base.nominal], base.floor, base.names, rm.model,
                         rm.qadr, rm.dadr)
 
@@ -611,9 +634,9 @@ def _prune_terms(problem: Problem, model: dict, cand: dict) -> tuple[dict, list[
                          "reason": f"removing it changes the held-out cost by {float(costs[1 + terms.index(t)] - c_with):+.2f} "
                                    f"(< {_margin(c_with, k):.2f}): not needed"})
         cand.pop(t)
-    small = _below_min_effect(cand)
+    small = _below_min_effect(cand, problem.robot)
     for t in small:
-        rejected.append(_small_entry(t, cand.pop(t)))
+        rejected.append(_small_entry(t, cand.pop(t), problem.robot))
     drop += small
     if drop and cand:
         fit = refit(problem, cand, grid=False, max_nfev=6)
@@ -650,10 +673,10 @@ def _drop_negligible(problem: Problem, model: dict, cost: float, c0: float) -> _
     """Drop terms a later refit moved to within their family's smallest reported effect of nominal,
     refit the rest briefly and recompute the held-out cost (``c0`` when nothing is left)."""
     step = _Step(model=model, cost=cost)
-    small = _below_min_effect(step.model)
+    small = _below_min_effect(step.model, problem.robot)
     if small:  # a refit can move an earlier term to within the smallest reported effect of nominal
         for t in small:
-            step.rejected.append(_small_entry(t, step.model.pop(t)))
+            step.rejected.append(_small_entry(t, step.model.pop(t), problem.robot))
         if step.model:
             step.model = dict(refit(problem, step.model, grid=False, max_nfev=6).values)
         step.cost = float(problem.cost([step.model], "heldout")[0]) if step.model else c0
@@ -806,7 +829,8 @@ def _after(logs: list[Log], problem: Problem, setup: _Setup, base: _Baseline, be
     # residual after the fit: per joint, whiteness, phases
     preds_all = predict(logs, setup.all_windows, [{**setup.base_model, **model}], with_imu=setup.with_imu)
     loc_after = localisation(logs, setup.all_windows, [p[0] for p in preds_all], base.floor, base.names)
-    unexplained = [nm for nm in base.names[:24] if loc_after["channels"][nm]["rms_over_floor"] ** 2 > FLAG_ENERGY]
+    unexplained = [nm for nm in base.names[:problem.n_joints]
+                   if loc_after["channels"][nm]["rms_over_floor"] ** 2 > FLAG_ENERGY]
     return _After(rms=rms_after, per_joint=per_after, energy=e_after, gap_closed=gap_closed, localisation=loc_after,
                   unexplained=unexplained)
 
@@ -878,7 +902,8 @@ def _report(logs: list[Log], setup: _Setup, base: _Baseline, loc: dict, problem:
             "per_joint_rms_after": {nm: float(v) for nm, v in zip(robot.joint_names, after.per_joint)},
             "per_joint_rms_over_floor_after": {nm: after.localisation["channels"][nm]["rms_over_floor"]
                                                for nm in names},
-            "whiteness_after": {nm: after.localisation["channels"][nm]["whiteness"] for nm in names[:24]},
+            "whiteness_after": {nm: after.localisation["channels"][nm]["whiteness"]
+                                for nm in names[:len(robot.joint_names)]},
             "phases_after": after.localisation["phases"],
             "groups_after": after.localisation["groups"],
             "heldout_energy_after": {nm: float(v) for nm, v in zip(names, after.energy)},

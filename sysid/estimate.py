@@ -1,4 +1,5 @@
-"""Floating-base state from what a NAO measures, for windowed replay of logs without ground truth.
+"""Floating-base state from what a robot measures (joint angles, torso roll/pitch, gyro, foot forces),
+for windowed replay of logs without ground truth.
 
 Assumptions (flat ground at z = 0, the stance foot does not slip): orientation from the logged
 torso roll/pitch (yaw 0: on flat ground yaw does not change the dynamics), angular velocity from
@@ -18,11 +19,11 @@ from common.spatial import quat_from_rpy
 from sysid.data import Log
 
 
-@functools.lru_cache(maxsize=2)
-def _kin_model(physics_dt: float):
+@functools.lru_cache(maxsize=4)
+def _kin_model(physics_dt: float, robot_name: str = "nao_h25"):
     from sysid.model import Structure, replay_model
 
-    rm = replay_model(Structure(fixed_base=False, physics_dt=physics_dt))
+    rm = replay_model(Structure(fixed_base=False, physics_dt=physics_dt, robot=robot_name))
     return rm, mujoco.MjData(rm.model)
 
 
@@ -35,7 +36,7 @@ def base_state(log: Log, k: int) -> dict:
     if "angle" not in log.imu or "gyro" not in log.imu:
         raise ValueError(f"{log.name}: a floating-base log needs angle.* and gyro.* columns (or gt.* ground truth) "
                          "to restart replays from the measured state")
-    rm, d = _kin_model(log.physics_dt)
+    rm, d = _kin_model(log.physics_dt, log.robot_name)
     m = rm.model
     roll, pitch = log.imu["angle"][k]
     quat = quat_from_rpy(float(roll), float(pitch))

@@ -53,12 +53,92 @@ _SHARE = {"holds": 0.17, "ramps": 0.13, "steps": 0.12, "reversals": 0.1, "gait":
 _FLOATING = ("slip", "stepping")
 
 
+#: Motion amplitude [rad] per joint group (``RobotModel.groups``): arms, head, everything else (legs,
+#: waist, torso); never more than :data:`RANGE_SHARE` of a joint's range.
+GROUP_AMPLITUDE = {"arms": 0.3, "head": 0.25}
+DEFAULT_AMPLITUDE = 0.2
+RANGE_SHARE = 0.25
+
+
 def _amplitudes(robot: RobotModel) -> np.ndarray:
-    """Per actuated joint motion amplitude [rad]: legs 0.2, arms 0.3, head 0.25."""
-    out = []
-    for n in robot.actuated_joint_names:
-        out.append(0.3 if any(k in n for k in ("Shoulder", "Elbow", "Wrist")) else 0.25 if n.startswith("Head") else 0.2)
-    return np.array(out)
+    """Per actuated joint motion amplitude [rad]: arms 0.3, head 0.25, the rest (legs, waist) 0.2
+    (:data:`GROUP_AMPLITUDE`), at most :data:`RANGE_SHARE` of the joint's range (G1 ankle roll:
+    0.13 of its +-0.26 rad)."""
+    arms, head = set(robot.groups.get("arms", ())), set(robot.groups.get("head", ()))
+    out = [GROUP_AMPLITUDE["arms"] if n in arms else GROUP_AMPLITUDE["head"] if n in head else DEFAULT_AMPLITUDE
+           for n in robot.actuated_joint_names]
+    idx = robot.actuated_index
+    return np.minimum(np.array(out), RANGE_SHARE * (robot.upper[idx] - robot.lower[idx]))
+
+
+def _rpy_matrix(r: float, p: float, y: float) -> np.ndarray:
+    """URDF ``rpy`` (fixed axes x, y, z) -> rotation matrix."""
+    cr, sr, cp, sp, cy, sy = np.cos(r), np.sin(r), np.cos(p), np.sin(p), np.cos(y), np.sin(y)
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
+
+
+def _zero_pose_axes(robot: RobotModel) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Joint name -> (origin, unit axis) in the root frame at zero joint angles (URDF chain: origin
+    ``xyz``, ``rpy``, then the joint's rotation)."""
+    frames = {robot.root: (np.zeros(3), np.eye(3))}
+    out: dict = {}
+    todo = list(robot.joints)
+    while todo:
+        rest = []
+        for j in todo:
+            if j.parent not in frames:
+                rest.append(j)
+                continue
+            p0, R0 = frames[j.parent]
+            p, R = p0 + R0 @ np.asarray(j.xyz, float), R0 @ _rpy_matrix(*j.rpy)
+            frames[j.child] = (p, R)
+            a = R @ np.asarray(j.axis, float)
+            out[j.name] = (p, a / np.linalg.norm(a))
+        if len(rest) == len(todo):  # a joint whose parent is on no chain from the root
+            raise ValueError(f"{robot.name}: joints {[j.name for j in rest]} do not hang from the root {robot.root!r}")
+        todo = rest
+    return out
+
+
+def joint_roles(robot: RobotModel) -> dict[str, tuple[str, float, float]]:
+    """The joints the protocol's coordinated patterns (gait, slip, stepping) move, by role.
+
+    Found from the kinematic chain, not from names: in each leg (``groups["left_leg"]`` /
+    ``groups["right_leg"]``, hip to ankle) the joints whose axis at zero angles is within 26 deg of
+    the root's x axis are rolls (first: ``hip_roll``, last: ``ankle_roll``), those near its y axis
+    pitches (first: ``hip_pitch``, last: ``ankle_pitch``, the one between: ``knee``); in each arm
+    (``groups["arms"]``, side by the shoulder's y coordinate) the first or second joint with a
+    pitch axis is ``shoulder_pitch``. A coupled yaw-pitch hip (the NAO's HipYawPitch) has neither.
+
+    Returns:
+        joint name -> (role, side: +1 left / -1 right, axis sign: +1 when the axis points along +x
+        (rolls) or +y (pitches), else -1).
+    """
+    axes = _zero_pose_axes(robot)
+    roles: dict[str, tuple[str, float, float]] = {}
+    for grp, side in (("left_leg", 1.0), ("right_leg", -1.0)):
+        leg = list(robot.groups.get(grp, ()))
+        rolls = [n for n in leg if abs(axes[n][1][0]) > 0.9]
+        pitches = [n for n in leg if abs(axes[n][1][1]) > 0.9]
+        named = []
+        if len(rolls) >= 2:
+            named += [(rolls[0], "hip_roll", 0), (rolls[-1], "ankle_roll", 0)]
+        if len(pitches) >= 2:
+            named += [(pitches[0], "hip_pitch", 1), (pitches[-1], "ankle_pitch", 1)]
+        if len(pitches) >= 3:
+            named.append((pitches[1], "knee", 1))
+        for n, role, k in named:
+            roles[n] = (role, side, 1.0 if axes[n][1][k] > 0 else -1.0)
+    arms = list(robot.groups.get("arms", ()))
+    for side in (1.0, -1.0):
+        chain = [n for n in arms if np.sign(axes[n][0][1]) == side]
+        for n in chain[:2]:
+            if abs(axes[n][1][1]) > 0.9:
+                roles[n] = ("shoulder_pitch", side, 1.0 if axes[n][1][1] > 0 else -1.0)
+                break
+    return roles
 
 
 def _smooth_step(x: np.ndarray) -> np.ndarray:
@@ -68,7 +148,11 @@ def _smooth_step(x: np.ndarray) -> np.ndarray:
 
 def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_dt: float = CONTROL_DT,
              pose: str = "crouch", segments=SEGMENTS, fixed_base: bool = True, scale: float = 1.0) -> np.ndarray:
-    """Joint targets [rad] for one excitation log, shape (round(seconds / control_dt), 23).
+    """Joint targets [rad] for one excitation log, shape (round(seconds / control_dt), m), m = the
+    robot's actuated joint count (``RobotModel.actuated_joint_names``: 23 for the NAO, 29 for the G1).
+
+    Amplitudes come from the joint groups and ranges (:func:`_amplitudes`), the coordinated
+    patterns (gait, slip, stepping) from the joints' roles in the chain (:func:`joint_roles`).
 
     Args:
         robot: the robot; ``pose``: the named pose the motion is centred on (and starts/ends in).
@@ -81,6 +165,7 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
 
     Raises:
         ValueError: ``seconds < 3``, unknown segment, non-positive ``scale``.
+        KeyError: unknown ``pose``.
     """
     if seconds < 3.0:
         raise ValueError(f"an excitation log needs >= 3 s, got {seconds}")
@@ -100,6 +185,8 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
         amp = amp * 0.3
     names = robot.actuated_joint_names
     na = len(names)
+    roles = joint_roles(robot)
+    role = [roles.get(nm, (None, 0.0, 1.0)) for nm in names]  # (role, side, axis sign) per actuated joint
     lead = int(round(0.4 / control_dt))
     tail = int(round(0.3 / control_dt))
     body = n - lead - tail
@@ -137,17 +224,16 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
             f = rng.uniform(0.9, 1.6)
             ph = 2 * np.pi * f * t
             d = np.zeros((L, na))
-            for i, nm in enumerate(names):
-                side = 1.0 if nm.startswith("L") else -1.0
-                if "HipPitch" in nm:
+            for i, (rl, side, _) in enumerate(role):
+                if rl == "hip_pitch":
                     d[:, i] = -0.6 * amp[i] * np.sin(ph) * side
-                elif "KneePitch" in nm:
+                elif rl == "knee":
                     d[:, i] = 0.8 * amp[i] * (0.5 + 0.5 * np.sin(ph * side + np.pi / 2)) - 0.4 * amp[i]
-                elif "AnklePitch" in nm:
+                elif rl == "ankle_pitch":
                     d[:, i] = 0.4 * amp[i] * np.sin(ph) * side
-                elif "Roll" in nm and ("Hip" in nm or "Ankle" in nm):
+                elif rl in ("hip_roll", "ankle_roll"):
                     d[:, i] = 0.3 * amp[i] * np.sin(ph + np.pi / 2)
-                elif "ShoulderPitch" in nm:
+                elif rl == "shoulder_pitch":
                     d[:, i] = 0.8 * amp[i] * np.sin(ph) * side
                 else:
                     d[:, i] = 0.3 * amp[i] * np.sin(ph + rng.uniform(0, 2 * np.pi))
@@ -169,32 +255,30 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
             grow = 0.4 + 0.6 * t / T
             spread = a * grow * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) * env
             d = np.zeros((L, na))
-            for i, nm in enumerate(names):
-                side = 1.0 if nm.startswith("L") else -1.0
-                if "HipRoll" in nm:
-                    d[:, i] = side * spread
-                elif "AnkleRoll" in nm:
-                    d[:, i] = -side * spread
+            for i, (rl, side, ax) in enumerate(role):  # ax: a roll axis along -x turns the other way
+                if rl == "hip_roll":
+                    d[:, i] = side * spread * ax
+                elif rl == "ankle_roll":
+                    d[:, i] = -side * spread * ax
         else:  # stepping (floating base): weight shift with small alternating knee lifts
             f = rng.uniform(0.5, 0.7)
             ph = 2 * np.pi * f * t
             d = np.zeros((L, na))
             sway = 0.08 * scale * np.sin(ph)
-            for i, nm in enumerate(names):
-                side = 1.0 if nm.startswith("L") else -1.0
-                if "HipRoll" in nm:
-                    d[:, i] = sway
-                elif "AnkleRoll" in nm:
-                    d[:, i] = -sway
-                elif "KneePitch" in nm:
-                    d[:, i] = 0.22 * scale * np.maximum(0.0, -side * np.sin(ph)) ** 2
-                elif "HipPitch" in nm or "AnklePitch" in nm:
-                    d[:, i] = -0.11 * scale * np.maximum(0.0, -side * np.sin(ph)) ** 2
+            for i, (rl, side, ax) in enumerate(role):  # ax: an axis along -x / -y turns the other way
+                if rl == "hip_roll":
+                    d[:, i] = sway * ax
+                elif rl == "ankle_roll":
+                    d[:, i] = -sway * ax
+                elif rl == "knee":
+                    d[:, i] = 0.22 * scale * np.maximum(0.0, -side * np.sin(ph)) ** 2 * ax
+                elif rl in ("hip_pitch", "ankle_pitch"):
+                    d[:, i] = -0.11 * scale * np.maximum(0.0, -side * np.sin(ph)) ** 2 * ax
             d *= env[:, None]
         out.append(d)
     out.append(np.zeros((tail, na)))
     delta = np.concatenate(out)[:n]
-    # the HipYawPitch motor is shared; keep it moving like any other joint
+    # a mimic pair (the NAO's HipYawPitch) shares one motor; it moves like any other joint
     lo = robot.lower[robot.actuated_index] + 0.01
     hi = robot.upper[robot.actuated_index] - 0.01
     return np.clip(q0[None] + delta, lo, hi)

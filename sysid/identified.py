@@ -110,7 +110,8 @@ class IdentifiedSimEnv(NaoSimEnv):
     # ---------------------------------------------------------------- model
     def _compile(self) -> mujoco.MjModel:
         st = series_structure(Structure(fixed_base=self.fixed_base, physics_dt=self.physics_dt,
-                                        hang_height=self.hang_height, friction=self.friction), self.terms)
+                                        hang_height=self.hang_height, friction=self.friction, robot=self.robot.name),
+                              self.terms)
         self._rm = rm = ReplayModel(self.robot, st, ground=self._terrain)
         m = rm.model  # freshly compiled for this world: ours to edit
         self._bias = apply_terms(rm, m, self.terms)

@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
-from sysid.candidates import (FAMILIES, Term, joints_above, links_below, term_allowed, term_bounds,
+from sysid.candidates import (FAMILIES, Term, family_for, joints_above, links_below, term_allowed, term_bounds,
                                term_probe)
 from sysid.data import Log
-from sysid.replay import Window, measured, predict
+from sysid.replay import IMU_CHANNELS, Window, measured, predict
 
 
 # ------------------------------------------------------------------------------------------ problem
@@ -36,16 +36,21 @@ class Problem:
     """Logs, windows and noise floor of one diagnosis.
 
     Args:
-        logs: the recordings.  train, heldout: windows of each set.
-        floor: (k,) noise floor per channel [rad or rad/s]; residuals are divided by it.
+        logs: the recordings (of one robot: ``Log.robot``, n joints).  train, heldout: windows of each set.
+        floor: (k,) noise floor per channel [rad or rad/s], k = n (+5 with IMU); residuals are divided by it.
         with_imu: compare torso roll/pitch and gyro too (floating base).
         base: terms (Term -> value) applied under every parameter set and never fitted (e.g. the
             actuator effects found in the air, when stepping logs are diagnosed for contact).
+
+    Attributes:
+        robot: the logs' robot (``logs[0].robot``).  n_joints: its joint count n.
     """
 
     def __init__(self, logs: list[Log], train: list[Window], heldout: list[Window], floor: np.ndarray,
                  with_imu: bool = False, base: dict | None = None):
         self.logs, self.train, self.heldout = logs, train, heldout
+        self.robot = logs[0].robot
+        self.n_joints = len(self.robot.joint_names)
         self.floor = np.asarray(floor, dtype=float)
         self.with_imu = with_imu
         self.base = dict(base or {})
@@ -108,11 +113,12 @@ class Problem:
         return self.channel_energy(self.predict(values_list, which), which).sum(axis=1)
 
     def rms(self, values: dict, which: str = "heldout") -> tuple[float, np.ndarray]:
-        """Encoder RMS [rad] over all joints and per joint (24,) of one parameter set."""
+        """Encoder RMS [rad] over all joints and per joint, shape (n,), of one parameter set."""
         preds = self.predict([values], which)
+        nj = self.n_joints
         sq, n = 0.0, 0
         for ym, yp in zip(self.meas[which], preds):
-            e = ym[1:, :24] - yp[0, 1:, :24]
+            e = ym[1:, :nj] - yp[0, 1:, :nj]
             sq = sq + (e ** 2).sum(axis=0)
             n += len(e)
         per = np.sqrt(sq / n)
@@ -155,7 +161,8 @@ class ScreenResult:
 
 
 def _mirror(fam) -> float:
-    """The probe on the other side of nominal, kept inside the family bounds."""
+    """The probe on the other side of nominal, kept inside the family bounds (``fam``: a
+    :class:`sysid.candidates.Family`, scaled to the robot by :func:`sysid.candidates.family_for`)."""
     m = 2 * fam.nominal - fam.probe
     if not (fam.lo < m < fam.hi):
         m = fam.nominal + 0.5 * ((fam.lo if m <= fam.lo else fam.hi) - fam.nominal)
@@ -241,7 +248,7 @@ def _dictionary(problem: Problem, current: dict, cols: list[Column]) -> tuple[np
 def _columns_stage_a(robot, families, current, J, links, floating: bool) -> list[Column]:
     cols = []
     for f in families:
-        fam = FAMILIES[f]
+        fam = family_for(f, robot)
         if fam.contact and not floating:
             continue
         if fam.scope == "global":
@@ -269,7 +276,7 @@ def _columns_stage_a(robot, families, current, J, links, floating: bool) -> list
 def _columns_terms(robot, fam_names, current, J, links, probes: dict | None = None) -> list[Column]:
     cols = []
     for f in fam_names:
-        fam = FAMILIES[f]
+        fam = family_for(f, robot)
         targets = [None] if fam.scope == "global" else J if fam.scope == "joint" else links
         for tg in targets:
             t = Term(f, tg)
@@ -287,8 +294,13 @@ FLAG_ENERGY = 1.5
 
 
 def flagged_joints(energy: np.ndarray, names, threshold: float = FLAG_ENERGY, max_joints: int = 8) -> list[str]:
-    """Joints whose residual energy exceeds ``threshold`` floors², worst first (at most ``max_joints``)."""
-    e = energy[:24]
+    """Joints whose residual energy exceeds ``threshold`` floors², worst first (at most ``max_joints``).
+
+    Args:
+        energy: (k,) residual energy per channel [floor²].  names: the k channel names, the robot's
+            n joints first (IMU channels, :data:`sysid.replay.IMU_CHANNELS`, after them are not joints).
+    """
+    e = energy[:sum(1 for nm in names if nm not in IMU_CHANNELS)]
     order = np.argsort(-e)
     return [names[i] for i in order if e[i] > threshold][:max_joints]
 
@@ -336,7 +348,7 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
         if cols_a[i].family not in fams:
             fams.append(cols_a[i].family)
     for c, e in zip(cols_a, expl):
-        fam = FAMILIES[c.family]
+        fam = family_for(c.family, robot)
         if fam.probe2 is not None and c.label.endswith("(large)"):
             small = next(x for x, ex in zip(cols_a, expl) if x.label == c.label[:-7])
             if e > expl[cols_a.index(small)]:
@@ -355,7 +367,7 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
         fam = t.fam
         delta = pv - fam.nominal
         v0 = current.get(t, fam.nominal) + wi * delta
-        selected[t] = float(np.clip(v0, *term_bounds(t)))
+        selected[t] = float(np.clip(v0, *term_bounds(t, robot)))
         weights[t] = float(wi)
     # dictionary columns that look like a selected one (cannot be told apart with this data)
     Dn = D / np.maximum(np.linalg.norm(D, axis=0), 1e-12)
@@ -383,6 +395,7 @@ class FitResult:
 
 
 def _grid(fam, v0: float) -> np.ndarray:
+    """Grid starts of a non-smooth family (``fam`` scaled to the robot: :func:`sysid.candidates.family_for`)."""
     if fam.name == "latency":
         return np.arange(0.0, fam.hi + 1e-9, 0.005)
     if fam.name == "torque_limit":
@@ -416,14 +429,15 @@ def refit(problem: Problem, start: dict, free: list | None = None, *, max_nfev: 
     if not free:
         R = problem.residuals(problem.predict([values]))[0]
         return FitResult(values, [], float(R @ R), None, R, 1)
-    lo = np.array([term_bounds(t)[0] for t in free])
-    hi = np.array([term_bounds(t)[1] for t in free])
+    robot = problem.robot
+    lo = np.array([term_bounds(t, robot)[0] for t in free])
+    hi = np.array([term_bounds(t, robot)[1] for t in free])
     span = hi - lo
     if grid:
         for t in free:
             if t.fam.smooth:
                 continue
-            g = _grid(t.fam, values[t])
+            g = _grid(family_for(t.family, robot), values[t])
             sets = [{**values, t: float(v)} for v in g]
             R = problem.residuals(problem.predict(sets))
             values[t] = float(g[int(np.argmin((R ** 2).sum(axis=1)))])
@@ -501,7 +515,7 @@ def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.95
     for i, t in enumerate(terms):
         v = fit.values[t]
         a, b = v - z * sd[i], v + z * sd[i]
-        tlo, thi = term_bounds(t)
+        tlo, thi = term_bounds(t, problem.robot)
         out[t] = (max(tlo, a) if np.isfinite(a) else -np.inf, min(thi, b) if np.isfinite(b) else np.inf)
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(sd, sd)

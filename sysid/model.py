@@ -10,7 +10,7 @@ the identified model can be exported as MJCF (``MjSpec.to_xml``). On top of the 
   documentation, Python bindings, "rollout");
 * a stiff dry-friction constraint (``solref_friction``, 2 physics steps) on every joint, used
   only when a Coulomb candidate sets ``dof_frictionloss``;
-* ``jointpos`` sensors for the 24 robot hinges (and the series play hinges), plus a torso
+* ``jointpos`` sensors for the robot's n hinges (and the series play hinges), plus a torso
   ``framequat`` and ``gyro`` for floating-base replays, so :func:`mujoco.rollout.rollout` returns
   only what is compared with the recording;
 * optionally, for gear backlash, a second "play" hinge in series with a robot joint on the same
@@ -34,6 +34,7 @@ index maps replays and candidates use.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 
@@ -44,7 +45,7 @@ from common.defaults import PHYSICS_DT
 from common.spatial import quat_to_mat
 from envs.effects import NOMINAL_FOOT_FRICTION
 from envs.mujoco_world import build_spec
-from robots import RobotModel, nao_h25
+from robots import RobotModel, get_robot
 from terrain import Heightfield
 
 #: Longest actuation latency a candidate can take [s] (history buffer length).
@@ -84,19 +85,23 @@ class Structure:
         play_joints: robot joints that get a series backlash hinge.
         spring_joints: robot joints that get a series compliance (spring) hinge.
         friction: sliding friction of all contacts (foot friction candidate edits the field).
-        hang_height: torso height of a fixed-base model [m].
+        hang_height: root height of a fixed-base model [m]; None: the robot's
+            ``RobotModel.hang_height`` (where the worlds hang it; 0.6 m for the NAO).
         terrain: the ground is a :data:`TERRAIN_SIZE` heightfield (``ground_hfield``) whose
             heights a caller writes with :func:`set_terrain` (uneven-ground simulations of
             :mod:`sysid.roughness`) instead of a plane.
+        robot: the robot's name (``RobotModel.name``: ``"nao_h25"``, ``"g1"``, ``"talos"``; a
+            recording's ``meta["robot"]``); :func:`replay_model` builds that robot.
     """
 
     fixed_base: bool = True
     physics_dt: float = PHYSICS_DT
     play_joints: tuple[str, ...] = ()
     friction: float = NOMINAL_FOOT_FRICTION
-    hang_height: float = 0.6
+    hang_height: float | None = None
     terrain: bool = False
     spring_joints: tuple[str, ...] = ()
+    robot: str = "nao_h25"
 
     @property
     def n_series(self) -> int:
@@ -119,7 +124,7 @@ def base_spec(robot: RobotModel, *, fixed_base: bool, physics_dt: float, hang_he
     or on the heightfield ``terrain``.
 
     Returns:
-        An uncompiled spec: 24 hinges (+ free joint ``root`` unless ``fixed_base``), 24 PD
+        An uncompiled spec: the robot's n hinges (+ free joint ``root`` unless ``fixed_base``), n PD
         actuators named like the joints, sites for ``robot.frames``, a ground plane ``ground``.
     """
     return build_spec(robot, terrain, fixed_base=fixed_base, hang_height=hang_height, physics_dt=physics_dt,
@@ -137,7 +142,8 @@ def replay_spec(robot: RobotModel, structure: Structure, ground: Heightfield | N
     s = structure
     if s.terrain and ground is not None:
         raise ValueError("a terrain structure writes its own heightfield: give no fixed ground")
-    spec = base_spec(robot, fixed_base=s.fixed_base, physics_dt=s.physics_dt, hang_height=s.hang_height,
+    hang = robot.hang_height if s.hang_height is None else s.hang_height
+    spec = base_spec(robot, fixed_base=s.fixed_base, physics_dt=s.physics_dt, hang_height=hang,
                      friction=s.friction, terrain=ground)
     if s.terrain:  # swap the plane for a heightfield with a fixed elevation range (data set at run time)
         ground = spec.geom("ground")
@@ -216,11 +222,11 @@ class ReplayModel:
 
     Attributes:
         robot, structure, spec, model (template ``MjModel``; copy before editing).
-        qadr, dadr: (24,) qpos / dof address of each robot joint's (motor) hinge.
+        qadr, dadr: (n,) qpos / dof address of each of the robot's n joints' (motor) hinge.
         play_qadr, play_dadr, play_jnt: dict joint name -> address / joint id of its play hinge.
         spring_qadr, spring_dadr, spring_jnt: the same for series-spring hinges.
-        act: (24,) actuator id per robot joint.  body: dict link name -> body id.
-        meas: (24, nsensordata) matrix mapping sensor data to the 24 measured joint angles.
+        act: (n,) actuator id per robot joint.  body: dict link name -> body id.
+        meas: (n, nsensordata) matrix mapping sensor data to the n measured joint angles.
         quat_adr, gyro_adr: sensordata addresses of the torso quaternion (4) and gyro (3), or None.
         nsample: history samples per actuator.
     """
@@ -264,8 +270,8 @@ class ReplayModel:
 
         Args:
             m: the (edited) model the state is for.
-            q: (24,) physical joint angles [rad]; dq: (24,) [rad/s] or None (zero).
-            cmd_hist: (nsample, 24) joint targets at the history buffer's time stamps
+            q: (n,) physical joint angles [rad]; dq: (n,) [rad/s] or None (zero).
+            cmd_hist: (nsample, n) joint targets at the history buffer's time stamps
                 (oldest first; the last row is the command active just before the start).
             base: floating base ``pos`` (3), ``quat`` (4, wxyz), ``linvel`` (3, world),
                 ``angvel`` (3, world); ignored for a fixed base.
@@ -324,11 +330,17 @@ def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT
     side ``dt^2 (kp + k) / I_m < 2`` (I_m: :func:`spring_motor_armature`). The returned value keeps
     a factor 2 margin on both.
 
+    Args:
+        robot_name: the robot (``RobotModel.name``, e.g. ``"nao_h25"``, ``"g1"``).
+
     Returns:
         dict joint name -> k_max [N m/rad] (the smallest compliance a candidate can represent is
         1 / k_max; a stiffer transmission is, at this step size, a rigid one).
+
+    Raises:
+        KeyError: an unknown robot name.
     """
-    robot = replay_model(Structure(fixed_base=fixed_base, physics_dt=physics_dt), robot_name).robot
+    robot = replay_model(Structure(fixed_base=fixed_base, physics_dt=physics_dt, robot=robot_name)).robot
     m = base_spec(robot, fixed_base=fixed_base, physics_dt=physics_dt).compile()
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
@@ -344,9 +356,37 @@ def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT
     return out
 
 
+@functools.lru_cache(maxsize=8)
+def joint_inertia(robot_name: str = "nao_h25", fixed_base: bool = True) -> dict:
+    """Effective inertia [kg m^2] of each joint of the robot ``robot_name``: 1 / (M^-1)_ii of the
+    sim's mass matrix at the zero pose (hanging robot for ``fixed_base``).
+
+    Raises:
+        KeyError: an unknown robot name.
+    """
+    robot = get_robot(robot_name)
+    m = base_spec(robot, fixed_base=fixed_base, physics_dt=PHYSICS_DT, hang_height=robot.hang_height).compile()
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    Minv = np.linalg.inv(M)
+    return {n: float(1.0 / Minv[i, i]) for n in robot.joint_names for i in [int(m.jnt_dofadr[m.joint(n).id])]}
+
+
 @functools.lru_cache(maxsize=64)
-def replay_model(structure: Structure, robot_name: str = "nao_h25") -> ReplayModel:
-    """Cached :class:`ReplayModel` of ``structure`` (treat as read-only)."""
-    if robot_name != "nao_h25":
-        raise ValueError(f"no replay model for robot {robot_name!r}; this package models 'nao_h25'")
-    return ReplayModel(nao_h25(), structure)
+def replay_model(structure: Structure, robot_name: str | None = None) -> ReplayModel:
+    """Cached :class:`ReplayModel` of ``structure`` (treat as read-only) for the robot
+    ``structure.robot`` (or ``robot_name`` when given: the structure is then taken for that robot).
+
+    Raises:
+        ValueError: an unknown robot name (the robots of ``robots.get_robot``).
+    """
+    if robot_name is not None and robot_name != structure.robot:
+        return replay_model(dataclasses.replace(structure, robot=robot_name))
+    try:
+        robot = get_robot(structure.robot)
+    except KeyError:
+        raise ValueError(f"no replay model for robot {structure.robot!r}; this package models the robots of "
+                         "robots.get_robot (nao_h25, g1, talos)") from None
+    return ReplayModel(robot, structure)

@@ -29,7 +29,10 @@ from sysid.candidates import Term, apply_terms, series_structure
 from sysid.data import Log
 from sysid.model import ReplayModel, Structure, replay_model
 
+#: (parameter set, window) pairs per batched ``rollout`` call (bounds memory).
 _CHUNK = 24
+#: Names of the IMU channels that follow the joint channels of a floating-base replay with IMU.
+IMU_CHANNELS = ("angle.roll", "angle.pitch", "gyro.x", "gyro.y", "gyro.z")
 
 
 def n_threads() -> int:
@@ -86,7 +89,8 @@ def windows(logs: list[Log], idx, seconds: float) -> list[Window]:
 
 
 def measured(log: Log, w: Window, with_imu: bool) -> np.ndarray:
-    """Measured outputs of a window, shape (L, 24) or (L, 29) with IMU (roll, pitch, gyro x y z)."""
+    """Measured outputs of a window, shape (L, n) for the robot's n joints, or (L, n + 5) with IMU
+    (roll, pitch, gyro x y z: :data:`IMU_CHANNELS`)."""
     y = log.q[w.k0:w.k1]
     if with_imu:
         y = np.concatenate([y, log.imu["angle"][w.k0:w.k1], log.imu["gyro"][w.k0:w.k1]], axis=1)
@@ -94,7 +98,7 @@ def measured(log: Log, w: Window, with_imu: bool) -> np.ndarray:
 
 
 def _cmd_history(log: Log, k0: int, nsample: int) -> np.ndarray:
-    """(nsample, 24) commands active at physics times -(nsample..1)*physics_dt before row k0."""
+    """(nsample, n) commands active at physics times -(nsample..1)*physics_dt before row k0."""
     sub = log.substeps
     back = np.arange(nsample, 0, -1)  # physics steps before the start
     rows = k0 - (back + sub - 1) // sub
@@ -120,7 +124,8 @@ def _base_state(log: Log, k: int) -> dict | None:
 
 
 def build_models(values_list: list[dict[Term, float]], structure: Structure) -> list[tuple[ReplayModel, mujoco.MjModel, np.ndarray]]:
-    """Compile/copy one model per parameter set: (replay model, edited MjModel copy, (24,) bias)."""
+    """Compile/copy one model per parameter set: (replay model, edited MjModel copy, (n,) bias) for the
+    robot ``structure.robot`` (n joints)."""
     out = []
     for vals in values_list:
         rm = replay_model(series_structure(structure, vals))
@@ -141,15 +146,16 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
         models: optional prebuilt :func:`build_models` output (same order as ``values_list``).
 
     Returns:
-        One array per window, shape (n_sets, L, ny), ny = 24 (+5 with IMU): predicted measured
-        outputs at the window's rows (row 0 is the measured start state). Diverged replays hold
-        their last value (MuJoCo's rollout padding); NaN marks a non-finite prediction.
+        One array per window, shape (n_sets, L, ny), ny = n (+5 with IMU), n = the joint count of the
+        logs' robot (``Log.robot``): predicted measured outputs at the window's rows (row 0 is the
+        measured start state). Diverged replays hold their last value (MuJoCo's rollout padding);
+        NaN marks a non-finite prediction.
     """
     lg0 = logs[wins[0].log]
-    structure = Structure(fixed_base=lg0.fixed_base, physics_dt=lg0.physics_dt)
+    structure = Structure(fixed_base=lg0.fixed_base, physics_dt=lg0.physics_dt, robot=lg0.robot_name)
     if models is None:
         models = build_models(values_list, structure)
-    ny = 24 + (5 if with_imu else 0)
+    ny = lg0.q.shape[1] + (len(IMU_CHANNELS) if with_imu else 0)
     out = [np.empty((len(values_list), w.length, ny)) for w in wins]
     # group (set, window) pairs by model size signature and window length
     groups: dict = {}

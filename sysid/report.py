@@ -119,17 +119,21 @@ def format_report(rep: dict) -> str:
     return "\n".join(lines)
 
 
-def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float) -> str:
-    """MJCF text of the sim with ``model_terms`` (Term -> value) applied.
+def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_name: str = "nao_h25") -> str:
+    """MJCF text of the sim of the robot ``robot_name`` (``RobotModel.name``; a recording's
+    ``meta["robot"]``) with ``model_terms`` (Term -> value) applied.
 
     Sensor biases are not physics: they are stored as ``<numeric name="sensor_bias:JOINT">``.
+
+    Raises:
+        KeyError: an unknown robot name.
     """
-    from robots import nao_h25
+    from robots import get_robot
     from sysid.candidates import series_structure
     from sysid.model import Structure, replay_spec, spring_stiffness_max
 
-    robot = nao_h25()
-    st = series_structure(Structure(fixed_base=fixed_base, physics_dt=physics_dt), model_terms)
+    robot = get_robot(robot_name)
+    st = series_structure(Structure(fixed_base=fixed_base, physics_dt=physics_dt, robot=robot.name), model_terms)
     spec = replay_spec(robot, st)
     kp = dict(zip(robot.joint_names, robot.kp))
     eff = dict(zip(robot.joint_names, robot.effort))
@@ -162,7 +166,7 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float) -> str:
         elif f == "backlash":
             spec.joint(t.target + "__play").range = [-v / 2, v / 2]
         elif f == "joint_compliance":
-            k_max = spring_stiffness_max(fixed_base, physics_dt)[t.target]
+            k_max = spring_stiffness_max(fixed_base, physics_dt, robot.name)[t.target]
             spec.joint(t.target + "__spring").stiffness = [min(1.0 / max(v, 1e-12), k_max), 0.0, 0.0]
         elif f == "sensor_bias":
             spec.add_numeric(name=f"sensor_bias:{t.target}", data=[v])
@@ -214,7 +218,7 @@ def _plots(rep: dict, logs, out_dir: str) -> list[str]:
     save(fig, "residual_by_joint.png", 110)
     if y is not None:
         before = rep["residual"]["per_joint_rms_before"]
-        top = sorted(range(24), key=lambda j: -before[names[j]])[:4]
+        top = sorted(range(len(names)), key=lambda j: -before[names[j]])[:4]
         fig, axes = plt.subplots(len(top), 2, figsize=(13, 2.4 * len(top)), squeeze=False)
         for r, j in enumerate(top):
             a, b = axes[r]
@@ -285,7 +289,7 @@ def write_report(rep: dict, logs, out_dir: str, plots: bool = True) -> dict:
     p = os.path.join(out_dir, "report.txt")
     atomic_write_text(p, text + "\n")
     paths["text"] = p
-    xml = export_mjcf(rep.get("_model_terms", {}), rep["fixed_base"], logs[0].physics_dt)
+    xml = export_mjcf(rep.get("_model_terms", {}), rep["fixed_base"], logs[0].physics_dt, logs[0].robot_name)
     p = os.path.join(out_dir, "identified_model.xml")
     atomic_write_text(p, xml)
     paths["mjcf"] = p

@@ -120,7 +120,8 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
     if any(lg.fixed_base for lg in logs):
         raise ValueError("terrain roughness needs floating-base (standing/stepping) logs")
     lg0 = logs[0]
-    st = series_structure(Structure(fixed_base=False, physics_dt=lg0.physics_dt, terrain=True), values)
+    st = series_structure(Structure(fixed_base=False, physics_dt=lg0.physics_dt, terrain=True, robot=lg0.robot_name),
+                          values)
     rm = replay_model(st)
     nq, nv = rm.model.nq, rm.model.nv
     sole = [rm.model.site(s).id for s in ("l_sole", "r_sole")]
@@ -180,7 +181,8 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 gt = {"gt.base": qpos[:, 0:3].copy(), "gt.quat": quat.copy(), "gt.vel": qvel[:, 0:3].copy(),
                       "gt.angvel": angvel_w}
                 out[s][i] = Log(name=f"{lg.name}@surface{s}", t=lg.t, cmd=lg.cmd, q=q, dq=dq,
-                                control_dt=lg.control_dt, physics_dt=lg.physics_dt, fixed_base=False, imu=imu, gt=gt)
+                                control_dt=lg.control_dt, physics_dt=lg.physics_dt, fixed_base=False, imu=imu, gt=gt,
+                                meta={"robot": lg.robot_name})
     return out
 
 
@@ -310,7 +312,8 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
     # the simulated logs are replayed on a *flat heightfield*: MuJoCo's box-heightfield contacts differ
     # from box-plane ones (measured: 6-25 mrad torso angle over 6 s open-loop), so the reference must
     # be the same contact model and the statistic measures the surface's unevenness alone
-    flat = build_models([values], Structure(fixed_base=False, physics_dt=logs[0].physics_dt, terrain=True))
+    flat = build_models([values], Structure(fixed_base=False, physics_dt=logs[0].physics_dt, terrain=True,
+                                            robot=logs[0].robot_name))
     sim_tr = np.full((len(grid), n_surfaces, len(problem.train), problem.k), np.nan)
     sim_ho = np.full((len(grid), n_surfaces, len(problem.heldout), problem.k), np.nan)
     sim_tr[0] = sim_ho[0] = 0.0

@@ -97,7 +97,8 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def gravity_torque(model: mujoco.MjModel, qadr: np.ndarray, dadr: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Gravity torque [N m] on each joint at angles ``q`` (L, 24), zero velocity: shape (L, 24)."""
+    """Gravity torque [N m] on each joint at angles ``q`` (L, n), zero velocity: shape (L, n), n = the
+    robot's joint count (``len(qadr)``)."""
     d = mujoco.MjData(model)
     out = np.empty_like(q)
     for k in range(len(q)):
@@ -139,7 +140,8 @@ def localisation(logs: list[Log], wins: list[Window], y_sim: list[np.ndarray], f
     Args:
         logs, wins: the replayed windows.  y_sim: per window, (L, k) nominal predictions.
         floor: (k,) noise floor per channel (σ, with the engine gap where calibrated).
-        names: k channel names (24 joints, then IMU channels if any).
+        names: k channel names (the robot's n joints, then IMU channels if any; n = the logs'
+            joint count, ``Log.q.shape[1]``).
         model, qadr, dadr: a replay model for gravity torques (joints only); skipped when None.
 
     Returns:
@@ -149,17 +151,18 @@ def localisation(logs: list[Log], wins: list[Window], y_sim: list[np.ndarray], f
         and touchdown/other ratio).
     """
     k = len(names)
+    nj = logs[0].q.shape[1]  # joint channels come first
     E, S, Y, C, G, P = [], [], [], [], [], []
     for lg, w, ys in zip(logs, wins, y_sim):
         from sysid.replay import measured
-        ym = measured(lg, w, with_imu=k > 24)
+        ym = measured(lg, w, with_imu=k > nj)
         E.append((ym - ys)[1:])
         S.append(ys[1:])
         Y.append(ym[1:])
         C.append(lg.cmd[w.k0:w.k1][1:])
         P.append(phases(lg, w)[1:])
         if model is not None:
-            G.append(gravity_torque(model, qadr, dadr, ys[1:, :24]))
+            G.append(gravity_torque(model, qadr, dadr, ys[1:, :nj]))
     dt = logs[0].control_dt
     e_all = np.concatenate(E)
     chans = {}
@@ -175,15 +178,15 @@ def localisation(logs: list[Log], wins: list[Window], y_sim: list[np.ndarray], f
               "bias": float(ej.mean()),
               "corr_sign_v": _corr(ej, np.sign(v)), "corr_v": _corr(ej, v), "corr_acc": _corr(ej, a),
               "whiteness": [float(x) for x in np.mean([_acf(e[:, j], 5) for e in E], axis=0)]}
-        if j < 24:
+        if j < nj:
             st["corr_tracking"] = _corr(ej, np.concatenate([c[:, j] - s[:, j] for c, s in zip(C, S)]))
             if G:
                 st["corr_gravity"] = _corr(ej, np.concatenate([g[:, j] for g in G]))
         chans[names[j]] = st
     fl2 = floor ** 2
-    groups = {"encoders": float(np.sqrt(np.mean(e_all[:, :24] ** 2 / fl2[:24])))}
-    if k > 24:
-        groups["imu"] = float(np.sqrt(np.mean(e_all[:, 24:] ** 2 / fl2[24:])))
+    groups = {"encoders": float(np.sqrt(np.mean(e_all[:, :nj] ** 2 / fl2[:nj])))}
+    if k > nj:
+        groups["imu"] = float(np.sqrt(np.mean(e_all[:, nj:] ** 2 / fl2[nj:])))
     p_all = np.concatenate(P)
     en = np.mean(e_all ** 2 / fl2, axis=1)
     ph = {}
