@@ -9,13 +9,17 @@ on a 1 cm lumpy heightfield, the robot holds the walking crouch and we time
   snapshot every 20 control steps so contacts stay like standing).
 
 Runs are interleaved and repeated; the table gives medians (control steps per second) and the
-ratio env/bare (1.0 = no overhead). Usage: ``python benchmarks/bench_envs.py [--repeats 5] [--steps 300]``.
+ratio env/bare (1.0 = no overhead). ``--save NAME`` also writes ``docs/results/NAME.json`` for the
+README (medians, ratios, the printed table, the load average).
+Usage: ``python benchmarks/bench_envs.py [--repeats 5] [--steps 300] [--save benchenvs]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import sys
 import time
 
 import mujoco
@@ -61,7 +65,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--steps", type=int, default=300, help="control steps per timing")
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (for the README)")
     args = ap.parse_args(argv)
+    load_before = os.getloadavg()[0]
     hf = lumpy(0, amplitude=0.01)
     cases = {
         "sim  flat": (NaoSimEnv(), time_bare_mujoco),
@@ -75,11 +81,22 @@ def main(argv=None):
         for k, (env, bare) in cases.items():
             res[k][0].append(time_env(env, args.steps))
             res[k][1].append(bare(env, args.steps))
-    print(f"median of {args.repeats} interleaved runs, {args.steps} control steps each (100 Hz control, 1 kHz physics)")
-    print(f"{'case':28s} {'env.step/s':>11s} {'bare/s':>9s} {'env/bare':>9s} {'x realtime':>11s}")
+    lines = [f"median of {args.repeats} interleaved runs, {args.steps} control steps each (100 Hz control, 1 kHz physics)",
+             f"{'case':28s} {'env.step/s':>11s} {'bare/s':>9s} {'env/bare':>9s} {'x realtime':>11s}"]
+    out = {"repeats": args.repeats, "steps": args.steps, "control_hz": 100, "cases": {}}
     for k, (e, b) in res.items():
         me, mb = statistics.median(e), statistics.median(b)
-        print(f"{k:28s} {me:11.0f} {mb:9.0f} {me / mb:9.2f} {me / 100:11.1f}")
+        lines.append(f"{k:28s} {me:11.0f} {mb:9.0f} {me / mb:9.2f} {me / 100:11.1f}")
+        out["cases"][k] = {"env_steps_per_s": me, "bare_steps_per_s": mb, "env_over_bare": me / mb,
+                           "x_realtime": me / 100}
+    out["text"] = "\n".join(lines)
+    print(out["text"])
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        save_benchmark(args.save, "benchmarks/bench_envs.py", sys.argv[1:] if argv is None else list(argv), out,
+                       load_before)
+    return out
 
 
 if __name__ == "__main__":

@@ -10,13 +10,18 @@ Times, interleaved and repeated (medians):
 Then one CMA-ES generation at population 150 with 7.5 s grounded episodes through the default
 process pool (``--generation``; about a minute on 2 cores).
 
-Usage: ``python benchmarks/bench_grounding.py [--repeats 5] [--generation]``.
+``--save NAME`` also writes ``docs/results/NAME.json`` for the README (medians, ratios, the printed
+lines, the load average).
+
+Usage: ``python benchmarks/bench_grounding.py [--repeats 5] [--generation] [--save benchgrounding]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
+import sys
 import tempfile
 import time
 
@@ -28,7 +33,9 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--generation", action="store_true", help="also time one CMA-ES generation at population 150")
     ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (for the README)")
     args = ap.parse_args(argv)
+    load_before = os.getloadavg()[0]
 
     import mujoco
 
@@ -79,12 +86,19 @@ def main(argv=None):
         res["transformer call"].append(transform())
     med = {k: statistics.median(v) for k, v in res.items()}
     b = med["bare mj_step (7500 steps)"]
-    print(f"7.5 s episode, medians of {args.repeats} interleaved runs")
+    lines = [f"7.5 s episode, medians of {args.repeats} interleaved runs"]
     for k in ("bare mj_step (7500 steps)", "ungrounded walk", "grounded walk (SGAT)"):
-        print(f"  {k:28s} {med[k]:7.3f} s   {med[k] / b:5.2f} x bare")
-    print(f"  grounded / ungrounded walk     {med['grounded walk (SGAT)'] / med['ungrounded walk']:.2f}")
-    print(f"  transformer call               {1e6 * med['transformer call']:.1f} µs per control step "
-          f"({100 * 750 * med['transformer call'] / med['grounded walk (SGAT)']:.1f} % of a grounded episode)")
+        lines.append(f"  {k:28s} {med[k]:7.3f} s   {med[k] / b:5.2f} x bare")
+    lines.append(f"  grounded / ungrounded walk     {med['grounded walk (SGAT)'] / med['ungrounded walk']:.2f}")
+    lines.append(f"  transformer call               {1e6 * med['transformer call']:.1f} µs per control step "
+                 f"({100 * 750 * med['transformer call'] / med['grounded walk (SGAT)']:.1f} % of a grounded episode)")
+    print("\n".join(lines), flush=True)
+    out = {"repeats": args.repeats, "median_s": med,
+           "bare_s": b, "ungrounded_over_bare": med["ungrounded walk"] / b,
+           "grounded_over_bare": med["grounded walk (SGAT)"] / b,
+           "grounded_over_ungrounded": med["grounded walk (SGAT)"] / med["ungrounded walk"],
+           "transformer_call_us": 1e6 * med["transformer call"],
+           "transformer_share_of_grounded": 750 * med["transformer call"] / med["grounded walk (SGAT)"]}
 
     if args.generation:
         from experiments.executors import make_executor
@@ -101,7 +115,16 @@ def main(argv=None):
                 t = time.perf_counter()
                 ex.map(run_episode, tasks)
                 wall = time.perf_counter() - t
-            print(f"one CMA-ES generation, population 150, 7.5 s grounded episodes, {ex.workers} workers: {wall:.1f} s")
+            lines.append(f"one CMA-ES generation, population 150, 7.5 s grounded episodes, {ex.workers} workers: {wall:.1f} s")
+            print(lines[-1])
+            out.update(generation_s=wall, generation_workers=ex.workers)
+    out["text"] = "\n".join(lines)
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        save_benchmark(args.save, "benchmarks/bench_grounding.py", sys.argv[1:] if argv is None else list(argv), out,
+                       load_before)
+    return out
 
 
 if __name__ == "__main__":

@@ -13,7 +13,10 @@ For comparison the same time-varying data is logged row by row (``set_time`` + `
 per step, the pattern of most tutorials), and the median columnar time is put against the 7.5 s of
 robot time and against the wall time of simulating the rollout. The target is < 0.3 s.
 
-Usage: ``python benchmarks/bench_rerun.py [--repeats 7] [--row-repeats 1] [--out DIR]``.
+``--save NAME`` also writes ``docs/results/NAME.json`` for the README (the medians, the printed
+lines but the last, which names the output directory, and the load average).
+
+Usage: ``python benchmarks/bench_rerun.py [--repeats 7] [--row-repeats 1] [--out DIR] [--save benchrerun]``.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import tempfile
 import time
 
@@ -90,15 +94,22 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=7, help="columnar runs (default 7)")
     ap.add_argument("--row-repeats", type=int, default=1, help="row-by-row runs (default 1; ~2-4 s each)")
     ap.add_argument("--out", default=None, help="directory for the .rrd files (default: a temporary one)")
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (for the README)")
     args = ap.parse_args(argv)
+    load_before = os.getloadavg()[0]
+    lines = []
+
+    def say(line):
+        print(line, flush=True)
+        lines.append(line)
 
     from experiments.viz import log_rollouts_to_rrd
 
     rec, what, sim_wall = make_rollout()
     out = args.out or tempfile.mkdtemp(prefix="bench_rerun_")
     os.makedirs(out, exist_ok=True)
-    print(f"rollout: {len(rec)} rows = {rec.t[-1] + rec.meta['control_dt']:.2f} s of robot time ({what}); "
-          f"simulating it took {sim_wall:.2f} s")
+    say(f"rollout: {len(rec)} rows = {rec.t[-1] + rec.meta['control_dt']:.2f} s of robot time ({what}); "
+        f"simulating it took {sim_wall:.2f} s")
 
     log_rollouts_to_rrd({"sim": rec}, os.path.join(out, "warmup.rrd"))  # imports, first-call costs
     logs, totals, size = [], [], 0
@@ -109,15 +120,21 @@ def main(argv=None):
         size = r["bytes"]
     n_ent = len(r["rows"])
     med_log, med_tot = statistics.median(logs), statistics.median(totals)
-    print(f"columnar (send_columns, {n_ent} time-varying entities, one call each): median log {med_log * 1e3:.0f} ms, "
-          f"total {med_tot * 1e3:.0f} ms (min {min(totals) * 1e3:.0f}, max {max(totals) * 1e3:.0f}, n={len(totals)}); "
-          f"{size / 1e6:.2f} MB")
+    say(f"columnar (send_columns, {n_ent} time-varying entities, one call each): median log {med_log * 1e3:.0f} ms, "
+        f"total {med_tot * 1e3:.0f} ms (min {min(totals) * 1e3:.0f}, max {max(totals) * 1e3:.0f}, n={len(totals)}); "
+        f"{size / 1e6:.2f} MB")
 
     pair = []
     for _ in range(max(1, args.repeats // 2)):
         pair.append(log_rollouts_to_rrd({"sim": rec, "sim2": rec}, os.path.join(out, "two.rrd"))["seconds"])
-    print(f"two rollouts side by side: median total {statistics.median(pair) * 1e3:.0f} ms")
+    say(f"two rollouts side by side: median total {statistics.median(pair) * 1e3:.0f} ms")
 
+    robot_time = float(rec.t[-1] + rec.meta["control_dt"])
+    result = {"rows": len(rec), "robot_time_s": robot_time, "controller": what, "sim_wall_s": sim_wall,
+              "repeats": args.repeats, "row_repeats": args.row_repeats, "entities": n_ent, "bytes": size,
+              "columnar_log_s_median": med_log, "columnar_total_s_median": med_tot,
+              "columnar_total_s_min": min(totals), "columnar_total_s_max": max(totals),
+              "two_rollouts_total_s_median": statistics.median(pair)}
     rows_log, rows_tot = [], []
     for _ in range(args.row_repeats):
         a, b = log_rows(rec, os.path.join(out, "rows.rrd"))
@@ -125,13 +142,20 @@ def main(argv=None):
         rows_tot.append(b)
     if rows_tot:
         rl, rt = statistics.median(rows_log), statistics.median(rows_tot)
-        print(f"row by row (set_time + log per entity per step, same time-varying data without the statics): "
-              f"log {rl:.2f} s, total {rt:.2f} s -> columnar is {rt / med_tot:.0f}x faster")
-    robot_time = float(rec.t[-1] + rec.meta["control_dt"])
-    print(f"columnar total = {100 * med_tot / robot_time:.1f} % of the robot time, "
-          f"{100 * med_tot / sim_wall:.0f} % of the simulation wall time; target < 0.3 s: "
-          f"{'met' if med_tot < 0.3 else 'MISSED'}")
+        say(f"row by row (set_time + log per entity per step, same time-varying data without the statics): "
+            f"log {rl:.2f} s, total {rt:.2f} s -> columnar is {rt / med_tot:.0f}x faster")
+        result.update(rows_log_s_median=rl, rows_total_s_median=rt, rows_over_columnar=rt / med_tot)
+    say(f"columnar total = {100 * med_tot / robot_time:.1f} % of the robot time, "
+        f"{100 * med_tot / sim_wall:.0f} % of the simulation wall time; target < 0.3 s: "
+        f"{'met' if med_tot < 0.3 else 'MISSED'}")
+    result.update(target_s=0.3, target_met=med_tot < 0.3, text="\n".join(lines))
     print(f"files in {out}")
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        save_benchmark(args.save, "benchmarks/bench_rerun.py", sys.argv[1:] if argv is None else list(argv), result,
+                       load_before)
+    return result
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 """Walk-engine benchmark: cost of ``WalkEngine.step`` and of a walking sim rollout.
 
-Run: ``PYTHONPATH=. python benchmarks/bench_walk.py [--episodes 5] [--json out.json]``.
+Run: ``PYTHONPATH=. python benchmarks/bench_walk.py [--episodes 5] [--json out.json] [--save benchwalk]``
+(``--save NAME`` also writes ``docs/results/NAME.json`` for the README: these figures, the printed
+JSON and the load average).
 
 Reports
 * ``step_us_median`` / ``step_us_p90``: one ``WalkEngine.step`` [µs] (target ≤ 100 µs median),
@@ -17,6 +19,7 @@ import argparse
 import json
 import os
 import platform
+import sys
 import time
 
 import numpy as np
@@ -72,13 +75,20 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--episodes", type=int, default=5)
     ap.add_argument("--json", metavar="PATH", help="also write the result to PATH")
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (for the README)")
     args = ap.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     res = {"machine": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
            "load_avg_1min": os.getloadavg()[0], **bench_step(), **bench_rollouts(args.episodes)}
-    print(json.dumps(res, indent=2))
+    text = json.dumps(res, indent=2)
+    print(text)
     if args.json:
-        atomic_write_text(args.json, json.dumps(res, indent=2))
+        atomic_write_text(args.json, text)
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        save_benchmark(args.save, "benchmarks/bench_walk.py", sys.argv[1:] if argv is None else list(argv),
+                       {**res, "text": text}, res["load_avg_1min"])
     return res
 
 

@@ -44,6 +44,19 @@ def save(name: str, command: str, result: dict, results_dir: str = RESULTS, mach
     return path
 
 
+def save_benchmark(name: str, script: str, argv: list[str], result: dict, load_before: float) -> str:
+    """A benchmark script's ``--save NAME``: :func:`save` with the command line that ran it (``python
+    SCRIPT ARGS``, less ``--save NAME``) and the machine (cores, 1-minute load before and now)."""
+    args, skip = [], False
+    for a in argv:
+        if skip or a == "--save" or a.startswith("--save="):
+            skip = a == "--save"
+            continue
+        args.append(a)
+    machine = {"cpus": os.cpu_count(), "load_before": load_before, "load_after": os.getloadavg()[0]}
+    return save(name, " ".join(["python", script, *args]), result, machine=machine)
+
+
 def _f(x, fmt="{:.2f}") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
 
@@ -219,7 +232,33 @@ def _diagnose(res: dict) -> str:
     return "```text\n" + "\n".join(out) + "\n```"
 
 
-RENDERERS = {"bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress}
+
+def _benchenvs(res: dict) -> str:
+    """``benchmarks/bench_envs.py``: its table, and what a 7.5 s episode costs in each world."""
+    cases = res["cases"]
+    r = [c["env_over_bare"] for c in cases.values()]
+    ep = 7.5 * res["control_hz"]
+    sim = [ep / c["env_steps_per_s"] for k, c in cases.items() if k.startswith("sim")]
+    real = [ep / c["env_steps_per_s"] for k, c in cases.items() if k.startswith("real")]
+    return (f"```text\n{res['text']}\n```\n\nSo env.step runs at {min(r):.2f}–{max(r):.2f} of the bare engine's speed, "
+            f"and a 7.5 s episode ({ep:.0f} control steps) costs {min(sim):.1f}–{max(sim):.1f} s in the sim and "
+            f"{min(real):.1f}–{max(real):.1f} s in the real world.")
+
+
+def _benchwalk(res: dict) -> str:
+    """``benchmarks/bench_walk.py``: the JSON it prints, and its two headline figures."""
+    target = "met" if res["step_us_median"] <= 100 else "missed"
+    return (f"```text\n{res['text']}\n```\n\nSo `WalkEngine.step` takes {res['step_us_median']:.0f} µs (median; "
+            f"target ≤ 100 µs {target}), and a {res['episode_s']} s walking rollout costs {res['rollout_over_bare']:.1f}× "
+            f"the bare `mj_step` time of the same {res['physics_steps']} physics steps.")
+
+
+def _benchtext(res: dict) -> str:
+    """A benchmark whose printed lines say it all (``bench_grounding.py``, ``bench_rerun.py``)."""
+    return f"```text\n{res['text']}\n```"
+
+RENDERERS = {"bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
+             "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:

@@ -83,13 +83,14 @@ def format_report(rep: dict) -> str:
     lines.append("LOCALISATION (nominal replay, all logs): worst channels")
     ch = rep["localisation"]["channels"]
     worst = sorted(ch.items(), key=lambda kv: -kv[1]["rms_over_floor"])
-    hdr = f"  {'channel':16s} {'RMS/floor':>9s} {'lag ms':>7s} {'bias mrad':>9s} {'c(sgn v)':>8s} {'c(v)':>6s} {'c(acc)':>6s} {'c(trk)':>6s} {'c(grav)':>7s} {'acf1':>5s}"
+    w = max(16, *(len(nm) for nm in ch))  # 16 for the NAO's names; the G1's are longer
+    hdr = f"  {'channel':{w}s} {'RMS/floor':>9s} {'lag ms':>7s} {'bias mrad':>9s} {'c(sgn v)':>8s} {'c(v)':>6s} {'c(acc)':>6s} {'c(trk)':>6s} {'c(grav)':>7s} {'acf1':>5s}"
     lines.append(hdr)
     shown = 0
     for nm, s in worst:
         if s["rms_over_floor"] ** 2 <= 1.5 and shown >= 3:
             break
-        lines.append(f"  {nm:16s} {s['rms_over_floor']:9.2f} {s['lag_ms']:7.1f} {1000 * s['bias']:9.3f} {s['corr_sign_v']:8.2f} "
+        lines.append(f"  {nm:{w}s} {s['rms_over_floor']:9.2f} {s['lag_ms']:7.1f} {1000 * s['bias']:9.3f} {s['corr_sign_v']:8.2f} "
                      f"{s['corr_v']:6.2f} {s['corr_acc']:6.2f} {s.get('corr_tracking', float('nan')):6.2f} "
                      f"{s.get('corr_gravity', float('nan')):7.2f} {s['whiteness'][0]:5.2f}")
         shown += 1

@@ -118,7 +118,10 @@ def test_terrain_roughness_injection_and_recovery():
     problem = _problem(_stepping_logs(0.012, [30, 31, 32]))
     rough = fit_roughness(problem, {}, n_surfaces=2, grid=grid, n_boot=50)
     assert rough.declared, rough.reason
-    assert 0.5 * truth < rough.rms_height < 2.0 * truth
+    # measured: 4.4 mm for 3.2 mm (+36 %; two surfaces per grid point, for speed; the blind benchmark's
+    # median error is 15-19 %): within 50 %, and the bootstrap interval holds the truth
+    assert abs(rough.rms_height / truth - 1.0) < 0.5, (rough.rms_height, truth)
+    assert rough.ci95[0] <= truth <= rough.ci95[1], (rough.ci95, truth)
     # a wrong contact term fitted next to it leaves most of the surface's excess (not repeatable)
     left, _ = excess_left(rough, problem, {Term("ground_compliance"): 0.03})
     assert left > 0.5 * rough.rms_height

@@ -78,8 +78,9 @@ class LegChain:
     Attributes:
         joint_names: the six joints, hip to ankle.  lower, upper: their limits [rad] (6,).
         analytic: whether :meth:`ik` uses the closed form (else damped least squares).
-        hip_roll, ankle_pitch, ankle_roll: indices (0-5) of those joints in the leg (by axis: the
-            first x-axis joint, the last y-axis joint, the last x-axis joint).
+        hip_roll, knee, ankle_pitch, ankle_roll: indices (0-5) of those joints in the leg (by axis:
+            the first x-axis joint, the last y-axis joint but one, the last y-axis joint, the last
+            x-axis joint).
 
     Raises:
         ValueError: the leg group is not a chain of 6 hinges from the root to the sole's link, or its
@@ -120,6 +121,7 @@ class LegChain:
         if len(x_like) < 2 or len(y_like) < 2:
             raise ValueError(f"{robot.name} {side} leg: expected two roll (x) and two or more pitch (y) axes")
         self.hip_roll, self.ankle_roll, self.ankle_pitch = x_like[0], x_like[-1], y_like[-1]
+        self.knee = y_like[-2]  # the pitch joint before the ankle's
         if any(world_axes[i][0] < 0 for i in x_like) or any(world_axes[i][1] < 0 for i in y_like):
             raise ValueError(f"{robot.name} {side} leg: roll axes must point along +x and pitch axes along +y")
         self.analytic = self._kajita_form()
@@ -176,10 +178,7 @@ class LegChain:
 
     def _default_guess(self) -> np.ndarray:
         q = np.zeros(6)
-        knee = [i for i in range(1, 5) if i not in (self.hip_roll, self.ankle_pitch, self.ankle_roll)]
-        pitch = [i for i, a in enumerate(self._a) if abs(a[1]) > 0.9]
-        k = pitch[-2] if len(pitch) >= 3 else (knee[-1] if knee else 3)
-        q[k] = 0.6
+        q[self.knee] = 0.6  # bent: keeps the solver on the knee-forward branch
         return q
 
     def _kajita_form(self) -> bool:
