@@ -67,38 +67,6 @@ def recs():
 
 
 # ---------------------------------------------------------------------------- kinematics
-@pytest.mark.parametrize("name,atol", [
-    ("g1", 1e-9),
-    # Talos: the URDF both engines load writes gripper_right_joint's rpy yaw -3.14159265358 with 9
-    # significant digits (-3.14159265, robots.nao._fmt), 3.6e-9 rad off the spec: 1.8e-9 in MuJoCo's
-    # quaternion of that link; every other link agrees to 1e-15.
-    ("talos", 5e-9),
-])
-def test_forward_kinematics_honours_joint_rpy(name, atol):
-    robot = get_robot(name)
-    assert any(any(j.rpy) for j in robot.joints)  # the case under test: joint origins with rotations
-    env = NaoSimEnv(robot)
-    m, d = env.model, env.data
-    rng = np.random.default_rng(7)
-    T, n = 4, len(robot.joint_names)
-    q = rng.uniform(robot.lower, robot.upper, (T, n))
-    pos = rng.normal(0, 0.3, (T, 3))
-    quat = rng.normal(size=(T, 4))
-    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
-    links, P, Q = viz.forward_kinematics(robot, q, pos, quat)
-    assert links[0] == robot.root and P.shape == (T, n + 1, 3) and Q.shape == (T, n + 1, 4)
-    for k in range(T):
-        d.qpos[:3], d.qpos[3:7] = pos[k], quat[k]
-        d.qpos[env._qadr] = q[k]
-        mujoco.mj_kinematics(m, d)
-        for i, link in enumerate(links):
-            b = m.body(link).id
-            np.testing.assert_allclose(P[k, i], d.xpos[b], atol=1e-9, rtol=0, err_msg=link)
-            sign = np.sign(np.dot(Q[k, i], d.xquat[b]))  # q and -q are one rotation
-            np.testing.assert_allclose(sign * Q[k, i], d.xquat[b], atol=atol, rtol=0, err_msg=link)
-    env.close()
-
-
 def test_robot_size_and_sole():
     """The camera scale and footstep boxes: exactly the NAO's constants for the NAO."""
     nao = nao_h25()

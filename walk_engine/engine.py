@@ -101,21 +101,31 @@ def nominal_stance(robot_name: str, com_height: float, feet_spacing: float, tors
     return _nominal_stance(robot, com_height, feet_spacing, torso_pitch)
 
 
-def _nominal_stance(robot: RobotModel, com_height, feet_spacing, torso_pitch):
+def _nominal_stance(robot: RobotModel, com_height, feet_spacing, torso_pitch, legs: dict | None = None):
+    """The fixed point of :func:`nominal_stance` for ``robot``: the NAO's legs by the closed form with
+    the shared HipYawPitch, or, given ``legs`` (side -> :class:`walk_engine.legs.LegChain`), each leg
+    by its own IK."""
     body = BodyModel(robot)
     q = robot.pose("crouch").copy()
-    iL = robot.joint_index(["L" + j for j in LEG_JOINTS])
-    iR = robot.joint_index(["R" + j for j in LEG_JOINTS])
+    if legs is None:
+        iL = robot.joint_index(["L" + j for j in LEG_JOINTS])
+        iR = robot.joint_index(["R" + j for j in LEG_JOINTS])
+    else:
+        idx = {s: robot.joint_index(legs[s].joint_names) for s in "LR"}
     Rt = rot_y(torso_pitch)
     pt = np.array([0.0, 0.0, com_height + 0.05])
     h = feet_spacing / 2.0
     for _ in range(50):
-        RL = _mat_rows(Rt.T)
-        pL = (Rt.T @ (np.array([0.0, h, 0.0]) - pt)).tolist()
-        pR = (Rt.T @ (np.array([0.0, -h, 0.0]) - pt)).tolist()
-        hyp = 0.5 * (_free_hyp("L", pL, RL) + _free_hyp("R", pR, RL))
-        q[iL] = _fixed_scalar("L", pL, RL, hyp)
-        q[iR] = _fixed_scalar("R", pR, RL, hyp)
+        if legs is None:
+            RL = _mat_rows(Rt.T)
+            pL = (Rt.T @ (np.array([0.0, h, 0.0]) - pt)).tolist()
+            pR = (Rt.T @ (np.array([0.0, -h, 0.0]) - pt)).tolist()
+            hyp = 0.5 * (_free_hyp("L", pL, RL) + _free_hyp("R", pR, RL))
+            q[iL] = _fixed_scalar("L", pL, RL, hyp)
+            q[iR] = _fixed_scalar("R", pR, RL, hyp)
+        else:
+            for s, y in (("L", h), ("R", -h)):
+                q[idx[s]] = legs[s].ik(Rt.T @ (np.array([0.0, y, 0.0]) - pt), Rt.T, q[idx[s]])
         com = pt + Rt @ body.com(q)
         err = com - np.array([0.0, 0.0, com_height])
         err[1] = 0.0
@@ -129,35 +139,15 @@ def _nominal_stance(robot: RobotModel, com_height, feet_spacing, torso_pitch):
     return c_off, q
 
 
-_GENERIC_STANCES: dict = {}
+_STANCES: dict = {}
 
 
 def _nominal_stance_legs(robot: RobotModel, legs: dict, com_height, feet_spacing, torso_pitch):
-    """:func:`_nominal_stance` for a robot without the NAO's shared HipYawPitch (each leg solved by
-    its own :class:`walk_engine.legs.LegChain`); cached per robot and stance."""
+    """:func:`_nominal_stance` with each leg's own IK, cached per robot and stance."""
     key = (robot.name, com_height, feet_spacing, torso_pitch)
-    if key in _GENERIC_STANCES:
-        return _GENERIC_STANCES[key]
-    body = BodyModel(robot)
-    q = robot.pose("crouch").copy()
-    idx = {s: robot.joint_index(legs[s].joint_names) for s in "LR"}
-    Rt = rot_y(torso_pitch)
-    pt = np.array([0.0, 0.0, com_height + 0.05])
-    h = feet_spacing / 2.0
-    for _ in range(50):
-        for s, y in (("L", h), ("R", -h)):
-            q[idx[s]] = legs[s].ik(Rt.T @ (np.array([0.0, y, 0.0]) - pt), Rt.T, q[idx[s]])
-        com = pt + Rt @ body.com(q)
-        err = com - np.array([0.0, 0.0, com_height])
-        err[1] = 0.0
-        pt = pt - err
-        if np.abs(err).max() < 1e-10:
-            break
-    c_off = pt + Rt @ body.com(q) - pt
-    c_off.setflags(write=False)
-    q.setflags(write=False)
-    _GENERIC_STANCES[key] = (c_off, q)
-    return c_off, q
+    if key not in _STANCES:
+        _STANCES[key] = _nominal_stance(robot, com_height, feet_spacing, torso_pitch, legs)
+    return _STANCES[key]
 
 
 class WalkEngine:

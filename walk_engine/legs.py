@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from robots import RobotModel
+from walk_engine.kinematics import BodyModel, _axis_rot, rot_x, rot_y, rot_z
 
 #: Damping λ [-] of the least-squares step (small: the leg stays far from singular while walking;
 #: large enough to keep an out-of-reach target finite).
@@ -37,19 +38,8 @@ IK_MAX_ITER = 50
 
 
 def _rpy(r, p, y) -> np.ndarray:
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
-    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-                     [-sp, cp * sr, cp * cr]])
-
-
-def _axis_rot(a: np.ndarray, q: float) -> np.ndarray:
-    x, y, z = a
-    c, s = math.cos(q), math.sin(q)
-    C = 1.0 - c
-    return np.array([[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
-                     [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
-                     [z * x * C - y * s, z * y * C + x * s, c + z * z * C]])
+    """URDF ``rpy`` (fixed axes x, y, z) -> rotation matrix Rz(y) Ry(p) Rx(r)."""
+    return rot_z(y) @ rot_y(p) @ rot_x(r)
 
 
 _EYE6 = np.eye(6)
@@ -231,8 +221,6 @@ def robot_geometry(robot: RobotModel) -> tuple[float, float, float, float]:
     joint to sole, legs straight [m]; stance width: distance between the soles, legs straight [m];
     whole-body CoM height above the soles in the crouch pose and with straight legs [m]; sole length
     [m]), from the robot's kinematics, inertials (torso upright) and foot collision box."""
-    from walk_engine.kinematics import BodyModel  # lazy: kinematics imports the NAO's constants
-
     body = BodyModel(robot)
     legs = {s: LegChain(robot, s) for s in "LR"}
     idx = {s: robot.joint_index(legs[s].joint_names) for s in "LR"}
