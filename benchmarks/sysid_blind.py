@@ -55,8 +55,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from benchmarks.blind.families import (ANGLE_NOISE, CLASSES, CLASSES_FLOATING, FAMILIES,  # noqa: E402
                                        GYRO_NOISE, MIN_LINK_MASS, NOISE, NOMINAL, SEED_ORDER)
 from benchmarks.blind.referee import (draw_effect, draw_trial, explicit_damping_stable_joints,  # noqa: E402
-                                      explicit_spring_stable_joints, plan_trials, record, roughness_truth,
-                                      run_diagnose, trial_id)
+                                      explicit_spring_stable_joints, opaque_id, plan_trials, record,
+                                      roughness_truth, run_diagnose, trial_id)
 from benchmarks.blind.report import summarize  # noqa: E402
 from benchmarks.blind.scorer import score  # noqa: E402
 from benchmarks.blind.worlds import RefereeRealWorld, RefereeSimWorld, make_world  # noqa: E402
@@ -64,7 +64,8 @@ from robots import nao_h25  # noqa: E402
 
 __all__ = ["ANGLE_NOISE", "CLASSES", "CLASSES_FLOATING", "FAMILIES", "GYRO_NOISE", "MIN_LINK_MASS", "NOISE",
            "NOMINAL", "SEED_ORDER", "RefereeRealWorld", "RefereeSimWorld", "draw_effect", "draw_trial",
-           "explicit_damping_stable_joints", "explicit_spring_stable_joints", "main", "make_world", "plan_trials",
+           "explicit_damping_stable_joints", "explicit_spring_stable_joints", "main", "make_world", "opaque_id",
+           "plan_trials",
            "record", "roughness_truth", "run_diagnose", "score", "summarize", "trial_id"]
 
 
@@ -115,7 +116,7 @@ def main(argv=None) -> int:
         if tid in done:
             continue
         seed, hidden = draw_trial(kind, s, cls, args.seed0, pair_fams, robot, args.logs)
-        tdir = os.path.join(root, "trials", tid)
+        tdir = os.path.join(root, "trials", opaque_id(tid, args.seed0))
         truth_dir = os.path.join(root, "truth")
         os.makedirs(truth_dir, exist_ok=True)
         truth_text = json.dumps({"trial": tid, "effects": hidden}, indent=1)

@@ -4,8 +4,8 @@
 :func:`plan_trials` and :func:`draw_trial` lay out a run's single- and two-effect trials and draw
 each one's hidden effects from its own seed; :func:`roughness_truth` turns a drawn bump height into
 the value the tool is scored on; :func:`record` records excitation logs in a referee world
-(:mod:`.worlds`) and strips their metadata of the profile and effect values, so only the recordings
-reach the tool; :func:`run_diagnose` runs ``sgatwalk diagnose`` in-process on such a folder.
+(:mod:`.worlds`) and strips them to a robot's own log (:func:`blind`: no ``gt.*`` columns, metadata
+whitelisted), so only the recordings reach the tool; :func:`run_diagnose` runs ``sgatwalk diagnose`` in-process on such a folder.
 """
 
 from __future__ import annotations
@@ -137,12 +137,24 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ recording
-_STRIP = ("effects", "profile", "excitation_seed", "seed", "source")
+#: The metadata a blind log keeps (the documented minimal schema, envs/recording.py): nothing of the
+#: profile, the effects, the seeds, the terrain or the world's name.
+META_KEYS = ("robot", "control_dt", "physics_dt", "fixed_base")
+
+
+def blind(rec):
+    """``rec`` stripped to what a robot's own log holds: no ``gt.*`` columns (ground truth a real robot
+    does not have), metadata whitelisted to :data:`META_KEYS`. Returns a new ``Recording``."""
+    from envs.recording import Recording
+
+    cols = {k: v for k, v in rec.columns.items() if not k.startswith("gt.")}
+    return Recording(cols, {k: rec.meta[k] for k in META_KEYS if k in rec.meta})
 
 
 def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: float, seed: int,
            fixed_base: bool = True) -> float:
-    """Record ``n_logs`` excitation logs with ``hidden`` effects into ``out_dir`` (metadata stripped)."""
+    """Record ``n_logs`` excitation logs with ``hidden`` effects into ``out_dir`` (:func:`blind`: no
+    ground truth, minimal metadata; files named ``log_NNN.parquet``)."""
     from envs.recording import Recording
     from sysid.worlds import record_excitation, rough_ground
 
@@ -155,10 +167,7 @@ def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: f
     env.close()
     os.makedirs(out_dir, exist_ok=True)
     for p in paths:
-        rec = Recording.from_parquet(p)
-        rec.meta = {k: v for k, v in rec.meta.items() if k not in _STRIP}
-        rec.meta["world"] = "real"
-        rec.to_parquet(os.path.join(out_dir, os.path.basename(p)))
+        blind(Recording.from_parquet(p)).to_parquet(os.path.join(out_dir, os.path.basename(p)))
         os.remove(p)
     os.rmdir(tmp)
     return time.perf_counter() - t0
@@ -214,8 +223,17 @@ def plan_trials(classes: list[str], seeds: int, two_effect: int, seed0: int) -> 
 
 
 def trial_id(kind: str, s: int, cls: str | None) -> str:
-    """The trial's name (folders, truth file, ``results.jsonl``): ``single_SS_CLASS`` or ``two_II``."""
+    """The trial's name in the truth folder and ``results.jsonl``: ``single_SS_CLASS`` or ``two_II``
+    (the folder the tool reads is :func:`opaque_id`)."""
     return f"{kind}_{s:02d}_{cls}" if kind == "single" else f"two_{s:02d}"
+
+
+def opaque_id(tid: str, seed0: int) -> str:
+    """The trial's folder name under ``trials/``: a hash of its name and the run's base seed, so the
+    path the tool reads says nothing of the hidden effect."""
+    import hashlib
+
+    return "t_" + hashlib.sha256(f"{seed0}:{tid}".encode()).hexdigest()[:12]
 
 
 def draw_trial(kind: str, s: int, cls: str | None, seed0: int, pair_fams: list[str], robot,

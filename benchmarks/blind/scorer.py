@@ -2,9 +2,11 @@
 
 :func:`score` gives a trial's top-1 family (the effect whose removal hurts the held-out fit most;
 "none" when no effect is reported), the predicted and true family sets, joint/link localisation
-counts (family and target must match), per-term parameter errors |θ̂-θ|/|θ-θ_nominal| (latency:
-absolute ms), 95 % CI coverage, held-out RMS before/after over the noise floor, gap closed and
-runtime.
+counts (family and target must match; every reported term counts against precision, whatever the
+truth, a global one included), per-term parameter errors |θ̂-θ|/|θ-θ_nominal| of the true terms found
+(latency: absolute ms), 95 % CI coverage over every reported term (spurious terms: does the interval
+hold the sim's value), the spurious terms, held-out RMS before/after over the noise floor, gap closed
+and runtime.
 """
 
 from __future__ import annotations
@@ -30,31 +32,52 @@ def _target(e: dict):
     return e["links"][0] if e["links"] else e["joints"][0] if len(e["joints"]) == 1 else None
 
 
+def _matches(x: dict, e: dict, tg) -> bool:
+    """Whether reported effect ``x`` is the truth term (family ``e``, target ``tg``; None: global)."""
+    return x["family"] == e["family"] and (tg is None or _target(x) == tg)
+
+
+def _nominal_covered(x: dict) -> bool:
+    """Whether a spurious term's 95 % interval holds the sim's (true) value."""
+    lo, hi = x["ci95"]
+    nominal = NOMINAL.get(x["family"])
+    return bool(nominal is not None and lo is not None and hi is not None and lo <= nominal <= hi)
+
+
 def score(truth: list[dict], report: dict) -> dict:
-    """Per-trial scores (see module docstring)."""
+    """Per-trial scores (see module docstring).
+
+    Every reported term counts (honest scoring, whatever the truth is): ``loc_pred`` is the number of
+    reported terms, ``pred_matched`` how many of them are a true term (family, and the joint or link
+    where the truth has one), ``spurious`` the others (with their labels); ``ci_cover`` has one entry
+    per reported term (a true term's interval holds the true value, a spurious one's the sim's
+    value); ``param_err`` has the true terms found. ``loc_tp`` / ``loc_true``: true terms found / all.
+    """
     fams_true = {e["family"] for e in truth}
     eff = report["effects"]
     fams_pred = {e["family"] for e in eff}
     out = {"pred_top1": _pred_family(report), "pred_families": sorted(fams_pred),
            "true_families": sorted(fams_true) or ["none"]}
-    local_true = {(e["family"], t) for e in truth for t in e["targets"] if t is not None}
-    local_pred = {(e["family"], _target(e)) for e in eff if _target(e) is not None}
-    out["loc_tp"] = len(local_true & local_pred)
-    out["loc_true"] = len(local_true)
-    out["loc_pred"] = len(local_pred) if local_true else 0
+    terms_true = [(e, tg, v) for e in truth for tg, v in zip(e["targets"], e["values"])]
+    out["loc_true"] = len(terms_true)
+    out["loc_tp"] = sum(any(_matches(x, e, tg) for x in eff) for e, tg, _ in terms_true)
+    out["loc_pred"] = len(eff)
+    matched = [any(_matches(x, e, tg) for e, tg, _ in terms_true) for x in eff]
+    out["pred_matched"] = int(sum(matched))
+    out["spurious"] = [f"{x['family']}[{_target(x) or 'all'}]" for x, m in zip(eff, matched) if not m]
     perr, cover = [], []
-    for e in truth:
-        for tg, v in zip(e["targets"], e["values"]):
-            match = [x for x in eff if x["family"] == e["family"] and (tg is None or _target(x) == tg)]
-            if not match:
-                continue
-            x = match[0]
-            if e["family"] == "latency":
-                perr.append({"family": "latency", "abs_ms": 1000 * abs(x["value"] - v)})
-            else:
-                perr.append({"family": e["family"], "rel": abs(x["value"] - v) / abs(v - NOMINAL[e["family"]])})
-            lo, hi = x["ci95"]
-            cover.append(bool(lo is not None and hi is not None and lo <= v <= hi))
+    for e, tg, v in terms_true:
+        match = [x for x in eff if _matches(x, e, tg)]
+        if not match:
+            continue
+        x = match[0]
+        if e["family"] == "latency":
+            perr.append({"family": "latency", "abs_ms": 1000 * abs(x["value"] - v)})
+        else:
+            perr.append({"family": e["family"], "rel": abs(x["value"] - v) / abs(v - NOMINAL[e["family"]])})
+        lo, hi = x["ci95"]
+        cover.append(bool(lo is not None and hi is not None and lo <= v <= hi))
+    cover += [_nominal_covered(x) for x, m in zip(eff, matched) if not m]
     out["param_err"] = perr
     out["ci_cover"] = cover
     fl = report["noise_floor"]

@@ -1,0 +1,68 @@
+"""The blind benchmark of ``sgatwalk diagnose`` (issue 20): what reaches the tool holds nothing of
+the truth, and the scorer counts every reported term."""
+
+import os
+import sys
+
+import pyarrow.parquet as pq
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+from benchmarks.blind.referee import META_KEYS, opaque_id, record, trial_id  # noqa: E402
+from benchmarks.blind.scorer import score  # noqa: E402
+
+
+def _eff(family, joints=(), links=(), value=0.0, ci=(None, None), cost=1.0):
+    return {"family": family, "joints": list(joints), "links": list(links), "value": value, "ci95": list(ci),
+            "heldout_cost_without": cost}
+
+
+def _report(*effects):
+    return {"effects": list(effects), "noise_floor": 1e-3, "heldout_rms_before": 5e-3, "heldout_rms_after": 1e-3,
+            "gap_closed": 0.8, "runtime_s": 1.0}
+
+
+def test_the_blind_folder_holds_only_a_robots_own_logs(tmp_path):
+    hidden = [{"family": "latency", "targets": [None], "values": [0.02]}]
+    tid = trial_id("single", 0, "latency")
+    folder = tmp_path / "trials" / opaque_id(tid, 1000) / "logs"
+    record("sim", hidden, str(folder), n_logs=1, seconds=3.0, seed=5, fixed_base=True)
+    assert "latency" not in str(folder) and opaque_id(tid, 1000) != opaque_id(tid, 2000)
+    files = sorted(os.listdir(folder))
+    assert files and all(f.endswith(".parquet") for f in files)
+    for f in files:
+        t = pq.read_table(folder / f)
+        assert not [c for c in t.column_names if c.startswith("gt.")]
+        from envs.recording import Recording
+
+        meta = Recording.from_parquet(folder / f).meta
+        assert set(meta) <= set(META_KEYS) and meta["robot"] == "nao_h25" and meta["fixed_base"] is True
+        raw = (folder / f).read_bytes()
+        assert b"latency" not in raw and b"0.02" not in raw  # no trace of the hidden value anywhere
+
+
+def test_spurious_terms_count_against_precision_whatever_the_truth():
+    truth = [{"family": "latency", "targets": [None], "values": [0.02]}]  # global: no joint
+    rep = _report(_eff("latency", value=0.0201, ci=(0.0195, 0.0205), cost=50.0),
+                  _eff("sensor_bias", joints=["LKneePitch"], value=0.003, ci=(0.002, 0.004)))
+    s = score(truth, rep)
+    assert s["pred_top1"] == "latency" and s["loc_tp"] == 1 and s["loc_true"] == 1
+    assert s["loc_pred"] == 2 and s["pred_matched"] == 1 and s["spurious"] == ["sensor_bias[LKneePitch]"]
+    # coverage over every reported term: the true one covers 20 ms, the spurious one misses the sim's 0
+    assert s["ci_cover"] == [True, False]
+    assert s["param_err"][0]["family"] == "latency" and abs(s["param_err"][0]["abs_ms"] - 0.1) < 1e-9
+
+
+def test_a_term_on_clean_logs_is_spurious_and_its_interval_is_judged_against_the_sim():
+    rep = _report(_eff("link_mass", links=["LTibia"], value=1.3, ci=(0.9, 1.6)))
+    s = score([], rep)
+    assert s["true_families"] == ["none"] and s["pred_top1"] == "link_mass"
+    assert s["loc_pred"] == 1 and s["pred_matched"] == 0 and s["spurious"] == ["link_mass[LTibia]"]
+    assert s["ci_cover"] == [True]  # the interval holds the nominal x1.0
+
+
+def test_a_term_on_the_wrong_joint_is_not_a_hit():
+    truth = [{"family": "backlash", "targets": ["RKneePitch"], "values": [0.02]}]
+    s = score(truth, _report(_eff("backlash", joints=["LKneePitch"], value=0.02, ci=(0.018, 0.022))))
+    assert s["loc_tp"] == 0 and s["pred_matched"] == 0 and s["param_err"] == []
+    assert s["spurious"] == ["backlash[LKneePitch]"] and s["ci_cover"] == [False]
