@@ -54,7 +54,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from benchmarks.blind.families import (ANGLE_NOISE, CLASSES, CLASSES_FLOATING, FAMILIES,  # noqa: E402
                                        GYRO_NOISE, MIN_LINK_MASS, NOISE, NOMINAL, SEED_ORDER)
-from benchmarks.blind.referee import (draw_effect, draw_trial, explicit_damping_stable_joints,  # noqa: E402
+from benchmarks.blind.referee import (SOURCES, draw_effect, draw_trial, explicit_damping_stable_joints,  # noqa: E402
                                       explicit_spring_stable_joints, opaque_id, plan_trials, record,
                                       roughness_truth, run_diagnose, trial_id)
 from benchmarks.blind.report import summarize  # noqa: E402
@@ -62,7 +62,7 @@ from benchmarks.blind.scorer import score  # noqa: E402
 from benchmarks.blind.worlds import RefereeRealWorld, RefereeSimWorld, make_world  # noqa: E402
 from robots import nao_h25  # noqa: E402
 
-__all__ = ["ANGLE_NOISE", "CLASSES", "CLASSES_FLOATING", "FAMILIES", "GYRO_NOISE", "MIN_LINK_MASS", "NOISE",
+__all__ = ["SOURCES", "ANGLE_NOISE", "CLASSES", "CLASSES_FLOATING", "FAMILIES", "GYRO_NOISE", "MIN_LINK_MASS", "NOISE",
            "NOMINAL", "SEED_ORDER", "RefereeRealWorld", "RefereeSimWorld", "draw_effect", "draw_trial",
            "explicit_damping_stable_joints", "explicit_spring_stable_joints", "main", "make_world", "opaque_id",
            "plan_trials",
@@ -85,9 +85,15 @@ def main(argv=None) -> int:
     ap.add_argument("--classes", help="comma list to restrict the single-effect classes")
     ap.add_argument("--floating", action="store_true", help="standing/stepping logs, contact families "
                     "(foot friction, ground compliance) instead of the fixed-base actuator families")
+    ap.add_argument("--excitation", choices=SOURCES, default="protocol",
+                    help="the logs' excitation: the project's protocol (sgatwalk excite) or the referee's own "
+                         "random multisine + steps (fixed base only; benchmarks/blind/excitation.py)")
     args = ap.parse_args(argv)
     robot = nao_h25()
-    root = os.path.join(args.out, args.world + ("_floating" if args.floating else ""))
+    if args.floating and args.excitation != "protocol":
+        ap.error("--excitation referee is for a fixed base only")
+    root = os.path.join(args.out, args.world + ("_floating" if args.floating else "")
+                        + ("" if args.excitation == "protocol" else f"_{args.excitation}"))
     fixed = not args.floating
     world_classes = (CLASSES_FLOATING if args.floating else CLASSES)[args.world]
     os.makedirs(root, exist_ok=True)
@@ -104,7 +110,7 @@ def main(argv=None) -> int:
         logs_dir = os.path.join(root, "none_logs")
         if not os.path.isdir(logs_dir):
             record(args.world, [], logs_dir, args.calibration_logs or 2 * args.logs, args.seconds, args.seed0 - 1,
-                   fixed)
+                   fixed, args.excitation)
         run_diagnose(["diagnose", "--real", logs_dir, "--out", cal_dir, "--calibrate"])
         print(f"calibrated engine gap on {logs_dir}", flush=True)
     classes = world_classes if not args.classes else args.classes.split(",")
@@ -126,7 +132,7 @@ def main(argv=None) -> int:
             shutil.rmtree(logs_dir)  # recorded for other hidden effects (e.g. a class list that changed)
         with open(truth_file, "w") as f:
             f.write(truth_text)
-        t_rec = record(args.world, hidden, logs_dir, args.logs, args.seconds, seed % 100000, fixed) \
+        t_rec = record(args.world, hidden, logs_dir, args.logs, args.seconds, seed % 100000, fixed, args.excitation) \
             if not os.path.isdir(logs_dir) else 0.0
         rep = run_diagnose(["diagnose", "--real", logs_dir, "--out", os.path.join(tdir, "report"),
                             "--calibration", cal_file, "--no-plots"])

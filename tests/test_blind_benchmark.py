@@ -4,6 +4,7 @@ the truth, and the scorer counts every reported term."""
 import os
 import sys
 
+import numpy as np
 import pyarrow.parquet as pq
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -66,3 +67,37 @@ def test_a_term_on_the_wrong_joint_is_not_a_hit():
     s = score(truth, _report(_eff("backlash", joints=["LKneePitch"], value=0.02, ci=(0.018, 0.022))))
     assert s["loc_tp"] == 0 and s["pred_matched"] == 0 and s["param_err"] == []
     assert s["spurious"] == ["backlash[LKneePitch]"] and s["ci_cover"] == [False]
+
+
+def test_the_referees_excitation_is_its_own_and_stays_inside_the_limits():
+    from benchmarks.blind.excitation import referee_commands
+    from robots import nao_h25
+    from sysid.excitation import protocol
+
+    robot = nao_h25()
+    cmd = referee_commands(robot, 6.0, seed=3)
+    assert cmd.shape == (600, len(robot.actuated_joint_names))
+    lo, hi = robot.lower[robot.actuated_index], robot.upper[robot.actuated_index]
+    assert (cmd >= lo + 0.05 - 1e-12).all() and (cmd <= hi - 0.05 + 1e-12).all()
+    legs = [robot.actuated_joint_names.index(j) for j in robot.groups["legs"] if j in robot.actuated_joint_names]
+    assert np.ptp(cmd[:, legs], axis=0).min() > 0.1  # every leg joint moves
+    jumps = np.abs(np.diff(cmd, axis=0)).max(axis=0)
+    assert np.median(jumps) > 0.02  # sharp steps, which a smooth protocol lacks
+    prot = protocol(robot, 6.0, seed=3, fixed_base=True)
+    c = [abs(np.corrcoef(cmd[:, j], prot[:, j])[0, 1]) for j in legs]
+    assert np.median(c) < 0.5  # not the protocol in disguise
+    assert not np.allclose(cmd, referee_commands(robot, 6.0, seed=4))
+
+
+def test_a_latency_is_found_in_logs_of_the_referees_excitation(tmp_path):
+    """The diagnosis on logs it was not designed for: a 20 ms latency in the sim-as-real world."""
+    from benchmarks.blind.referee import run_diagnose
+
+    hidden = [{"family": "latency", "targets": [None], "values": [0.02]}]
+    record("sim", [], str(tmp_path / "none"), n_logs=3, seconds=4.0, seed=7, source="referee")
+    run_diagnose(["diagnose", "--real", str(tmp_path / "none"), "--calibrate", "--out", str(tmp_path / "cal")])
+    record("sim", hidden, str(tmp_path / "logs"), n_logs=3, seconds=4.0, seed=8, source="referee")
+    rep = run_diagnose(["diagnose", "--real", str(tmp_path / "logs"), "--out", str(tmp_path / "rep"), "--no-plots",
+                        "--calibration", str(tmp_path / "cal" / "calibration.json")])
+    s = score(hidden, rep)
+    assert s["pred_top1"] == "latency" and s["param_err"][0]["abs_ms"] < 2.0, s

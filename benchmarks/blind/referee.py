@@ -151,19 +151,39 @@ def blind(rec):
     return Recording(cols, {k: rec.meta[k] for k in META_KEYS if k in rec.meta})
 
 
+#: Excitation sources: the project's protocol (``sgatwalk excite``) or the referee's own (:mod:`.excitation`).
+SOURCES = ("protocol", "referee")
+
+
 def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: float, seed: int,
-           fixed_base: bool = True) -> float:
+           fixed_base: bool = True, source: str = "protocol") -> float:
     """Record ``n_logs`` excitation logs with ``hidden`` effects into ``out_dir`` (:func:`blind`: no
-    ground truth, minimal metadata; files named ``log_NNN.parquet``)."""
+    ground truth, minimal metadata; files named ``log_NNN.parquet``).
+
+    ``source``: ``"protocol"`` (``sysid.excitation``, what ``sgatwalk excite`` records) or
+    ``"referee"`` (:func:`.excitation.referee_commands`, fixed base only).
+
+    Raises:
+        ValueError: unknown source, or the referee's source with a floating base.
+    """
     from envs.recording import Recording
     from sysid.worlds import record_excitation, rough_ground
 
+    from .excitation import record_referee
+
+    if source not in SOURCES:
+        raise ValueError(f"unknown excitation source {source!r}; choose from {', '.join(SOURCES)}")
+    if source == "referee" and not fixed_base:
+        raise ValueError("the referee's excitation is for a fixed base only")
     t0 = time.perf_counter()
     env = make_world(world, hidden, fixed_base)
     tmp = out_dir + ".tmp"
-    amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e["peak"])
-    paths = record_excitation(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed, prefix="log",
-                              terrain=rough_ground(amp, seed) if amp > 0 else None)
+    if source == "referee":
+        paths = record_referee(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed)
+    else:
+        amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e["peak"])
+        paths = record_excitation(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed, prefix="log",
+                                  terrain=rough_ground(amp, seed) if amp > 0 else None)
     env.close()
     os.makedirs(out_dir, exist_ok=True)
     for p in paths:
