@@ -57,7 +57,7 @@ from benchmarks.blind.families import (ANGLE_NOISE, CLASSES, CLASSES_FLOATING, F
 from benchmarks.blind.referee import (SOURCES, draw_effect, draw_trial, explicit_damping_stable_joints,  # noqa: E402
                                       explicit_spring_stable_joints, opaque_id, plan_trials, record,
                                       roughness_truth, run_diagnose, trial_id)
-from benchmarks.blind.report import summarize  # noqa: E402
+from benchmarks.blind.report import metrics, summarize  # noqa: E402
 from benchmarks.blind.scorer import score  # noqa: E402
 from benchmarks.blind.worlds import RefereeRealWorld, RefereeSimWorld, make_world  # noqa: E402
 from robots import nao_h25  # noqa: E402
@@ -85,10 +85,12 @@ def main(argv=None) -> int:
     ap.add_argument("--classes", help="comma list to restrict the single-effect classes")
     ap.add_argument("--floating", action="store_true", help="standing/stepping logs, contact families "
                     "(foot friction, ground compliance) instead of the fixed-base actuator families")
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (headline figures, for the README)")
     ap.add_argument("--excitation", choices=SOURCES, default="protocol",
                     help="the logs' excitation: the project's protocol (sgatwalk excite) or the referee's own "
                          "random multisine + steps (fixed base only; benchmarks/blind/excitation.py)")
     args = ap.parse_args(argv)
+    load_before = os.getloadavg()[0]
     robot = nao_h25()
     if args.floating and args.excitation != "protocol":
         ap.error("--excitation referee is for a fixed base only")
@@ -152,6 +154,14 @@ def main(argv=None) -> int:
     with open(os.path.join(root, "summary.md"), "w") as f:
         f.write(summarize(rows, args.world, world_classes))
     print(summarize(rows, args.world, world_classes))
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        res = {"world": args.world, "floating": args.floating, "excitation": args.excitation, "seed0": args.seed0,
+               "seeds": args.seeds, "two_effect": args.two_effect, "logs": args.logs, "seconds": args.seconds,
+               "encoder_noise_mrad": 1000 * NOISE, "metrics": metrics(rows)}
+        print(save_benchmark(args.save, "benchmarks/sysid_blind.py", argv if argv is not None else sys.argv[1:], res,
+                             load_before))
     return 0
 
 

@@ -257,7 +257,34 @@ def _benchtext(res: dict) -> str:
     """A benchmark whose printed lines say it all (``bench_grounding.py``, ``bench_rerun.py``)."""
     return f"```text\n{res['text']}\n```"
 
-RENDERERS = {"bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
+def _blind(res: dict) -> str:
+    """``benchmarks/sysid_blind.py --save``: the headline figures against the issue's targets."""
+    m = res["metrics"]
+
+    def fr(x, target=""):
+        if not x["n"]:
+            return "–"
+        return f"{x['rate']:.0%} ({x['k']}/{x['n']})" + (f" | {target}" if target else "")
+
+    world = {"sim": "MuJoCo sim-as-real", "real": "PyBullet real"}[res["world"]]
+    lines = [f"{world}, {'floating' if res['floating'] else 'fixed'} base, {res['excitation']} excitation; "
+             f"{m['single']} single-effect trials ({res['seeds']} seeds per class, base seed {res['seed0']}) and "
+             f"{m['two']} two-effect trials; {res['logs']} logs × {res['seconds']:g} s each, "
+             f"{res['encoder_noise_mrad']:g} mrad encoder noise.", "",
+             "| figure | value | target |", "|---|---|---|",
+             f"| family top-1 (trials with an effect) | {fr(m['top1'], '≥ 90 % on detectable effects')} |",
+             f"| false positives on clean logs | {fr(m['none_fp'], '≤ 5 %')} |",
+             f"| trials with a spurious term | {fr(m['spurious'], '≤ 10 %')} |",
+             f"| 95 % interval coverage (every reported term) | {fr(m['coverage'], '≥ 85 %')} |",
+             f"| precision / recall of terms (family + joint or link) | {fr(m['precision'])} / {fr(m['recall'])} | |",
+             f"| median parameter error (non-latency terms found) | {_f(m['param_err_median'], '{:.1%}')} | |",
+             f"| median latency error | {_f(m['latency_err_ms'], '{:.2f} ms')} | |",
+             f"| two effects: both found | {fr(m['both_found'])} | |",
+             f"| diagnose runtime (median) | {_f(m['runtime_s'], '{:.1f} s')} | |"]
+    return "\n".join(lines)
+
+
+RENDERERS = {"blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext}
 
 

@@ -13,6 +13,41 @@ import numpy as np
 from .families import CLASSES, NOISE
 
 
+def _frac(k: int, n: int) -> dict:
+    return {"k": int(k), "n": int(n), "rate": (k / n) if n else None}
+
+
+def metrics(rows: list[dict]) -> dict:
+    """Headline figures of scored trials (what the README shows), against the issue's targets:
+    ``top1`` (single-effect trials with an effect; top-1 family), ``none_fp`` (trials on clean logs
+    with any term found), ``spurious`` (trials with a reported term that is no true term),
+    ``coverage`` (95 % intervals of every reported term holding the truth), ``precision``/``recall``
+    (reported terms that are true / true terms found), ``param_err_median`` (non-latency true terms
+    found), ``latency_err_ms`` (median), ``both_found`` (two-effect trials), ``runtime_s`` (median)."""
+    single = [r for r in rows if r["kind"] == "single"]
+    eff = [r for r in single if r["truth_class"] != "none"]
+    none = [r for r in single if r["truth_class"] == "none"]
+    two = [r for r in rows if r["kind"] == "two"]
+    sc = [r["score"] for r in rows]
+    cov = [c for s in sc for c in s["ci_cover"]]
+    rel = [p["rel"] for s in sc for p in s["param_err"] if "rel" in p]
+    lat = [p["abs_ms"] for s in sc for p in s["param_err"] if "abs_ms" in p]
+    return {
+        "trials": len(rows), "single": len(single), "two": len(two),
+        "top1": _frac(sum(r["score"]["pred_top1"] == r["truth_class"] for r in eff), len(eff)),
+        "none_fp": _frac(sum(bool(r["score"]["pred_families"]) for r in none), len(none)),
+        "spurious": _frac(sum(bool(s.get("spurious")) for s in sc), len(sc)),
+        "coverage": _frac(sum(cov), len(cov)),
+        "precision": _frac(sum(s.get("pred_matched", s["loc_tp"]) for s in sc), sum(s["loc_pred"] for s in sc)),
+        "recall": _frac(sum(s["loc_tp"] for s in sc), sum(s["loc_true"] for s in sc)),
+        "param_err_median": float(np.median(rel)) if rel else None,
+        "latency_err_ms": float(np.median(lat)) if lat else None,
+        "both_found": _frac(sum(set(r["score"]["true_families"]) <= set(r["score"]["pred_families"]) for r in two),
+                            len(two)),
+        "runtime_s": float(np.median([s["runtime_s"] for s in sc])) if sc else None,
+    }
+
+
 def summarize(rows: list[dict], world: str, classes=None) -> str:
     """Markdown tables of the benchmark results."""
     single = [r for r in rows if r["kind"] == "single"]
