@@ -11,6 +11,11 @@ experiment would), and the residual left. Writes ``report.json``, ``report.txt``
 The robot is the recordings' (``meta["robot"]``: the NAO, Unitree G1 or PAL Talos); all recordings
 must be of one robot.
 
+Floating-base recordings are replayed in short windows, each started from the torso state
+estimated from the IMU, the encoders and the foot force sensors (contact-aided, flat ground), as
+on a real robot; ``gt.*`` ground-truth columns a simulator wrote are ignored unless
+``--use-ground-truth`` is given. The report says which was used.
+
 ``--calibrate`` treats the recordings as logs of a real world with no injected effects (profile
 "none") and writes ``calibration.json``: the engine gap that later diagnoses (``--calibration
 FILE``) are judged against.
@@ -48,6 +53,9 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=A.count(1, 100), default=3, help="screen/refit rounds (default 3)")
     p.add_argument("--time-budget", type=A.real(0.0, 86400.0, unit='s'), default=300.0, metavar="SECONDS",
                    help="start no new search step after this long (default 300; 0 = no limit)")
+    p.add_argument("--use-ground-truth", action="store_true",
+                   help="replay floating-base recordings from their gt.* ground-truth base state (a simulator's; "
+                        "default: ignore it and estimate the state from IMU, encoders and foot forces, as on a robot)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     return p
 
@@ -57,7 +65,7 @@ def run(args) -> dict:
     from sysid.diagnose import calibrate, diagnose  # lazy: loads the engines; keeps sgatwalk --help fast
     from sysid.report import format_report, public_json, write_report  # lazy: loads the engines; keeps sgatwalk --help fast
 
-    logs = load_logs(args.real)
+    logs = load_logs(args.real, use_ground_truth=args.use_ground_truth)
     robot = logs[0].robot
     if args.sim != "auto":
         from robots import get_robot  # lazy: g1/talos parse their URDFs
@@ -67,7 +75,7 @@ def run(args) -> dict:
     say = None if args.json else (lambda s: print(s, file=sys.stderr))
     os.makedirs(args.out, exist_ok=True)
     if args.calibrate:
-        cal = calibrate(logs, robot=robot)
+        cal = calibrate(logs, robot=robot, use_ground_truth=args.use_ground_truth)
         p = os.path.join(args.out, "calibration.json")
         atomic_write_text(p, json.dumps(public_json(cal), indent=1))
         if not args.json:
@@ -75,7 +83,8 @@ def run(args) -> dict:
             print(f"engine gap from {cal['n_logs']} log(s): sensor σ {1000 * cal['sigma']['encoders']:.3f} mrad; "
                   f"largest gap {', '.join(f'{k} {1000 * v:.3f} mrad' for k, v in worst)}; "
                   "baseline model (engine gap in candidate terms): "
-                  f"{', '.join(f'{k} = {v:.4g}' for k, v in cal['baseline_model'].items()) or 'none'}; wrote {p}")
+                  f"{', '.join(f'{k} = {v:.4g}' for k, v in cal['baseline_model'].items()) or 'none'}; "
+                  f"base state {cal['base_state']}; wrote {p}")
         return {"calibration": p, **public_json(cal)}
     cal = None
     if args.calibration:
@@ -114,7 +123,7 @@ def run(args) -> dict:
             raise ValueError(f"{args.base_report}: effect {alien[0]} is not on a joint or link of {robot.name} "
                              "(a report of another robot)")
     rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
-                   time_budget_s=args.time_budget or None, robot=robot)
+                   time_budget_s=args.time_budget or None, robot=robot, use_ground_truth=args.use_ground_truth)
     paths = write_report(rep, logs, args.out, plots=not args.no_plots)
     if not args.json:
         print(format_report(rep))

@@ -14,6 +14,7 @@ viscous_damping     joint      N m s/rad ``dof_damping`` (added)                
 pd_gain             joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
 torque_limit        global     x effort  ``actuator_forcerange`` (all joints)          x0.75
 link_mass           link       x mass    ``body_mass``, ``body_inertia`` + mj_setConst  x1.3
+                               (every link, the root (torso) included)
 armature            joint      kg m^2    ``dof_armature`` (added)                      0.002
 sensor_bias         joint      rad       measured angle offset (replay starts at q-b)  0.005
 foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
@@ -279,10 +280,10 @@ def term_allowed(term: Term, robot: RobotModel) -> bool:
 
 
 def all_terms(robot: RobotModel, families=FIXED_BASE_FAMILIES, joints=None, links=None) -> list[Term]:
-    """Every term of ``families`` over ``joints`` (default all n of ``robot``) and ``links`` (default all
-    but the root)."""
+    """Every term of ``families`` over ``joints`` (default all n of ``robot``) and ``links`` (default
+    every link, the root (the torso) included: :func:`mass_links`)."""
     joints = robot.joint_names if joints is None else joints
-    links = [ln for ln in robot.links if ln != robot.root] if links is None else links
+    links = list(robot.links) if links is None else links
     out = []
     for f in families:
         sc = FAMILIES[f].scope
@@ -292,6 +293,23 @@ def all_terms(robot: RobotModel, families=FIXED_BASE_FAMILIES, joints=None, link
             out.extend(Term(f, j) for j in joints)
         else:
             out.extend(Term(f, ln) for ln in links)
+    return out
+
+
+def mass_links(robot: RobotModel, flagged_joints, floating: bool) -> list[str]:
+    """Links whose mass error shows on ``flagged_joints``: every link below one of them
+    (:func:`links_below`) and, for a floating base, the root link (``robot.root``, the torso): on
+    the ground its weight loads every stance joint and tilts the IMU, so no joint has it below.
+    With a fixed base the root is welded and its mass moves nothing: it is left out.
+
+    Returns:
+        Link names, the root first when included, then in the order the joints list them.
+    """
+    out = [robot.root] if floating else []
+    for j in flagged_joints:
+        for ln in links_below(robot, j):
+            if ln not in out:
+                out.append(ln)
     return out
 
 

@@ -1,11 +1,15 @@
 """Loading recordings for diagnosis: files or folders of Parquet logs, checked for what replay needs.
 
 A diagnosis reads any recording that follows the schema of :mod:`envs.recording` (ground truth is
-optional) and never writes to it: :func:`load_logs` only opens files for reading.
+optional) and never writes to it: :func:`load_logs` only opens files for reading. A real robot
+does not know its torso's true position and velocity: :func:`load_logs` drops the ``gt.*`` columns
+unless asked to keep them, and floating-base replays then estimate the base state
+(:mod:`sysid.estimate`); :func:`base_state_source` says which of the two a replay of some logs uses.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import glob
 import os
 from dataclasses import dataclass, field
@@ -17,6 +21,12 @@ from robots import RobotModel, get_robot
 
 #: Shortest log a replay can use [s] (a few servo time constants plus a 0.1 s window).
 MIN_SECONDS = 1.0
+#: The ground-truth groups a floating-base replay starts from when a log has all of them.
+GT_GROUPS = ("gt.base", "gt.quat", "gt.vel", "gt.angvel")
+#: What a report says about the base state of the replays (:func:`base_state_source`).
+BASE_ESTIMATED = "estimated from IMU, encoders and foot force sensors (contact-aided, flat ground)"
+BASE_GROUND_TRUTH = "ground truth (--use-ground-truth)"
+BASE_FIXED = "fixed base"
 
 
 @dataclass
@@ -31,7 +41,9 @@ class Log:
         dq: (N, n) measured velocities [rad/s] or None.
         control_dt, physics_dt: [s].  fixed_base: bool.
         imu: dict with ``angle`` (N, 2) [rad], ``gyro`` (N, 3) [rad/s] when recorded.
-        fsr: (N, 2) foot forces [N] or None.  gt: dict of ground-truth groups present.
+        fsr: (N, 2) foot forces [N] or None.  gt: dict of the ground-truth groups present
+            (:data:`GT_GROUPS`, each (N, 3) or (N, 4) quaternions wxyz; SI units, world frame);
+            empty for a real robot's recording and, unless asked, after :func:`load_logs`.
         meta: the recording's metadata (read-only use); ``meta["robot"]`` names the robot
             (:attr:`robot`; ``"nao_h25"`` when absent).
     """
@@ -76,8 +88,11 @@ class Log:
         return get_robot(self.robot_name)
 
 
-def from_recording(rec: Recording, name: str = "log", path: str | None = None) -> Log:
+def from_recording(rec: Recording, name: str = "log", path: str | None = None, *, ground_truth: bool = True) -> Log:
     """Convert a validated :class:`Recording` into a :class:`Log`.
+
+    ``ground_truth``: keep the recording's ``gt.base``, ``gt.quat``, ``gt.vel`` and ``gt.angvel``
+    groups in :attr:`Log.gt` (False: ``Log.gt`` is empty, as for a real robot's recording).
 
     Raises:
         RecordingError: robot is not one of ``robots.ROBOT_NAMES`` (``nao_h25``, ``g1``, ``talos``);
@@ -107,7 +122,7 @@ def from_recording(rec: Recording, name: str = "log", path: str | None = None) -
     for g in ("angle", "gyro"):
         if rec.has(g):
             imu[g] = rec.group(g)
-    gt = {g: rec.group(g) for g in ("gt.base", "gt.quat", "gt.vel", "gt.angvel") if rec.has(g)}
+    gt = {g: rec.group(g) for g in GT_GROUPS if ground_truth and rec.has(g)}
     gt = {k: v for k, v in gt.items() if np.all(np.isfinite(v))}
     fixed = rec.meta.get("fixed_base")
     if fixed is None:  # infer: a hanging robot has no foot forces
@@ -141,8 +156,12 @@ def find_files(inputs: list[str] | str) -> list[str]:
     return out
 
 
-def load_logs(inputs: list[str] | str) -> list[Log]:
+def load_logs(inputs: list[str] | str, *, use_ground_truth: bool = False) -> list[Log]:
     """Load and check every recording of ``inputs`` (files and/or folders); read-only.
+
+    ``use_ground_truth``: keep the recordings' ``gt.*`` base-state columns (``sgatwalk diagnose
+    --use-ground-truth``); by default they are dropped (``Log.gt`` empty), so floating-base replays
+    start from the state estimated from IMU, encoders and foot forces, as on a real robot.
 
     Raises:
         FileNotFoundError: missing path or empty folder.
@@ -155,12 +174,45 @@ def load_logs(inputs: list[str] | str) -> list[Log]:
         name = os.path.splitext(os.path.basename(p))[0]
         try:
             rec = Recording.from_parquet(p)
-            logs.append(from_recording(rec, name=name, path=p))
+            logs.append(from_recording(rec, name=name, path=p, ground_truth=use_ground_truth))
         except RecordingError as exc:
             msg = str(exc)
             raise RecordingError(msg if p in msg or name in msg else f"{p}: {msg}") from None
     check_consistent(logs)
     return logs
+
+
+def has_ground_truth(log: Log) -> bool:
+    """Whether ``log`` carries every ground-truth group a replay starts from (:data:`GT_GROUPS`)."""
+    return all(g in log.gt for g in GT_GROUPS)
+
+
+def without_ground_truth(logs: list[Log]) -> list[Log]:
+    """Shallow copies of ``logs`` with ``gt`` empty (the arrays are shared, never written)."""
+    return [dataclasses.replace(lg, gt={}) if lg.gt else lg for lg in logs]
+
+
+def base_state_source(logs: list[Log]) -> str:
+    """Where a replay of ``logs`` takes the floating base's state from: :data:`BASE_FIXED` for
+    fixed-base logs, :data:`BASE_GROUND_TRUTH` when every log carries the ``gt.*`` groups, else
+    :data:`BASE_ESTIMATED` (:func:`sysid.estimate.base_state`).
+
+    Raises:
+        ValueError: no logs; some floating-base logs with ground truth and some without (a replay
+            would mix the two; drop it from all with :func:`without_ground_truth`).
+    """
+    if not logs:
+        raise ValueError("no logs")
+    if logs[0].fixed_base:
+        return BASE_FIXED
+    have = [has_ground_truth(lg) for lg in logs]
+    if all(have):
+        return BASE_GROUND_TRUTH
+    if any(have):
+        missing = next(lg.name for lg, h in zip(logs, have) if not h)
+        raise ValueError(f"{missing}: no gt.base/gt.quat/gt.vel/gt.angvel ground truth while other logs have it; "
+                         "replay all logs from ground truth or none")
+    return BASE_ESTIMATED
 
 
 def check_consistent(logs: list[Log]) -> None:

@@ -27,7 +27,8 @@ import numpy as np
 
 from sysid.candidates import (CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above, term_allowed,
                               term_min_effect, term_probe)
-from sysid.data import Log, split_by_trajectory
+from sysid.data import (BASE_ESTIMATED, Log, base_state_source, split_by_trajectory,
+                         without_ground_truth)
 from sysid.identify import FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen
 from sysid.replay import IMU_CHANNELS, Window, predict, whole_logs, windows
 from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
@@ -79,6 +80,17 @@ def _channel_names(robot, with_imu: bool) -> list[str]:
 
 def _floor(logs: list[Log], wins: list[Window], nominal: list[np.ndarray], with_imu: bool,
            calibration: dict | None, robot) -> tuple[np.ndarray, dict]:
+    """Noise floor per channel, (k,) [rad, rad/s]: sqrt(σ² + gap²), never below MIN_FLOOR.
+
+    σ is always the diagnosed logs' own sensor noise (:func:`sysid.stats.noise_sigma` of the
+    nominal residual: encoders, and with an IMU torso angles and gyro); the engine gap is the
+    calibration's ``gap_rms`` per channel (0 without a calibration). The calibration's own σ is not
+    used: logs noisier (or cleaner) than the calibration's are judged against their own noise.
+
+    Returns:
+        (floor, {"sigma": {"encoders": [rad], "angle": [rad], "gyro": [rad/s]} (the latter two with
+        an IMU), "gap": (k,) engine gap [rad, rad/s]}).
+    """
     from sysid.replay import measured
 
     res = [measured(logs[w.log], w, with_imu) - p[0] for w, p in zip(wins, nominal)]
@@ -99,9 +111,6 @@ def _floor(logs: list[Log], wins: list[Window], nominal: list[np.ndarray], with_
         g = calibration.get("gap_rms", {})
         for i, nm in enumerate(_channel_names(robot, with_imu)):
             gap[i] = float(g.get(nm, 0.0))
-        cal_sigma = calibration.get("sigma", {}).get("encoders")
-        if cal_sigma:  # a sensor spec known from calibration is a better floor than a noisy estimate
-            floor[:nj] = max(float(cal_sigma), sigma["encoders"] * 0.8)
     floor = np.sqrt(floor ** 2 + gap ** 2)
     return np.maximum(floor, MIN_FLOOR), {"sigma": sigma, "gap": gap}
 
@@ -139,6 +148,8 @@ def _entry(t: Term, v: float, ci, robot) -> dict:
     else:
         joints, links = [], [t.target]
     where = ("all joints" if fam.scope == "global" and not fam.contact else "feet/ground" if fam.contact
+             else f"link {t.target} (the root: carried by the stance legs, shows on their joints and the IMU)"
+             if fam.scope == "link" and t.target == robot.root
              else f"link {t.target} (shows on {', '.join(joints_above(robot, t.target)[:3])})" if fam.scope == "link"
              else t.target)
     return {"family": t.family, "joints": joints, "links": links, "value": float(v), "unit": fam.unit,
@@ -218,7 +229,24 @@ def _robot_of(logs: list[Log], robot=None):
     return robot or own
 
 
-def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
+def _replay_logs(logs: list[Log], use_ground_truth: bool) -> tuple[list[Log], str]:
+    """The logs as a diagnosis replays them and where their base state comes from
+    (:func:`sysid.data.base_state_source`): without their ``gt.*`` ground truth unless
+    ``use_ground_truth`` (a real robot does not know its torso's true state).
+
+    Raises:
+        ValueError: ``use_ground_truth`` with floating-base logs that lack (some or all) ``gt.*`` columns.
+    """
+    if not use_ground_truth:
+        logs = without_ground_truth(logs)
+    source = base_state_source(logs)
+    if use_ground_truth and source == BASE_ESTIMATED:
+        raise ValueError("--use-ground-truth: the recordings have no gt.base, gt.quat, gt.vel and gt.angvel columns "
+                         "(a real robot's recordings do not); diagnose without it")
+    return logs, source
+
+
+def calibrate(logs: list[Log], robot=None, baseline: bool = True, *, use_ground_truth: bool = False) -> dict:
     """Engine-gap baseline from logs of a real world with no injected effects.
 
     Two parts: (1) the engine gap expressed in candidate terms: a diagnosis of these logs (with
@@ -229,22 +257,29 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
     the sensor noise removed: the gap that widens every later noise floor.
 
     Returns:
-        dict with ``sigma`` (noise levels), ``gap_rms`` (channel -> residual RMS of the baseline
-        model without noise [rad]), ``rms`` (channel -> raw residual RMS), ``baseline_model``
-        (term label -> value), ``n_logs``, ``fixed_base``; and ``screen`` (the terms a plain
-        screening picks on these logs, for the record).
+        dict with ``sigma`` (noise levels of these logs: ``encoders`` [rad], with an IMU ``angle``
+        [rad] and ``gyro`` [rad/s]; for reference only, a later diagnosis uses its own logs'),
+        ``gap_rms`` (channel -> residual RMS of the baseline model without noise [rad]), ``rms``
+        (channel -> raw residual RMS), ``baseline_model`` (term label -> value), ``n_logs``,
+        ``fixed_base``, ``base_state`` (where the replays took the base state from:
+        :data:`sysid.data.BASE_FIXED`, ``BASE_ESTIMATED`` or ``BASE_GROUND_TRUTH``); and ``screen``
+        (the terms a plain screening picks on these logs, for the record).
 
     Args:
         logs: recordings of one robot (``Log.robot``, n joints).  robot: that robot (default the logs').
+        use_ground_truth: replay floating-base logs from their ``gt.*`` ground-truth base state
+            (default: estimated from IMU, encoders and foot forces, as a later diagnosis does by default).
 
     Raises:
-        ValueError: ``robot`` is not the logs' robot.
+        ValueError: ``robot`` is not the logs' robot; ``use_ground_truth`` with floating-base logs
+            without ``gt.*`` columns.
     """
     robot = _robot_of(logs, robot)
+    logs, source = _replay_logs(logs, use_ground_truth)
     with_imu = not logs[0].fixed_base and all("angle" in lg.imu and "gyro" in lg.imu for lg in logs)
     base_model = {}
     if baseline and len(logs) > 1:
-        base_model = diagnose(logs, robot=robot)["_model_terms"]
+        base_model = diagnose(logs, robot=robot, use_ground_truth=use_ground_truth)["_model_terms"]
     wins = whole_logs(logs) if logs[0].fixed_base else windows(logs, range(len(logs)), WINDOW_S)
     nominal = predict(logs, wins, [base_model], with_imu=with_imu)
     floor, info = _floor(logs, wins, nominal, with_imu, None, robot)
@@ -265,14 +300,15 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True) -> dict:
     fams = FIXED_BASE_FAMILIES if logs[0].fixed_base else CONTACT_FAMILIES
     sr = screen(problem, robot, {}, fams, floating=not logs[0].fixed_base)
     return {"kind": "sgatwalk-sysid-calibration", "version": 2, "n_logs": len(logs),
-            "fixed_base": logs[0].fixed_base, "sigma": info["sigma"],
+            "fixed_base": logs[0].fixed_base, "base_state": source, "sigma": info["sigma"],
             "gap_rms": {nm: float(g) for nm, g in zip(names, gap)}, "rms": {nm: float(r) for nm, r in zip(names, rms)},
             "baseline_model": {t.label(): float(v) for t, v in base_model.items()},
             "screen": {t.label(): v for t, v in sr.selected.items()}}
 
 
 def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None, max_rounds: int = 3,
-             progress=None, robot=None, base_model: dict | None = None, time_budget_s: float | None = 300.0) -> dict:
+             progress=None, robot=None, base_model: dict | None = None, time_budget_s: float | None = 300.0,
+             use_ground_truth: bool = False) -> dict:
     """Diagnose the sim against ``logs``; returns the report dict (see module docstring).
 
     The stages, in order: :func:`_prepare` (split into training and held-out windows, base
@@ -288,7 +324,8 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             (``Log.robot``, from ``meta["robot"]``; n joints: the report has n per-joint channels).
         robot: that robot (``robots.RobotModel``); default the logs' own.
         calibration: output of :func:`calibrate` on "none" logs (engine gap: its baseline model
-            is replayed under everything, its gap widens the noise floor), or None.
+            is replayed under everything, its gap widens the noise floor; the sensor noise always
+            comes from ``logs``), or None.
         families: family names to consider (default: the actuator families for fixed-base logs,
             the contact families for floating-base logs).
         base_model: terms (Term -> value) kept fixed under every replay, e.g. the effects a
@@ -299,19 +336,28 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             after this many seconds (the report says so); None: no limit.
         max_rounds: screening/refit rounds (re-screening around the fitted model).
         progress: callable(str) for progress lines.
+        use_ground_truth: replay floating-base logs from their ``gt.*`` ground-truth base state
+            (``sgatwalk diagnose --use-ground-truth``). Default False: the logs' ``gt.*`` columns
+            are ignored and every window starts from the state estimated from IMU, encoders and
+            foot forces (:mod:`sysid.estimate`: flat ground, non-slipping stance foot, yaw 0), which
+            is all a real robot has.
 
     Returns:
         The report: ``verdict``, ``noise_floor``, ``heldout_rms_before``, ``heldout_rms_after``
         [rad], ``effects`` (list of {family, joints, links, value, unit, ci95, ...}),
         ``rejected``, ``indistinguishable``, ``residual``, ``localisation``, ``split``,
-        ``model`` (term label -> value), ``runtime_s``, ``rollouts``.
+        ``base_state`` (:data:`sysid.data.BASE_FIXED`, ``BASE_ESTIMATED`` or ``BASE_GROUND_TRUTH``),
+        ``noise`` (``sigma``: the logs' sensor noise, ``calibration_sigma``: the calibration's,
+        for reference), ``model`` (term label -> value), ``runtime_s``, ``rollouts``.
 
     Raises:
-        ValueError: a name in ``families`` is not a candidate family; ``robot`` is not the logs' robot.
+        ValueError: a name in ``families`` is not a candidate family; ``robot`` is not the logs' robot;
+            ``use_ground_truth`` with floating-base logs without ``gt.*`` columns.
     """
     clock = _Clock(time.perf_counter(), time_budget_s)
     say = progress or (lambda s: None)
     robot = _robot_of(logs, robot)
+    logs, source = _replay_logs(logs, use_ground_truth)
     setup = _prepare(logs, families, calibration, base_model, say)
     base = _baseline(logs, setup, calibration, robot)
     loc = _localise(logs, setup, base)
@@ -325,10 +371,10 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     rough_rejected = _check_roughness(rough.fit, problem, iv.model, say)
     effects, indist = _roughness_effect(rough.fit, iv.model, iv.effects, indist)
     after = _after(logs, problem, setup, base, before, iv.model)
-    verdict = _verdict(before, after, effects, base, rough.fit, calibration)
+    verdict = _verdict(before, after, effects, base, rough.fit, calibration, source)
     rejected = sel.rejected + final.rejected + rough.rejected + rough_rejected
     return _report(logs, setup, base, loc, problem, before, sel, iv, effects, indist, rejected, rough, after,
-                   verdict, calibration, robot, clock)
+                   verdict, calibration, robot, clock, source)
 
 
 # ------------------------------------------------------------------------------------------ stages
@@ -836,9 +882,11 @@ def _after(logs: list[Log], problem: Problem, setup: _Setup, base: _Baseline, be
 
 
 def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baseline, rough: RoughnessFit | None,
-             calibration: dict | None) -> _Verdict:
+             calibration: dict | None, source: str) -> _Verdict:
     """The one-paragraph verdict (nothing to explain / nothing explains it / what was found), the
-    roughness note, and the caution for noise-free recordings without an engine-gap calibration."""
+    roughness note, the caution for noise-free recordings without an engine-gap calibration, and a
+    warning (not in the verdict) when the calibration replayed its base state differently
+    (``source``: this diagnosis's :func:`sysid.data.base_state_source`)."""
     noise_floor = base.noise_floor
     rms_before, rms_after = before.rms, after.rms
     words = "; ".join(f"{e['words']} {e['display']} at {e['where']}" for e in effects)
@@ -871,13 +919,18 @@ def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baselin
                         "this sim counts as missing physics; record logs without injected effects, run "
                         "'sgatwalk diagnose --calibrate' on them and pass --calibration")
         verdict += ". CAUTION: " + warnings[-1]
+    cal_source = (calibration or {}).get("base_state")
+    if cal_source and cal_source != source:
+        warnings.append(f"base state: the calibration's replays used {cal_source.split(' (')[0]}, this diagnosis's "
+                        f"{source.split(' (')[0]}: its engine gap is not the gap of these replays; calibrate the "
+                        "same way (both with or both without --use-ground-truth)")
     return _Verdict(text=verdict, warnings=warnings)
 
 
 def _report(logs: list[Log], setup: _Setup, base: _Baseline, loc: dict, problem: Problem, before: _Before,
             sel: _Selection, iv: _Intervals, effects: list[dict], indist: list[dict], rejected: list[dict],
             rough: _RoughnessStage, after: _After, verdict: _Verdict, calibration: dict | None, robot,
-            clock: _Clock) -> dict:
+            clock: _Clock, source: str) -> dict:
     """The report dict (key order as written to ``report.json``), plus the private ``_base_terms``
     and ``_model_terms`` (Term -> value, for the MJCF export and plots; not in the JSON)."""
     names, model, rough_fit = base.names, iv.model, rough.fit
@@ -910,8 +963,11 @@ def _report(logs: list[Log], setup: _Setup, base: _Baseline, loc: dict, problem:
             "unexplained_joints": after.unexplained,
         },
         "localisation": loc,
-        "noise": {"sigma": base.sigma, "floor_per_channel": {nm: float(v) for nm, v in zip(names, base.floor)},
+        "noise": {"sigma": base.sigma, "sigma_source": "the diagnosed logs (nominal replay residual)",
+                  "calibration_sigma": (calibration or {}).get("sigma"),
+                  "floor_per_channel": {nm: float(v) for nm, v in zip(names, base.floor)},
                   "engine_gap_calibrated": calibration is not None},
+        "base_state": source,
         "split": {"train": [logs[i].name for i in setup.train_idx], "heldout": [logs[i].name for i in setup.heldout_idx],
                   "note": setup.split_note,
                   "mode": "single shooting" if setup.fixed else f"windowed replay ({WINDOW_S} s)"},

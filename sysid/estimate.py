@@ -34,8 +34,8 @@ def base_state(log: Log, k: int) -> dict:
         ValueError: the log lacks ``angle`` or ``gyro`` columns (needed for a floating base).
     """
     if "angle" not in log.imu or "gyro" not in log.imu:
-        raise ValueError(f"{log.name}: a floating-base log needs angle.* and gyro.* columns (or gt.* ground truth) "
-                         "to restart replays from the measured state")
+        raise ValueError(f"{log.name}: a floating-base log needs angle.* and gyro.* columns (or gt.* ground truth, "
+                         "used with --use-ground-truth) to restart replays from the measured state")
     rm, d = _kin_model(log.physics_dt, log.robot_name)
     m = rm.model
     roll, pitch = log.imu["angle"][k]

@@ -6,8 +6,9 @@ Each log is a sequence of segments, every one aimed at some family of missing ph
 ==============  ============================================  =================================
 segment         motion                                        separates
 ==============  ============================================  =================================
-holds           posture holds in 2 random postures            link mass vs servo kp (gravity
-                                                              torque changes with posture)
+holds           posture holds in 2 random postures (standing:  link mass vs servo kp (gravity
+                the legs squat and lean sideways with the     torque changes with posture)
+                soles flat, arms and head random)
 ramps           slow triangle ramps (~0.15 rad/s)             Coulomb friction (sign q̇, low |q̇|)
 steps           target steps of ~0.6 amplitude every 0.2-0.3  torque limit (saturated rises),
                 s                                             latency (onset), armature, kp
@@ -141,6 +142,43 @@ def joint_roles(robot: RobotModel) -> dict[str, tuple[str, float, float]]:
     return roles
 
 
+def _standing_posture(p: np.ndarray, role: list, legs: np.ndarray) -> np.ndarray:
+    """A hold posture for a robot standing on both feet, from the random posture ``p`` (m,) [rad].
+
+    Independent random offsets on every leg joint tilt the soles against the floor and lean the
+    body: after the stepping segment's rocking, some seeds tipped the NAO over backwards in its own
+    flat world (8 of 100 seeds of a 6 s log in the sim, 0.3-1 s after the holds). Here the legs
+    move together so the soles stay flat and the centre of mass over the feet: a squat of depth
+    ``s`` (the first knee's draw; knee ``s``, hip and ankle pitch ``-s/2`` each, rotations about
+    the same lateral axis, so the torso stays upright above the ankles) and a sideways lean ``y``
+    (the first hip roll's draw; hip roll ``y`` and ankle roll ``-y`` on both legs, a
+    parallelogram). Other leg joints (a yaw or the NAO's HipYawPitch) hold still; joints outside
+    the legs (arms, head, waist) keep their draws.
+
+    Args:
+        p: (m,) posture offsets per actuated joint [rad].  role: per actuated joint (role, side,
+            axis sign) (:func:`joint_roles`).  legs: (m,) bool, the actuated joints of the legs.
+
+    Returns:
+        A new (m,) array [rad].
+    """
+    out = np.where(legs, 0.0, p)
+    knees = [i for i, (rl, _, _) in enumerate(role) if rl == "knee"]
+    rolls = [i for i, (rl, _, _) in enumerate(role) if rl == "hip_roll"]
+    s = float(p[knees[0]]) if knees else 0.0  # rotation about the lateral axis [rad]
+    y = float(p[rolls[0]]) if rolls else 0.0  # rotation about the forward axis [rad]
+    for i, (rl, _, ax) in enumerate(role):  # ax: an axis along -x / -y turns the other way
+        if rl == "knee":
+            out[i] = s * ax
+        elif rl in ("hip_pitch", "ankle_pitch"):
+            out[i] = -0.5 * s * ax
+        elif rl == "hip_roll":
+            out[i] = y * ax
+        elif rl == "ankle_roll":
+            out[i] = -y * ax
+    return out
+
+
 def _smooth_step(x: np.ndarray) -> np.ndarray:
     x = np.clip(x, 0.0, 1.0)
     return 0.5 - 0.5 * np.cos(np.pi * x)
@@ -187,6 +225,8 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     na = len(names)
     roles = joint_roles(robot)
     role = [roles.get(nm, (None, 0.0, 1.0)) for nm in names]  # (role, side, axis sign) per actuated joint
+    leg_names = set(robot.groups.get("left_leg", ())) | set(robot.groups.get("right_leg", ()))
+    legs = np.array([nm in leg_names for nm in names])
     lead = int(round(0.4 / control_dt))
     tail = int(round(0.3 / control_dt))
     body = n - lead - tail
@@ -202,6 +242,8 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
             # two postures, each reached by a smooth 0.25 T transition and held
             p1 = rng.uniform(-1, 1, na) * amp
             p2 = rng.uniform(-1, 1, na) * amp
+            if not fixed_base:  # standing: legs in postures the robot balances in (same draws)
+                p1, p2 = _standing_posture(p1, role, legs), _standing_posture(p2, role, legs)
             x = t / T
             w1 = _smooth_step(x / 0.2) - _smooth_step((x - 0.4) / 0.2)
             w2 = _smooth_step((x - 0.4) / 0.2) - _smooth_step((x - 0.8) / 0.2)

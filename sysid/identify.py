@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
-from sysid.candidates import (FAMILIES, Term, family_for, joints_above, links_below, term_allowed, term_bounds,
+from sysid.candidates import (FAMILIES, Term, family_for, joints_above, mass_links, term_allowed, term_bounds,
                                term_probe)
 from sysid.data import Log
 from sysid.replay import IMU_CHANNELS, Window, measured, predict
@@ -313,7 +313,7 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
         problem: the diagnosis problem.  robot: the RobotModel.
         current: term -> value of the model screened around ({} = the plain sim).
         families: family names to consider.  max_terms: most terms selected.
-        floating: floating-base logs (contact families allowed).
+        floating: floating-base logs (contact families allowed; the root link is a link-mass candidate).
 
     Returns:
         :class:`ScreenResult` (empty ``selected`` when nothing stands out).
@@ -326,12 +326,12 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
     J = list(dict.fromkeys(robot.mimic.get(j, j) for j in J))
     if not J:
         return ScreenResult([], {}, {}, [], [])
-    links: list[str] = []
-    for j in J:  # a mass error shows on the joints above the link: links below flagged joints
-        for ln in links_below(robot, j):
-            if ln not in links:
-                links.append(ln)
-    links = sorted(links, key=lambda ln: -sum(1 for j in joints_above(robot, ln) if j in J))[:max_links]
+    # a mass error shows on the joints above the link: links below flagged joints, and on the ground
+    # the root (torso), whose weight every stance joint carries (:func:`sysid.candidates.mass_links`)
+    links = mass_links(robot, J, floating)
+    root = links[:1] if floating else []
+    links = root + sorted(links[len(root):],
+                          key=lambda ln: -sum(1 for j in joints_above(robot, ln) if j in J))[:max_links - len(root)]
     n = sum((w.length - 1) * problem.k for w in problem.train)
     n_eff = max(10.0, 0.1 * n)
     # stage A: one column per family (globals, local families over all flagged joints)

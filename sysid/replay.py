@@ -6,7 +6,9 @@ held for the ``substeps`` physics steps that follow. :func:`mujoco.rollout.rollo
 sensor values computed at the start of each step, so sensor row ``i * substeps`` is log row
 ``k0 + i`` of a replay started at row ``k0``.
 
-A :class:`Window` is a stretch of one log replayed from the measured state at its first row.
+A :class:`Window` is a stretch of one log replayed from the measured state at its first row (for a
+floating base: the log's ``gt.*`` ground truth if it carries it, else the state estimated from IMU,
+encoders and foot forces, :mod:`sysid.estimate`).
 Single shooting uses one window per log; windowed replay (multiple shooting, Ribeiro et al., "On the
 smoothness of nonlinear system identification", Automatica 2020) cuts floating-base logs into short
 windows, each restarted from the measured state. All
@@ -26,7 +28,7 @@ from mujoco import rollout as mj_rollout
 
 from common.spatial import quat_roll_pitch
 from sysid.candidates import Term, apply_terms, series_structure
-from sysid.data import Log
+from sysid.data import Log, has_ground_truth
 from sysid.model import ReplayModel, Structure, replay_model
 
 #: (parameter set, window) pairs per batched ``rollout`` call (bounds memory).
@@ -115,8 +117,11 @@ def _start_velocity(log: Log, k: int) -> np.ndarray:
 
 
 def _base_state(log: Log, k: int) -> dict | None:
-    g = log.gt
-    if all(key in g for key in ("gt.base", "gt.quat", "gt.vel", "gt.angvel")):
+    """The floating base's state at row ``k``: the log's ``gt.*`` ground truth when it carries it
+    (:func:`sysid.data.has_ground_truth`; :func:`sysid.data.load_logs` and :func:`sysid.diagnose.diagnose`
+    drop it unless asked), else the estimate of :func:`sysid.estimate.base_state`."""
+    if has_ground_truth(log):
+        g = log.gt
         return {"pos": g["gt.base"][k], "quat": g["gt.quat"][k], "linvel": g["gt.vel"][k],
                 "angvel": g["gt.angvel"][k]}
     from sysid.estimate import base_state  # floating logs without ground truth

@@ -4,7 +4,9 @@
 
 * ``report.json``: the dict of :func:`sysid.diagnose.diagnose` (keys ``verdict``, ``noise_floor``,
   ``heldout_rms_before``, ``heldout_rms_after`` [rad], ``effects`` [{family, joints, links, value,
-  unit, ci95, ...}], ``rejected``, ``indistinguishable``, ``residual``, ``localisation``, ...);
+  unit, ci95, ...}], ``rejected``, ``indistinguishable``, ``residual``, ``localisation``,
+  ``base_state`` (where the floating base's replay state came from), ``noise`` (the logs' sensor σ,
+  the calibration's for reference, the floor per channel), ...);
 * ``report.txt``: the printed report;
 * ``overlay.png`` (per-joint measured vs sim before/after on a held-out log), ``residual_by_joint.png``,
   ``residual_by_phase.png``, ``hysteresis.png`` (command vs output where backlash or Coulomb
@@ -54,12 +56,21 @@ def format_report(rep: dict) -> str:
     """The human-readable report (what ``sgatwalk diagnose`` prints)."""
     mm = 1000.0
     lines = ["=" * 100, "VERDICT: " + rep["verdict"], "=" * 100]
-    lines.append(f"noise floor {mm * rep['noise_floor']:.3f} mrad (sensor σ {mm * rep['noise']['sigma']['encoders']:.3f} mrad"
-                 + (", engine gap calibrated" if rep["noise"]["engine_gap_calibrated"] else ", engine gap not calibrated")
+    noise = rep["noise"]
+    cal_sigma = (noise.get("calibration_sigma") or {}).get("encoders")
+    lines.append(f"noise floor {mm * rep['noise_floor']:.3f} mrad (sensor σ {mm * noise['sigma']['encoders']:.3f} mrad"
+                 + (" from these logs" if "sigma_source" in noise else "")
+                 + (f", the calibration's {mm * cal_sigma:.3f} mrad" if cal_sigma is not None else "")
+                 + (", engine gap calibrated" if noise["engine_gap_calibrated"] else ", engine gap not calibrated")
                  + f"); held-out RMS before {mm * rep['heldout_rms_before']:.3f} mrad, after {mm * rep['heldout_rms_after']:.3f} mrad"
                  + (f", gap closed {100 * rep['gap_closed']:.0f} %" if rep.get("gap_closed") is not None else ""))
     lines.append(f"data: {rep['split']['note']}; {rep['split']['mode']}; train {', '.join(rep['split']['train'])}; "
                  f"held out {', '.join(rep['split']['heldout'])}")
+    if rep.get("base_state"):
+        lines.append(f"base state of the replays: {rep['base_state']}")
+    for wtxt in rep.get("warnings", []):
+        if wtxt not in rep["verdict"]:
+            lines.append(f"WARNING: {wtxt}")
     lines.append("")
     lines.append("EFFECTS FOUND" + ("" if rep["effects"] else ": none"))
     for e in rep["effects"]:

@@ -13,7 +13,8 @@ with DROPO's short windows restarted from the measured state:
    consistent with their ground (the robot stands on what is simulated), as a real log is.
 2. **Same statistic as the real logs.** They are replayed exactly like the real ones (windowed,
    on flat ground, under the current model); the excess cost ε(A) = Σ_channels mean(e²/floor²)
-   is the statistic the diagnosis already uses, with its per-channel profile v_c(A).
+   is the statistic the diagnosis already uses, with its per-channel profile v_c(A); the windows
+   start from the same kind of base state as the recordings' (estimated unless they carry ground truth).
 3. **Fit.** Â solves ε(Â) = ε_obs (the windows' cost above the channel count, all logs: a robot
    stepping in place samples only the few spots its feet stand on, so one log is one draw of the
    surface and the fit needs every draw there is), by interpolation of the monotone curve in
@@ -53,7 +54,7 @@ import numpy as np
 from common.spatial import quat_roll_pitch, quat_to_mat
 from envs.base import FALL_TORSO_HEIGHT
 from sysid.candidates import FAMILIES, apply_terms, series_structure
-from sysid.data import Log
+from sysid.data import Log, has_ground_truth, without_ground_truth
 from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
 from sysid.replay import (Window, _base_state, _cmd_history, _pool, _start_velocity, build_models,
                           measured, predict)
@@ -97,6 +98,30 @@ def _height_at(h: np.ndarray, x: float, y: float) -> float:
     return float(Heightfield(h, TERRAIN_CELL).height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy)))
 
 
+def _foot_forces(m: mujoco.MjModel, rm, states: np.ndarray, cmd: np.ndarray) -> np.ndarray:
+    """(L, 2) total normal force under the left and right foot [N] of each full physics state
+    (``mjSTATE_FULLPHYSICS`` rows of the replay model ``rm``, ``m`` its edited copy) with the servo
+    targets of ``cmd`` (L, n) [rad] (row ``k``: the command that drove the step into state ``k``),
+    what a recording's ``fsr`` columns hold (the sim world's sum,
+    :func:`envs.mujoco_world.foot_contact_sums`)."""
+    from envs.mujoco_world import foot_contact_sums
+
+    feet = {rm.robot.frames["l_sole"].link: 0, rm.robot.frames["r_sole"].link: 1}
+    geom_foot = np.array([feet.get(m.body(m.geom_bodyid[g]).name, -1) for g in range(m.ngeom)])
+    ground = m.geom("ground").id
+    d = mujoco.MjData(m)
+    out = np.zeros((len(states), 2))
+    for k, x in enumerate(states):
+        mujoco.mj_setState(m, d, x, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        d.ctrl[rm.act] = cmd[k]
+        mujoco.mj_forward(m, d)
+        if d.ncon:
+            con = d.contact
+            out[k] = foot_contact_sums(con.geom1, con.geom2, d.efc_force[con.efc_address], con.pos, geom_foot,
+                                       ground)[0][0]
+    return out
+
+
 def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarray]) -> list[list[Log]]:
     """Each log's commands run open-loop on each surface, from the log's first row.
 
@@ -112,7 +137,9 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
 
     Returns:
         ``out[s][i]``: log ``i`` simulated on surface ``s``, a noise-free :class:`Log` with the same
-        times and commands, measured angles, velocities, IMU roll/pitch/gyro and base ground truth.
+        times and commands, measured angles, velocities, IMU roll/pitch/gyro and base ground truth;
+        when a log of ``logs`` has no ground truth (its replays estimate the base state), also the
+        foot forces (``fsr``, (N, 2) [N]) the estimator takes the stance foot from.
 
     Raises:
         ValueError: a fixed-base log.
@@ -126,6 +153,7 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
     nq, nv = rm.model.nq, rm.model.nv
     sole = [rm.model.site(s).id for s in ("l_sole", "r_sole")]
     names = list(rm.robot.joint_names)
+    with_fsr = not all(has_ground_truth(lg) for lg in logs)
     out = [[None] * len(logs) for _ in surfaces]
     pool, nt = _pool()
     for L in sorted({len(lg) for lg in logs}):
@@ -180,9 +208,10 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 imu = {"angle": quat_roll_pitch(ys[:, qa:qa + 4]), "gyro": ys[:, ga:ga + 3].copy()}
                 gt = {"gt.base": qpos[:, 0:3].copy(), "gt.quat": quat.copy(), "gt.vel": qvel[:, 0:3].copy(),
                       "gt.angvel": angvel_w}
+                fsr = _foot_forces(mlist[j], rm, xs, lg.cmd[np.maximum(np.arange(L) - 1, 0)]) if with_fsr else None
                 out[s][i] = Log(name=f"{lg.name}@surface{s}", t=lg.t, cmd=lg.cmd, q=q, dq=dq,
                                 control_dt=lg.control_dt, physics_dt=lg.physics_dt, fixed_base=False, imu=imu, gt=gt,
-                                meta={"robot": lg.robot_name})
+                                fsr=fsr, meta={"robot": lg.robot_name})
     return out
 
 
@@ -309,6 +338,10 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
     remap = {i: j for j, i in enumerate(used)}
     sims = simulate_on_surfaces(logs, values, [h for _, h in surfs])
     n_roll = len(surfs) * len(logs)
+    # replayed like the recordings: from the ground-truth base state only if they have it, else from
+    # the estimate (its error is part of the recordings' excess too); the simulated logs' own ground
+    # truth still tells which of them tipped over
+    as_recorded = (lambda sl: sl) if all(has_ground_truth(lg) for lg in logs) else without_ground_truth
     # the simulated logs are replayed on a *flat heightfield*: MuJoCo's box-heightfield contacts differ
     # from box-plane ones (measured: 6-25 mrad torso angle over 6 s open-loop), so the reference must
     # be the same contact model and the statistic measures the surface's unevenness alone
@@ -322,7 +355,7 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
             slogs = sims[(g - 1) * n_surfaces + s]
             for which, arr in (("train", sim_tr), ("heldout", sim_ho)):
                 wins = [Window(remap[w.log], w.k0, w.k1) for w in problem.wins[which]]
-                pred = predict(slogs, wins, [values], with_imu=True, models=flat)
+                pred = predict(as_recorded(slogs), wins, [values], with_imu=True, models=flat)
                 meas = [measured(slogs[w.log], w, True) for w in wins]
                 ex = _excess_per_window(meas, [p[0] for p in pred], floor)
                 # an open-loop simulation that tips over is not a sample of walking on that ground

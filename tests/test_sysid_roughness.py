@@ -13,6 +13,7 @@ from sysid.candidates import Term
 from sysid.roughness import (CORRELATION_RADIUS, MIN_RMS_HEIGHT, _excess_per_window, excess_left, fit_roughness,
                              simulate_on_surfaces, surface)
 from terrain import Heightfield
+from _sensors import add_sensor_noise
 
 FLOOR = np.array([1e-3] * 24 + [2e-3] * 2 + [1e-2] * 3)  # encoders, torso roll/pitch, gyro
 
@@ -33,11 +34,7 @@ def _stepping_logs(amplitude: float, seeds, seconds: float = 4.0, friction: floa
     for i, s in enumerate(seeds):
         rec = rollout(env, CommandLog(protocol(r, seconds, seed=s, fixed_base=False)), seed=0, seconds=seconds,
                       options={"terrain": ground(i)})
-        rng = np.random.default_rng(s)
-        for c in rec.columns:
-            sd = 1e-3 if c.startswith("q.") else 2e-3 if c.startswith("angle.") else 1e-2 if c.startswith("gyro.") else 0
-            if sd:
-                rec.columns[c] = rec.columns[c] + rng.normal(0, sd, len(rec))
+        add_sensor_noise(rec, s)
         logs.append(from_recording(rec, f"rough_{s}"))
     return logs
 
