@@ -39,10 +39,8 @@ from robots import RobotModel, nao_h25
 from terrain import Heightfield
 
 GRAVITY = 9.81
-#: Fall thresholds (a project choice): torso origin lower than this above the terrain [m] (the NAO's;
-#: other robots: ``RobotModel.fall_height``) ...
-FALL_TORSO_HEIGHT = 0.20
-#: ... or torso tilted more than this from upright [rad].
+#: Fall thresholds (a project choice): the torso origin lower than the robot's ``RobotModel.fall_height``
+#: above the terrain (the NAO: 0.20 m) or tilted more than this from upright [rad].
 FALL_TILT = math.radians(45.0)
 #: Joint speeds above this [rad/s] mean the simulation blew up.
 UNSTABLE_JOINT_SPEED = 200.0

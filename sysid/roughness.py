@@ -52,7 +52,6 @@ import mujoco
 import numpy as np
 
 from common.spatial import quat_roll_pitch, quat_to_mat
-from envs.base import FALL_TORSO_HEIGHT
 from sysid.candidates import FAMILIES, apply_terms, series_structure
 from sysid.data import Log, has_ground_truth, without_ground_truth
 from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
@@ -284,9 +283,10 @@ def _invert(grid: np.ndarray, curve: np.ndarray, target: float) -> float:
     return float(math.exp(math.log(a0) + f * (math.log(a1) - math.log(a0))))
 
 
-def _upright(log: Log, w: Window, min_height: float = FALL_TORSO_HEIGHT, max_tilt: float = 0.6) -> bool:
-    """Whether a simulated log's torso stays above ``min_height`` [m] and within ``max_tilt`` [rad]
-    of upright over the window."""
+def _upright(log: Log, w: Window, max_tilt: float = 0.6) -> bool:
+    """Whether a simulated log's torso stays above its robot's fall height (``RobotModel.fall_height``,
+    the worlds' rule) and within ``max_tilt`` [rad] of upright over the window."""
+    min_height = log.robot.fall_height
     z = log.gt["gt.base"][w.k0:w.k1, 2]
     ang = log.imu["angle"][w.k0:w.k1]
     return bool(np.all(z > min_height) and np.all(np.abs(ang) < max_tilt))

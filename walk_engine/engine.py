@@ -205,8 +205,8 @@ class WalkEngine:
             self._fb = (lg.hip_roll, lg.ankle_pitch, lg.ankle_roll)
         else:
             leg_names = {s: [s + j for j in LEG_JOINTS] for s in "LR"}
-            self._iL = np.array([act.index("L" + j) for j in LEG_JOINTS])
-            self._iR = np.array([act.index("R" + j) for j in LEG_JOINTS[1:]])  # RHipYawPitch follows
+            self._iL = np.array([act.index(n) for n in leg_names["L"]])
+            self._iR = np.array([act.index(n) for n in leg_names["R"][1:]])  # RHipYawPitch follows
             self._fb = (1, 4, 5)
         self._lo = r.lower[r.actuated_index]
         self._hi = r.upper[r.actuated_index]

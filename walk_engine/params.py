@@ -361,11 +361,15 @@ def scaled_specs(leg_length: float, hip_width: float, com_crouch: float, com_str
         elif s.name in TIMES:
             k = math.sqrt(lam)
             s = dataclasses.replace(s, init=s.init * k, low=s.low * k, high=s.high * k)
-        elif s.name == "feet_spacing":
-            s = dataclasses.replace(s, init=hip_width, low=hip_width * 0.85, high=hip_width * 1.4)
-        elif s.name == "com_height":
-            s = dataclasses.replace(s, init=com_crouch + 0.1 * span, low=com_crouch - 1.9 * span,
-                                    high=com_crouch + 0.6 * span, note="scaled from the NAO's (scaled_specs)")
+        elif s.name == "feet_spacing":  # the NAO's θ0 and bounds relative to its hip width
+            k = hip_width / NAO_HIP_WIDTH
+            s = dataclasses.replace(s, init=s.init * k, low=s.low * k, high=s.high * k)
+        elif s.name == "com_height":  # the NAO's, relative to its crouch and straight-leg CoM heights
+            def place(v):
+                return com_crouch + (v - NAO_COM_CROUCH) / (NAO_COM_STRAIGHT - NAO_COM_CROUCH) * span
+
+            s = dataclasses.replace(s, init=place(s.init), low=place(s.low), high=place(s.high),
+                                    note="scaled from the NAO's (scaled_specs)")
         out.append(dataclasses.replace(s, init=float(f"{s.init:.6g}"), low=float(f"{s.low:.6g}"),
                                        high=float(f"{s.high:.6g}")))
     return tuple(out), lam
