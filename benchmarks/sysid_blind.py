@@ -89,15 +89,32 @@ def main(argv=None) -> int:
     ap.add_argument("--excitation", choices=SOURCES, default="protocol",
                     help="the logs' excitation: the project's protocol (sgatwalk excite) or the referee's own "
                          "random multisine + steps (fixed base only; benchmarks/blind/excitation.py)")
+    ap.add_argument("--noise", type=float, default=1000 * NOISE, metavar="MRAD",
+                    help="encoder noise of the trial logs [mrad] (default 1; the engine-gap calibration logs keep "
+                         "1 mrad, so 3 tests a floor taken from noisier logs than the calibration's)")
+    ap.add_argument("--extra-classes", default="", metavar="LIST",
+                    help="comma list of classes outside the default set to draw as well (e.g. torque_constant)")
+    ap.add_argument("--diagnose-families", metavar="LIST",
+                    help="passed to sgatwalk diagnose --families (e.g. +torque_constant: the defaults and that one)")
     args = ap.parse_args(argv)
+    if not args.noise > 0:
+        ap.error(f"--noise must be positive, got {args.noise}")
     load_before = os.getloadavg()[0]
     robot = nao_h25()
     if args.floating and args.excitation != "protocol":
         ap.error("--excitation referee is for a fixed base only")
+    extra = [c.strip() for c in args.extra_classes.split(",") if c.strip()]
+    if any(c not in SEED_ORDER for c in extra):
+        ap.error(f"--extra-classes: unknown class(es) {', '.join(c for c in extra if c not in SEED_ORDER)}; "
+                 f"known: {', '.join(dict.fromkeys(SEED_ORDER))}")
     root = os.path.join(args.out, args.world + ("_floating" if args.floating else "")
-                        + ("" if args.excitation == "protocol" else f"_{args.excitation}"))
+                        + ("" if args.excitation == "protocol" else f"_{args.excitation}")
+                        + ("" if args.noise == 1000 * NOISE else f"_noise{args.noise:g}")
+                        + "".join(f"_{c}" for c in extra)
+                        + (f"_fam{args.diagnose_families.replace(',', '_').replace('+', '')}"
+                           if args.diagnose_families else ""))
     fixed = not args.floating
-    world_classes = (CLASSES_FLOATING if args.floating else CLASSES)[args.world]
+    world_classes = (CLASSES_FLOATING if args.floating else CLASSES)[args.world] + extra
     os.makedirs(root, exist_ok=True)
     res_path = os.path.join(root, "results.jsonl")
     done = {}
@@ -134,10 +151,12 @@ def main(argv=None) -> int:
             shutil.rmtree(logs_dir)  # recorded for other hidden effects (e.g. a class list that changed)
         with open(truth_file, "w") as f:
             f.write(truth_text)
-        t_rec = record(args.world, hidden, logs_dir, args.logs, args.seconds, seed % 100000, fixed, args.excitation) \
+        t_rec = record(args.world, hidden, logs_dir, args.logs, args.seconds, seed % 100000, fixed, args.excitation,
+                       noise=args.noise / 1000) \
             if not os.path.isdir(logs_dir) else 0.0
         rep = run_diagnose(["diagnose", "--real", logs_dir, "--out", os.path.join(tdir, "report"),
-                            "--calibration", cal_file, "--no-plots"])
+                            "--calibration", cal_file, "--no-plots",
+                            *(["--families", args.diagnose_families] if args.diagnose_families else [])])
         sc = score(hidden, rep)
         row = {"trial": tid, "kind": kind, "seed": s, "truth_class": cls if kind == "single" else None,
                "truth": hidden, "truth_sha256": hashlib.sha256(truth_text.encode()).hexdigest(),
@@ -159,7 +178,8 @@ def main(argv=None) -> int:
 
         res = {"world": args.world, "floating": args.floating, "excitation": args.excitation, "seed0": args.seed0,
                "seeds": args.seeds, "two_effect": args.two_effect, "logs": args.logs, "seconds": args.seconds,
-               "encoder_noise_mrad": 1000 * NOISE, "metrics": metrics(rows)}
+               "encoder_noise_mrad": args.noise, "calibration_noise_mrad": 1000 * NOISE, "extra_classes": extra,
+               "diagnose_families": args.diagnose_families, "metrics": metrics(rows)}
         print(save_benchmark(args.save, "benchmarks/sysid_blind.py", argv if argv is not None else sys.argv[1:], res,
                              load_before))
     return 0

@@ -47,7 +47,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--calibrate", action="store_true", help="the recordings have no injected effects: write "
                    "REPORT_DIR/calibration.json (engine-gap baseline) instead of a diagnosis")
     p.add_argument("--families", help="comma list of candidate families (default: actuator families for fixed-base "
-                   "logs, contact families (foot_friction, ground_compliance) for floating-base logs)")
+                   "logs, contact families (foot_friction, ground_compliance) for floating-base logs); "
+                   "torque_constant (a servo error scaling kp and kd together) is screened only when listed here")
     p.add_argument("--base-report", type=A.in_file, metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
                    "(bottom-up staging: diagnose fixed-base logs first, then stepping logs with their report)")
     p.add_argument("--rounds", type=A.count(1, 100), default=3, help="screen/refit rounds (default 3)")
@@ -104,7 +105,7 @@ def run(args) -> dict:
         if missing:
             raise ValueError(f"{args.calibration}: calibrated on another robot's logs (no engine gap for joint "
                              f"{missing[0]} of {robot.name})")
-    fams = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
+    fams = _families(args.families, logs) if args.families else None
     base = None
     if args.base_report:
         from sysid.report import terms_from_labels  # lazy: loads the engines; keeps sgatwalk --help fast
@@ -131,3 +132,18 @@ def run(args) -> dict:
     out = public_json(rep)
     out["files"] = paths
     return out
+
+
+def _families(text: str, logs) -> list[str]:
+    """``--families``: a comma list of family names, or ``+NAME,...`` for the default families of the
+    logs (actuator families for a fixed base, contact families otherwise) and those, in library order."""
+    from sysid.candidates import CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES  # lazy: loads mujoco
+
+    names = [f.strip() for f in text.lstrip("+").split(",") if f.strip()]
+    if not text.startswith("+"):
+        return names
+    default = FIXED_BASE_FAMILIES if logs[0].fixed_base else CONTACT_FAMILIES
+    bad = [f for f in names if f not in FAMILIES]
+    if bad:
+        return bad  # diagnose() names the unknown family
+    return [f for f in FAMILIES if f in default or f in names]

@@ -13,6 +13,7 @@ folder and replays that robot.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import experiments.argtypes as A
@@ -32,12 +33,37 @@ def register(sub) -> argparse.ArgumentParser:
                    help="real-world ground for floating-base logs (default flat); lumpy: a fresh field of random "
                         "bumps per log under the feet (no flat start pad), peak height from the profile's "
                         "terrain_amplitude (e.g. --effect terrain_amplitude=0.01)")
-    p.add_argument("--out", type=A.out_dir, required=True, metavar="DIR", help="folder for the recordings")
+    p.add_argument("--out", type=A.out_dir, metavar="DIR", help="folder for the recordings (required unless --design-only)")
     p.add_argument("--logs", type=A.count(1, 1000), default=4, help="number of trajectories (default 4; >= 2 for a held-out split)")
     p.add_argument("--seconds", type=A.real(3.0, 3600.0, unit="s"), default=8.0, help="duration of each log [s] (default 8)")
     p.add_argument("--seed", type=A.seed, default=0, help="seed of the robot's effects and of the trajectories")
     p.add_argument("--scale", type=A.real(0.0, 3.0, open_lo=True), default=1.0, help="amplitude scale of the motions (default 1)")
+    p.add_argument("--segments", type=_segments, metavar="LIST",
+                   help="comma list of protocol segments, in order (default holds,ramps,steps,reversals,gait,chirp); "
+                        "'+saturation' adds steps that drive every joint into its torque limit (fixed base)")
+    p.add_argument("--design", choices=("protocol", "d-optimal"), default="protocol",
+                   help="segment shares: the protocol's own (default) or D-optimal: chosen on the sim, before "
+                        "anything is recorded, to maximise the Fisher information of the candidate families "
+                        "(fixed base; prints each family's expected identifiability under both; ~1 min)")
+    p.add_argument("--design-only", action="store_true", help="print the design and record nothing (no --out needed)")
     return p
+
+
+#: The protocol's default segments (``sysid.excitation.SEGMENTS``; repeated here so ``--help`` stays light).
+SEGMENTS_DEFAULT = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
+
+
+def _segments(text: str) -> tuple[str, ...]:
+    """``--segments``: a comma list of segment names, or ``+NAME,...`` to add to the default protocol."""
+    from sysid.excitation import KNOWN_SEGMENTS, OPTIONAL_SEGMENTS, SEGMENTS
+
+    add = text.startswith("+")
+    names = [s.strip() for s in text.lstrip("+").split(",") if s.strip()]
+    bad = [s for s in names if s not in KNOWN_SEGMENTS]
+    if not names or bad:
+        raise argparse.ArgumentTypeError(f"unknown segment(s) {', '.join(bad) or repr(text)}; known: "
+                                         f"{', '.join(SEGMENTS + OPTIONAL_SEGMENTS)}")
+    return tuple(SEGMENTS) + tuple(s for s in names if s not in SEGMENTS) if add else tuple(names)
 
 
 def run(args) -> dict:
@@ -46,7 +72,31 @@ def run(args) -> dict:
     from sysid.worlds import freeze, record_excitation, rough_ground  # lazy: loads the engines; keeps sgatwalk --help fast
     from robots import get_robot  # lazy: g1/talos parse their URDFs
 
+    if args.segments and "saturation" in args.segments and not args.fixed_base:
+        raise ValueError("--segments saturation needs --fixed-base (a standing robot would fall)")
+    if (args.design != "protocol" or args.design_only) and not args.fixed_base:
+        raise ValueError("--design d-optimal needs --fixed-base (the design replays the robot in the air)")
+    if args.design_only and args.design == "protocol":
+        raise ValueError("--design-only needs --design d-optimal")
+    if args.out is None and not args.design_only:
+        raise ValueError("--out DIR is required (the folder for the recordings)")
     robot = get_robot(args.robot)
+    shares = None
+    plan = None
+    if args.design == "d-optimal":
+        from sysid.design import design, format_design  # lazy: replays the sim
+
+        t_design = time.perf_counter()
+
+        def say_err(line: str) -> None:  # a line per simulated segment, with elapsed time, to stderr
+            print(f"{line} ({time.perf_counter() - t_design:.0f} s)", file=sys.stderr, flush=True)
+
+        d = design(robot, args.segments or SEGMENTS_DEFAULT, seconds=args.seconds, seed=args.seed, progress=say_err)
+        shares, plan = d.shares, d.to_json()
+        if not args.json:
+            print(format_design(plan), flush=True)
+        if args.design_only:
+            return {"robot": robot.name, "design": plan}
     kw = {"fixed_base": args.fixed_base, "robot": robot}
     ground = None
     if args.world == "real":
@@ -71,11 +121,12 @@ def run(args) -> dict:
     t0 = time.perf_counter()
     say = None if args.json else print
     paths = record_excitation(env, args.out, n_logs=args.logs, seconds=args.seconds, seed=args.seed,
-                              scale=args.scale, progress=say, terrain=ground)
+                              scale=args.scale, progress=say, terrain=ground, segments=args.segments, shares=shares)
     env.close()
     wall = time.perf_counter() - t0
     if not args.json:
         print(f"wrote {len(paths)} log(s) of {args.seconds:g} s to {args.out} in {wall:.1f} s; "
               f"next: sgatwalk diagnose --real {args.out} --out REPORT_DIR")
     return {"robot": robot.name, "world": args.world, "profile": args.profile if args.world == "real" else None,
-            "fixed_base": args.fixed_base, "recordings": paths, "wall_s": wall}
+            "fixed_base": args.fixed_base, "recordings": paths, "wall_s": wall,
+            **({"design": plan} if plan else {})}

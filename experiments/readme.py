@@ -233,6 +233,13 @@ def _diagnose(res: dict) -> str:
 
 
 
+def _excite(res: dict) -> str:
+    """``sgatwalk excite --design d-optimal --design-only --json``: the design as the command prints it."""
+    from sysid.design import format_design
+
+    return "```text\n" + format_design(res["design"]) + "\n```"
+
+
 def _benchenvs(res: dict) -> str:
     """``benchmarks/bench_envs.py``: its table, and what a 7.5 s episode costs in each world."""
     cases = res["cases"]
@@ -270,21 +277,31 @@ def _blind(res: dict) -> str:
     lines = [f"{world}, {'floating' if res['floating'] else 'fixed'} base, {res['excitation']} excitation; "
              f"{m['single']} single-effect trials ({res['seeds']} seeds per class, base seed {res['seed0']}) and "
              f"{m['two']} two-effect trials; {res['logs']} logs × {res['seconds']:g} s each, "
-             f"{res['encoder_noise_mrad']:g} mrad encoder noise.", "",
+             f"{res['encoder_noise_mrad']:g} mrad encoder noise"
+             + (f" (engine-gap calibration on {res['calibration_noise_mrad']:g} mrad logs)"
+                if res.get("calibration_noise_mrad", res["encoder_noise_mrad"]) != res["encoder_noise_mrad"] else "")
+             + (f"; extra classes {', '.join(res['extra_classes'])}" if res.get("extra_classes") else "")
+             + (f"; `sgatwalk diagnose --families {res['diagnose_families']}`" if res.get("diagnose_families") else "")
+             + ".", "",
              "| figure | value | target |", "|---|---|---|",
              f"| family top-1 (trials with an effect) | {fr(m['top1'], '≥ 90 % on detectable effects')} |",
              f"| false positives on clean logs | {fr(m['none_fp'], '≤ 5 %')} |",
-             f"| trials with a spurious term | {fr(m['spurious'], '≤ 10 %')} |",
-             f"| 95 % interval coverage (every reported term) | {fr(m['coverage'], '≥ 85 %')} |",
+             f"| trials with a spurious \"Found\" term | {fr(m['spurious'], '≤ 10 %')} |",
+             f"| 95 % interval coverage (every reported term, uncertain ones included) | {fr(m['coverage'], '≥ 85 %')} |",
              f"| precision / recall of terms (family + joint or link) | {fr(m['precision'])} / {fr(m['recall'])} | |",
              f"| median parameter error (non-latency terms found) | {_f(m['param_err_median'], '{:.1%}')} | |",
              f"| median latency error | {_f(m['latency_err_ms'], '{:.2f} ms')} | |",
              f"| two effects: both found | {fr(m['both_found'])} | |",
+             *([f"| terms reported as uncertain / compensating: of them true terms | {fr(m['uncertain'])} | |"]
+               if "uncertain" in m else []),
+             *([f"| {c}: top-1, median parameter error | {fr(v['top1'])}, {_f(v['param_err_median'], '{:.1%}')} | "
+                f"{'≥ 80 %, ≤ 25 %' if res['floating'] and c != 'none' else ''} |"
+                for c, v in m.get("per_class", {}).items()] if res["floating"] else []),
              f"| diagnose runtime (median) | {_f(m['runtime_s'], '{:.1f} s')} | |"]
     return "\n".join(lines)
 
 
-RENDERERS = {"blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
+RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext}
 
 

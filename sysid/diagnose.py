@@ -12,7 +12,10 @@ windows (C = number of channels when every channel sits at its floor):
 * a screening round is kept if it lowers the held-out cost by at least
   max(0.25, 5 % of the excess C - k) and lowers the training BIC by more than 10;
 * a term, then a whole family, is dropped if removing it (families: and refitting the rest)
-  raises the held-out cost by less than that same margin (backward elimination).
+  raises the held-out cost by less than that same margin (backward elimination);
+* a selected term is reported as Found only if it survives held-out elimination, its 95 % interval
+  excludes the sim's value, it is not at a bound of its family and it does not only compensate
+  another term; the others are reported as uncertain / compensating, with the reason (:func:`_vet`).
 """
 
 from __future__ import annotations
@@ -26,11 +29,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sysid.candidates import (CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above, term_allowed,
-                              term_min_effect, term_probe)
+                              term_bounds, term_min_effect, term_probe)
 from sysid.data import (BASE_ESTIMATED, Log, base_state_source, split_by_trajectory,
                          without_ground_truth)
 from sysid.identify import FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen
-from sysid.replay import IMU_CHANNELS, Window, predict, whole_logs, windows
+from sysid.replay import IMU_CHANNELS, MUJOCO_WARNINGS, Window, predict, whole_logs, windows
 from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
 from sysid.stats import integrated_autocorr, localisation, noise_sigma
 
@@ -47,6 +50,15 @@ EXPERIMENTS = {
     frozenset({"pd_gain", "joint_compliance"}): "a chirp through 1-4 Hz and steps: a series spring takes the servo "
                                                 "damping off the output (a larger, slower-settling resonance), a kp "
                                                 "error keeps it; or motor current against output deflection",
+    frozenset({"pd_gain", "torque_constant"}): "target steps of two sizes and a chirp through the servo resonance: a "
+                                               "torque-constant error scales the damping with the stiffness (same "
+                                               "overshoot, slower or faster), a kp-only error changes the overshoot",
+    frozenset({"torque_constant", "joint_compliance"}): "a chirp through 1-4 Hz and steps: a series spring takes the "
+                                                        "servo damping off the output, a torque-constant error keeps "
+                                                        "its ratio to the stiffness",
+    frozenset({"backlash", "sensor_bias"}): "holds in postures with opposite gravity load on the joint, or load "
+                                            "reversals: an encoder offset stays, backlash under a one-sided load "
+                                            "flips sign with the load",
     frozenset({"pd_gain", "link_mass"}): "posture holds in several postures plus a chirp: a mass error follows the "
                                          "posture-dependent gravity torque, a kp error also shifts the servo resonance",
     frozenset({"latency", "pd_gain"}): "a chirp to 4 Hz: latency gives phase lag growing with frequency at constant "
@@ -165,13 +177,19 @@ def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, ro
     same joints (grid starts + least squares); the held-out costs decide (the
     selection rules of this module: single-family fits ranked on held-out data).
 
+    A rival that fits the held-out data within the margin of the kept family (neither better nor
+    clearly worse) is a near-equivalent explanation: it goes into the returned ties, which the report
+    lists under "cannot be told apart with this data" with the experiment that separates them.
+
     Returns:
-        (the winning parameter set, [rejection records for the losers]).
+        (the winning parameter set, [rejection records for the losers], [ties: (kept term label,
+        rival term label, |cost difference|)]).
     """
     new = {t: v for t, v in cand.items() if t not in model}
     fams = sorted({t.family for t in new if t.fam.scope == "joint"})
+    ties = []
     if not fams:
-        return cand, []
+        return cand, [], ties
     best_c = float(problem.cost([cand], "heldout")[0])
     records = []
     for f in fams:
@@ -194,11 +212,15 @@ def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, ro
                                           f"(cost {c_alt:.1f} vs {best_c:.1f})"})
                 cand, best_c = dict(fit.values), c_alt
                 break
+            near = c_alt - best_c < _margin(best_c, k)
             records.append({"term": ",".join(Term(g, tg).label() for tg in targets), "family": g,
                             "value": float(np.mean([fit.values[Term(g, tg)] for tg in targets])),
                             "reason": f"fitted instead of {f} on the same joints: held-out cost {c_alt:.1f} "
-                                      f"vs {best_c:.1f} ({f} kept)"})
-    return cand, records
+                                      f"vs {best_c:.1f} ({f} kept" + ("; within the margin: near-equivalent)"
+                                                                      if near else ")")})
+            if near:
+                ties.extend((Term(f, tg).label(), Term(g, tg).label(), abs(c_alt - best_c)) for tg in targets)
+    return cand, records, ties
 
 
 def _trajectory_spread(problem: Problem, model: dict) -> dict:
@@ -316,7 +338,8 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     residual sits), :func:`_before` (held-out cost and RMS of the sim as it is), :func:`_select`
     (screening rounds, refit, family competition, pruning, backward elimination),
     :func:`_drop_negligible`, :func:`_roughness` (terrain roughness, a distribution fit),
-    :func:`_intervals` (final refit, confidence intervals, identifiability), :func:`_check_roughness`
+    :func:`_intervals` (final refit, confidence intervals, identifiability), :func:`_vet` (Found vs
+    uncertain / compensating), :func:`_check_roughness`
     and :func:`_roughness_effect`, :func:`_after` (residual left), :func:`_verdict`, :func:`_report`.
 
     Args:
@@ -344,17 +367,21 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
 
     Returns:
         The report: ``verdict``, ``noise_floor``, ``heldout_rms_before``, ``heldout_rms_after``
-        [rad], ``effects`` (list of {family, joints, links, value, unit, ci95, ...}),
+        [rad], ``effects`` (the findings: list of {family, joints, links, value, unit, ci95, ...}),
+        ``uncertain`` (fitted terms that fail a test of :func:`_vet`, with ``reasons``),
         ``rejected``, ``indistinguishable``, ``residual``, ``localisation``, ``split``,
         ``base_state`` (:data:`sysid.data.BASE_FIXED`, ``BASE_ESTIMATED`` or ``BASE_GROUND_TRUTH``),
         ``noise`` (``sigma``: the logs' sensor noise, ``calibration_sigma``: the calibration's,
-        for reference), ``model`` (term label -> value), ``runtime_s``, ``rollouts``.
+        for reference), ``model`` (term label -> value), ``runtime_s``, ``rollouts``,
+        ``mujoco_warnings`` (MuJoCo's own warnings during the replays, counted by message:
+        :data:`sysid.replay.MUJOCO_WARNINGS`).
 
     Raises:
         ValueError: a name in ``families`` is not a candidate family; ``robot`` is not the logs' robot;
             ``use_ground_truth`` with floating-base logs without ``gt.*`` columns.
     """
     clock = _Clock(time.perf_counter(), time_budget_s)
+    warned = dict(MUJOCO_WARNINGS)
     say = progress or (lambda s: None)
     robot = _robot_of(logs, robot)
     logs, source = _replay_logs(logs, use_ground_truth)
@@ -367,14 +394,17 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     final = _drop_negligible(problem, sel.model, sel.cost, before.c0)
     rough = _roughness(problem, setup, before.nothing, clock, say)
     iv = _intervals(problem, final.model, final.cost, base.floor, robot, len(logs))
-    indist = _identifiability(sel.confusable, iv.indistinguishable, iv.model)
+    indist = _identifiability(sel.confusable, iv.indistinguishable, iv.model, sel.ties)
+    found, uncertain = _vet(problem, iv, robot, clock, say)
     rough_rejected = _check_roughness(rough.fit, problem, iv.model, say)
-    effects, indist = _roughness_effect(rough.fit, iv.model, iv.effects, indist)
+    effects, indist = _roughness_effect(rough.fit, iv.model, found, indist)
     after = _after(logs, problem, setup, base, before, iv.model)
-    verdict = _verdict(before, after, effects, base, rough.fit, calibration, source)
+    verdict = _verdict(before, after, effects, uncertain, base, rough.fit, calibration, source)
     rejected = sel.rejected + final.rejected + rough.rejected + rough_rejected
-    return _report(logs, setup, base, loc, problem, before, sel, iv, effects, indist, rejected, rough, after,
-                   verdict, calibration, robot, clock, source)
+    report = _report(logs, setup, base, loc, problem, before, sel, iv, effects, uncertain, indist, rejected, rough,
+                     after, verdict, calibration, robot, clock, source)
+    report["mujoco_warnings"] = {m: n - warned.get(m, 0) for m, n in MUJOCO_WARNINGS.items() if n > warned.get(m, 0)}
+    return report
 
 
 # ------------------------------------------------------------------------------------------ stages
@@ -454,6 +484,7 @@ class _Round:
     kept: bool  # whether the round passed the held-out margin and the BIC test
     record: dict  # the round's entry of ``report["rounds"]``
     rejected: list[dict]  # rejection records (competition losers, pruned terms, the round's picks if not kept)
+    ties: list = field(default_factory=list)  # (kept label, rival label, |cost difference|): near-equivalent fits
 
 
 @dataclass
@@ -465,6 +496,7 @@ class _Selection:
     rounds: list[dict] = field(default_factory=list)  # ``report["rounds"]``
     screened: dict = field(default_factory=dict)  # column label -> first round it was screened in
     confusable: list = field(default_factory=list)  # (label a, label b, |corr|) from screening
+    ties: list = field(default_factory=list)  # (label a, label b, |held-out cost difference|) from competition
     rejected: list[dict] = field(default_factory=list)  # rejection records, in report order
     budget_hit: bool = False  # the time budget stopped a round or an elimination step
 
@@ -613,6 +645,7 @@ def _select(problem: Problem, setup: _Setup, before: _Before, names: list[str], 
             break
         rd = _refit_round(problem, sel.model, sel.cost, sr, setup.families, before.bic0, rnd + 1, robot, clock, say)
         sel.rejected.extend(rd.rejected)
+        sel.ties.extend(rd.ties)
         sel.rounds.append(rd.record)
         if not rd.kept:
             break
@@ -640,7 +673,7 @@ def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, f
     k = problem.k
     fit = refit(problem, {**model, **sr.selected})
     cand = dict(fit.values)
-    cand, swaps = _compete(problem, model, cand, sr, families, k, robot) if not clock.over() else (cand, [])
+    cand, swaps, ties = _compete(problem, model, cand, sr, families, k, robot) if not clock.over() else (cand, [], [])
     for sw in swaps:
         say(f"round {rnd}: {sw['reason']}")
     cand, pruned = _prune_terms(problem, model, cand)
@@ -657,7 +690,7 @@ def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, f
             if t in cand and t not in model:
                 rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
                                  "reason": "the round did not improve held-out trajectories enough"})
-    return _Round(model=cand, cost=c_new, kept=kept, record=record, rejected=rejected)
+    return _Round(model=cand, cost=c_new, kept=kept, record=record, rejected=rejected, ties=ties)
 
 
 def _prune_terms(problem: Problem, model: dict, cand: dict) -> tuple[dict, list[dict]]:
@@ -776,7 +809,7 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
         res = [(m - p[0]) / floor for m, p in zip(problem.meas["train"], preds)]
         tau = integrated_autocorr(res)
         spread = _trajectory_spread(problem, model) if n_logs > 1 else {}
-        ci, corr = confidence(fit, problem, tau, spread=spread)
+        ci, corr = confidence(fit, problem, tau, spread=spread, spread_dof=n_logs - 1 if spread else None)
         order = sorted(model, key=lambda u: (u.family, u.target or ""))
         c_drop = problem.cost([model] + [{u: v for u, v in model.items() if u != t} for t in order], "heldout")
         for t, cd in zip(order, c_drop[1:]):
@@ -793,18 +826,120 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
     return _Intervals(model=model, cost=cost, effects=effects, indistinguishable=indist)
 
 
-def _identifiability(confusable: list, indist: list[dict], model: dict) -> list[dict]:
-    """``indist`` plus the screening's confusable column pairs whose first member is in ``model``
-    (not already listed), each with the experiment that would tell them apart. Returns a new list."""
+def _identifiability(confusable: list, indist: list[dict], model: dict, ties: list = ()) -> list[dict]:
+    """``indist`` plus the family competition's near-equivalent fits (``ties``: another family on the
+    same joint fitted the held-out logs within the margin) and the screening's confusable column
+    pairs, each whose first member is in ``model`` (not already listed), each with the experiment
+    that would tell them apart. Returns a new list."""
     indist = list(indist)
+    labels = {t.label() for t in model}
+    for a, b, d in ties:
+        if a in labels and not any({e["a"], e["b"]} == {a, b} for e in indist):
+            indist.append({"a": a, "b": b, "corr": None, "heldout_cost_difference": float(d),
+                           "why": "both fit the held-out logs within the selection margin",
+                           "experiment": _experiment(a.split("[")[0], b.split("[")[0])})
     for a, b, c in confusable:
         fa, fb = a.split("[")[0], b.split("[")[0]
-        if any(e["a"] == a and e["b"] == b for e in indist):
+        if any({e["a"], e["b"]} == {a.replace("(-)", ""), b.replace("(-)", "")} for e in indist):
             continue
         if any(t.label() == a.replace("(-)", "") for t in model):
             indist.append({"a": a.replace("(-)", ""), "b": b.replace("(-)", ""), "corr": c,
                            "experiment": _experiment(fa, fb.split("(")[0])})
     return indist
+
+
+#: A fitted value within this share of its family's range from a bound is "at a bound" (:func:`_vet`).
+BOUND_TOL = 0.01
+#: A term whose held-out need is below this share of the need of a stronger term on the same joint is a
+#: small correction beside that term (:func:`_vet`, rule "compensating").
+COMPENSATION_SHARE = 0.1
+
+
+def _same_place(a: dict, b: dict) -> bool:
+    """Whether two report entries act on the same joint (a link term: on a joint its mass loads)."""
+    ja = set(a["joints"]) if len(a["joints"]) == 1 else set()
+    jb = set(b["joints"]) if len(b["joints"]) == 1 else set()
+    if a["links"]:
+        ja = set(a.get("_loads", []))
+    if b["links"]:
+        jb = set(b.get("_loads", []))
+    return bool(ja & jb)
+
+
+def _vet(problem: Problem, iv: _Intervals, robot, clock: _Clock,
+         say: Callable[[str], None]) -> tuple[list[dict], list[dict]]:
+    """Split the fitted effects into "Found" and "uncertain / compensating" (no invented physics).
+
+    A term is Found only if all of these hold (each failure is a reason, in the entry's ``reasons``):
+
+    * it survives held-out elimination: removing it raises the held-out cost by at least the
+      selection margin (``heldout_cost_without``);
+    * its 95 % interval excludes the sim's (nominal) value;
+    * it is not at a bound of its family (within :data:`BOUND_TOL` of the range): a value the fit
+      could not take further says the family is the wrong shape, not what the value is;
+    * it does not only compensate another term: with more than one term, the others refitted without
+      it must not explain the held-out logs as well (cost rise below the margin), and its held-out
+      need must not be below :data:`COMPENSATION_SHARE` of a stronger term's on the same joint
+      (a small correction riding on that term's model-form error).
+
+    The terms all stay in the identified model (``report["model"]``: they lower the held-out error);
+    only the claim of physics is withheld. Returns (found, uncertain), both lists of report entries
+    (uncertain ones with ``reasons``), each sorted by held-out need.
+    """
+    margin = _margin(iv.cost, problem.k)
+    effects = [dict(e) for e in iv.effects]
+    by_label = {t.label(): t for t in iv.model}
+    for e in effects:
+        e["reasons"] = []
+        e["_term"] = by_label.get(e["family"] + (f"[{(e['links'] or e['joints'])[0]}]"
+                                                  if e["links"] or len(e["joints"]) == 1 else ""))
+        if e["links"]:
+            e["_loads"] = joints_above(robot, e["links"][0])[:3]
+    for e in effects:
+        t = e["_term"]
+        need = e["heldout_cost_without"]
+        if need < margin:
+            e["reasons"].append(f"the final model without it fits the held-out logs about as well "
+                                f"(cost {need:+.2f}, margin {margin:.2f})")
+        lo, hi = e["ci95"]
+        if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
+            e["reasons"].append("its value is not identifiable with this data (unbounded interval)")
+        elif lo <= e["nominal"] <= hi:
+            e["reasons"].append(f"its 95 % interval holds the sim's value ({FAMILIES[e['family']].fmt(e['nominal'])})")
+        if t is not None:
+            blo, bhi = term_bounds(t, robot)
+            tol = BOUND_TOL * (bhi - blo)
+            if e["value"] - blo <= tol or bhi - e["value"] <= tol:
+                e["reasons"].append(f"it sits at the bound of its family ({t.fam.fmt(blo if e['value'] - blo <= tol else bhi)}): "
+                                    "the family's shape does not fit, so the value means little")
+        stronger = [o for o in effects if o is not e and o["heldout_cost_without"] > need and _same_place(e, o)]
+        for o in stronger:
+            if need < COMPENSATION_SHARE * o["heldout_cost_without"]:
+                e["reasons"].append(f"a small correction beside {o['words']} at {o['where']} (held-out need "
+                                    f"{need:.2f} vs {o['heldout_cost_without']:.2f}): it compensates that term")
+                break
+    if len(iv.model) > 1:
+        for e in effects:
+            t = e["_term"]
+            if t is None or clock.over():
+                continue
+            rest = {u: v for u, v in iv.model.items() if u != t}
+            fit = refit(problem, rest, grid=False, max_nfev=6)
+            rise = float(problem.cost([fit.values], "heldout")[0]) - iv.cost
+            e["heldout_cost_without_refit"] = rise
+            if rise < margin and not any(r.startswith("the final model without it") for r in e["reasons"]):
+                e["reasons"].append(f"the other terms, refitted without it, explain the held-out logs as well "
+                                    f"(cost {rise:+.2f}, margin {margin:.2f}): it only compensates them")
+    found, uncertain = [], []
+    for e in effects:
+        e.pop("_term", None)
+        e.pop("_loads", None)
+        (uncertain if e["reasons"] else found).append(e)
+        if not e["reasons"]:
+            e.pop("reasons")
+    for e in uncertain:
+        say(f"uncertain: {e['words']} {e['display']} at {e['where']}: {'; '.join(e['reasons'])}")
+    return found, uncertain
 
 
 def _check_roughness(rough: RoughnessFit | None, problem: Problem, model: dict,
@@ -881,8 +1016,8 @@ def _after(logs: list[Log], problem: Problem, setup: _Setup, base: _Baseline, be
                   unexplained=unexplained)
 
 
-def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baseline, rough: RoughnessFit | None,
-             calibration: dict | None, source: str) -> _Verdict:
+def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: list[dict], base: _Baseline,
+             rough: RoughnessFit | None, calibration: dict | None, source: str) -> _Verdict:
     """The one-paragraph verdict (nothing to explain / nothing explains it / what was found), the
     roughness note, the caution for noise-free recordings without an engine-gap calibration, and a
     warning (not in the verdict) when the calibration replayed its base state differently
@@ -893,6 +1028,10 @@ def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baselin
     if before.nothing:
         verdict = (f"no missing physics: held-out RMS {1000 * rms_before:.2f} mrad is at the noise floor "
                    f"({1000 * noise_floor:.2f} mrad); no joint's residual energy exceeds 1.5x its floor's")
+    elif not effects and uncertain:
+        verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
+                   f"{1000 * noise_floor:.2f} mrad) with {len(uncertain)} fitted term(s), but none passes the tests "
+                   f"for a finding (uncertain: {'; '.join(e['words'] + ' at ' + e['where'] for e in uncertain)})")
     elif not effects:
         worst = (flagged_joints(before.energy_heldout, base.names)[:3]
                  or flagged_joints(before.energy_train, base.names)[:3])
@@ -903,6 +1042,9 @@ def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baselin
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
                    f"{1000 * noise_floor:.2f} mrad), {100 * (after.gap_closed or 0):.0f} % of the gap closed. "
                    f"Found: {words}")
+        if uncertain:
+            verdict += (f". Uncertain or compensating (kept in the model, not claimed): "
+                        f"{'; '.join(e['words'] + ' at ' + e['where'] for e in uncertain)}")
         if after.unexplained:
             verdict += f". Still above 1.5x floor energy: {', '.join(after.unexplained)}"
     if rough is not None and rough.declared:
@@ -928,7 +1070,8 @@ def _verdict(before: _Before, after: _After, effects: list[dict], base: _Baselin
 
 
 def _report(logs: list[Log], setup: _Setup, base: _Baseline, loc: dict, problem: Problem, before: _Before,
-            sel: _Selection, iv: _Intervals, effects: list[dict], indist: list[dict], rejected: list[dict],
+            sel: _Selection, iv: _Intervals, effects: list[dict], uncertain: list[dict], indist: list[dict],
+            rejected: list[dict],
             rough: _RoughnessStage, after: _After, verdict: _Verdict, calibration: dict | None, robot,
             clock: _Clock, source: str) -> dict:
     """The report dict (key order as written to ``report.json``), plus the private ``_base_terms``
@@ -945,6 +1088,7 @@ def _report(logs: list[Log], setup: _Setup, base: _Baseline, loc: dict, problem:
         "heldout_rms_after": after.rms,
         "gap_closed": after.gap_closed,
         "effects": effects,
+        "uncertain": uncertain,
         "rejected": rejected,
         "families_considered": list(setup.families),
         "families_screened": considered,

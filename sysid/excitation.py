@@ -20,6 +20,9 @@ chirp           0.3-4 Hz linear chirp, random per-joint        latency (phase âˆ
                                                               limit (peaks)
 stepping        weight shift side to side with small knee     ground compliance, foot friction
                 lifts (floating base only)                    (contact phases)
+saturation      steps of 1.5x the error at which the servo    torque limit (the PD torque is
+                saturates (effort / kp), alternating signs,    clipped at every rise), kp vs
+                0.3 s each (fixed base only; opt-in)          limit (saturated vs linear rise)
 slip            feet pushed apart and pulled together in      foot friction (the feet slide
                 double support at 2-3.5 Hz, growing           on a slippery floor, stick on a
                 amplitude (hip and ankle roll in opposition,  grippy one; the amplitude at
@@ -48,7 +51,15 @@ from robots import RobotModel
 SEGMENTS = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
 #: Share of the log each segment takes (fixed base), after 0.4 s of holding the start pose.
 _SHARE = {"holds": 0.17, "ramps": 0.13, "steps": 0.12, "reversals": 0.1, "gait": 0.16, "chirp": 0.32,
-          "stepping": 0.5, "slip": 0.25}
+          "stepping": 0.5, "slip": 0.25, "saturation": 0.12}
+#: Segments outside the default protocol, added on request (``sgatwalk excite --segments``).
+OPTIONAL_SEGMENTS = ("saturation",)
+#: Every segment name :func:`protocol` knows.
+KNOWN_SEGMENTS = tuple(_SHARE)
+#: Saturation steps: the step is this multiple of the error at which the PD torque reaches the effort
+#: limit (effort / kp), at most :data:`SATURATION_RANGE_SHARE` of the joint's range.
+SATURATION_FACTOR = 1.5
+SATURATION_RANGE_SHARE = 0.35
 #: Segments of a floating-base log, in this order, when ``segments`` has no ``"stepping"``
 #: (``holds`` and ``gait`` only if asked for).
 _FLOATING = ("slip", "stepping")
@@ -185,7 +196,8 @@ def _smooth_step(x: np.ndarray) -> np.ndarray:
 
 
 def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_dt: float = CONTROL_DT,
-             pose: str = "crouch", segments=SEGMENTS, fixed_base: bool = True, scale: float = 1.0) -> np.ndarray:
+             pose: str = "crouch", segments=SEGMENTS, fixed_base: bool = True, scale: float = 1.0,
+             shares: dict | None = None) -> np.ndarray:
     """Joint targets [rad] for one excitation log, shape (round(seconds / control_dt), m), m = the
     robot's actuated joint count (``RobotModel.actuated_joint_names``: 23 for the NAO, 29 for the G1).
 
@@ -195,14 +207,17 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     Args:
         robot: the robot; ``pose``: the named pose the motion is centred on (and starts/ends in).
         seconds: log duration [s] (>= 3).  seed: trajectory seed.
-        segments: subset/order of :data:`SEGMENTS`. For a floating base (``fixed_base=False``)
+        segments: subset/order of :data:`SEGMENTS` and :data:`OPTIONAL_SEGMENTS`. For a floating base (``fixed_base=False``)
             without ``"stepping"`` in it, the log is ``slip``, ``stepping`` and then the asked-for
             ``holds`` and ``gait`` (at 0.3 of the amplitudes; ``slip`` is about a fifth of the
             log); a list with ``"stepping"`` is taken as given.
         scale: multiplies every amplitude (0.5 for a cautious first run on hardware).
+        shares: segment -> share of the log (e.g. a D-optimal design, :func:`sysid.design.design`);
+            default the protocol's own shares. Missing segments keep theirs; they are normalised.
 
     Raises:
-        ValueError: ``seconds < 3``, unknown segment, non-positive ``scale``.
+        ValueError: ``seconds < 3``, unknown segment, non-positive ``scale``, ``saturation`` with a
+            floating base, a negative share or shares summing to 0.
         KeyError: unknown ``pose``.
     """
     if seconds < 3.0:
@@ -210,6 +225,8 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     if not scale > 0:
         raise ValueError(f"scale must be positive, got {scale}")
     segments = list(segments)
+    if not fixed_base and "saturation" in segments:
+        raise ValueError("the saturation segment is for a fixed base only (a standing robot would fall)")
     if not fixed_base and "stepping" not in segments:
         segments = list(_FLOATING) + [s for s in segments if s in ("holds", "gait")]
     for s in segments:
@@ -230,11 +247,15 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     lead = int(round(0.4 / control_dt))
     tail = int(round(0.3 / control_dt))
     body = n - lead - tail
-    shares = np.array([_SHARE[s] for s in segments])
+    if shares is not None and (any(not v >= 0 for v in shares.values()) or not sum(shares.values()) > 0):
+        raise ValueError(f"shares must be non-negative and not all 0, got {shares}")
+    shares = np.array([(shares or {}).get(s, _SHARE[s]) for s in segments], dtype=float)
     lens = np.floor(shares / shares.sum() * body).astype(int)
     lens[-1] = body - lens[:-1].sum()
     out = [np.zeros((lead, na))]
     for seg, L in zip(segments, lens):
+        if L <= 0:
+            continue
         t = np.arange(L) * control_dt
         T = max(L * control_dt, control_dt)
         env = _smooth_step(t / min(0.25, T / 4)) * _smooth_step((T - t) / min(0.25, T / 4))
@@ -257,6 +278,19 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
             dwell = min(rng.uniform(0.2, 0.3), T / 3)
             k = np.floor(t / dwell).astype(int)
             levels = rng.uniform(0.3, 0.7, (k.max() + 1, na)) * rng.choice([-1.0, 1.0], (k.max() + 1, na)) * amp[None]
+            levels[-1] = 0.0  # back to the pose before the next segment
+            d = levels[k]
+        elif seg == "saturation":
+            if not fixed_base:
+                raise ValueError("the saturation segment is for a fixed base only (a standing robot would fall)")
+            # steps beyond effort/kp: the servo's torque is clipped at the effort limit during every rise
+            idx = robot.actuated_index
+            sat = np.asarray(robot.effort, float)[idx] / np.asarray(robot.kp, float)[idx]
+            size = np.minimum(SATURATION_FACTOR * sat, SATURATION_RANGE_SHARE * (robot.upper[idx] - robot.lower[idx]))
+            dwell = min(0.3, T / 2)
+            k = np.floor(t / dwell).astype(int)
+            sign = rng.choice([-1.0, 1.0], na)
+            levels = np.where((np.arange(k.max() + 1) % 2 == 0)[:, None], 1.0, -1.0) * sign[None] * size[None]
             levels[-1] = 0.0  # back to the pose before the next segment
             d = levels[k]
         elif seg == "reversals":

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import least_squares, nnls
+from scipy.stats import norm
+from scipy.stats import t as student_t
 
 from sysid.candidates import (FAMILIES, Term, family_for, joints_above, mass_links, term_allowed, term_bounds,
                                term_probe)
@@ -477,12 +479,16 @@ def refit(problem: Problem, start: dict, free: list | None = None, *, max_nfev: 
 
 
 def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.959964,
-               spread: dict | None = None) -> tuple[dict, np.ndarray]:
+               spread: dict | None = None, spread_dof: int | None = None) -> tuple[dict, np.ndarray]:
     """95 % intervals from the Gauss-Newton covariance s² τ_int (JᵀJ)⁻¹ (as in
     ``mujoco.sysid.calculate_intervals``, inflated by the autocorrelation time τ_int of
     :func:`sysid.stats.integrated_autocorr`), widened by
     ``spread`` (term -> standard deviation of per-trajectory estimates, which carries the model-form
     and trajectory-dependent errors a Gauss-Newton interval ignores).
+
+    The half-width is sqrt((z σ_GN)² + (t σ_spread)²): the spread is a standard deviation of only
+    ``spread_dof + 1`` per-log estimates, so its quantile is Student's t with ``spread_dof`` degrees of
+    freedom (``scipy.stats.t``; 4.30 for three logs) rather than the normal z; None: z for both.
 
     Returns:
         (term -> (low, high) in physical units, clipped to the family bounds; infinite where
@@ -507,14 +513,19 @@ def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.95
     null = [k for k in range(p) if not np.isfinite(inv_w[k])]
     cov *= s2 * max(1.0, tau_int)
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    half = z * sd
     if spread:
-        sd = np.sqrt(sd ** 2 + np.array([spread.get(t, 0.0) ** 2 for t in terms]))
+        t_q = float(student_t.ppf(0.5 + 0.5 * (2 * norm.cdf(z) - 1), spread_dof)) if spread_dof else z
+        sp = np.array([spread.get(t, 0.0) for t in terms])
+        half = np.sqrt(half ** 2 + (t_q * sp) ** 2)
+        sd = np.sqrt(sd ** 2 + sp ** 2)
     for k in null:
         sd[np.abs(V[:, k]) > 0.1] = np.inf
+        half[np.abs(V[:, k]) > 0.1] = np.inf
     out = {}
     for i, t in enumerate(terms):
         v = fit.values[t]
-        a, b = v - z * sd[i], v + z * sd[i]
+        a, b = v - half[i], v + half[i]
         tlo, thi = term_bounds(t, problem.robot)
         out[t] = (max(tlo, a) if np.isfinite(a) else -np.inf, min(thi, b) if np.isfinite(b) else np.inf)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -18,6 +18,7 @@ windows, each restarted from the measured state. All
 
 from __future__ import annotations
 
+import collections
 import copy
 import os
 from dataclasses import dataclass
@@ -46,6 +47,29 @@ def n_threads() -> int:
 
 
 _POOL: dict = {}
+#: MuJoCo's own warnings (``mju_warning``) raised during replays, counted by message: probe models
+#: and diverging candidates make the solver warn thousands of times ("Linesearch objective is not
+#: convex", "Nan, Inf or huge value in QACC"), which MuJoCo's default handler prints to stdout (it
+#: would break ``--json`` output) and appends to ``MUJOCO_LOG.TXT`` in the working directory. A
+#: diverged replay is already handled (its prediction holds its last value, non-finite ones are NaN).
+MUJOCO_WARNINGS: collections.Counter = collections.Counter()
+
+
+def _count_warning(msg: str) -> None:
+    MUJOCO_WARNINGS.update([msg.split(". Time =")[0]])
+
+
+class _CountedMujocoWarnings:
+    """Context: MuJoCo warnings go to :data:`MUJOCO_WARNINGS` (``mujoco.set_mju_user_warning``) while
+    replays run; the process's previous handler (or MuJoCo's default) is restored afterwards."""
+
+    def __enter__(self):
+        self.prev = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(_count_warning)
+
+    def __exit__(self, *exc):
+        mujoco.set_mju_user_warning(self.prev)
+        return False
 
 
 def _pool():
@@ -191,9 +215,10 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
             rm0 = models[chunk[0][0]][0]
             datas = [mujoco.MjData(mlist[0]) for _ in range(nt)]
             sens = np.empty((len(chunk), nstep, mlist[0].nsensordata))
-            pool.rollout(mlist, datas, np.asarray(states), np.asarray(ctrls), nstep=nstep, skip_checks=True,
-                         state=None, sensordata=sens, control_spec=mujoco.mjtState.mjSTATE_CTRL.value,
-                         initial_warmstart=None, chunk_size=max(1, len(chunk) // (nt * 2)))
+            with _CountedMujocoWarnings():
+                pool.rollout(mlist, datas, np.asarray(states), np.asarray(ctrls), nstep=nstep, skip_checks=True,
+                             state=None, sensordata=sens, control_spec=mujoco.mjtState.mjSTATE_CTRL.value,
+                             initial_warmstart=None, chunk_size=max(1, len(chunk) // (nt * 2)))
             sens = sens[:, ::sub]  # (n, L, nsens)
             for j, (s, wi) in enumerate(chunk):
                 rm, m, bias = models[s]

@@ -4,7 +4,8 @@
 
 * ``report.json``: the dict of :func:`sysid.diagnose.diagnose` (keys ``verdict``, ``noise_floor``,
   ``heldout_rms_before``, ``heldout_rms_after`` [rad], ``effects`` [{family, joints, links, value,
-  unit, ci95, ...}], ``rejected``, ``indistinguishable``, ``residual``, ``localisation``,
+  unit, ci95, ...}] (the findings), ``uncertain`` (fitted terms not claimed as physics, each with its
+  ``reasons``), ``rejected``, ``indistinguishable``, ``residual``, ``localisation``,
   ``base_state`` (where the floating base's replay state came from), ``noise`` (the logs' sensor σ,
   the calibration's for reference, the floor per channel), ...);
 * ``report.txt``: the printed report;
@@ -75,12 +76,20 @@ def format_report(rep: dict) -> str:
     lines.append("EFFECTS FOUND" + ("" if rep["effects"] else ": none"))
     for e in rep["effects"]:
         lines.append(f"  - {e['words']} at {e['where']}: {e['display']}  ({_ci_text(e)}; the sim had {_nominal_text(e)})")
+    if rep.get("uncertain"):
+        lines.append("")
+        lines.append("UNCERTAIN / COMPENSATING (in the identified model, not claimed as physics)")
+        for e in rep["uncertain"]:
+            lines.append(f"  - {e['words']} at {e['where']}: {e['display']}  ({_ci_text(e)}; the sim had {_nominal_text(e)})")
+            for r in e["reasons"]:
+                lines.append(f"      {r}")
     lines.append("")
     lines.append("CONSIDERED AND REJECTED")
     if rep["rejected"]:
         for r in rep["rejected"]:
             lines.append(f"  - {r['term']} ({r['value']:.4g}): {r['reason']}")
-    fam_found = {e["family"] for e in rep["effects"]} | {r["family"] for r in rep["rejected"]}
+    fam_found = ({e["family"] for e in rep["effects"] + rep.get("uncertain", [])}
+                 | {r["family"] for r in rep["rejected"]})
     not_picked = [f for f in rep["families_considered"] if f not in fam_found]
     if not_picked:
         lines.append(f"  - not selected by screening (sensitivity dictionary + OMP/BIC): {', '.join(not_picked)}")
@@ -88,7 +97,9 @@ def format_report(rep: dict) -> str:
     lines.append("CANNOT BE TOLD APART WITH THIS DATA" + ("" if rep["indistinguishable"] else ": nothing flagged"))
     for p in rep["indistinguishable"]:
         c = p.get("corr")
-        cor = f" (|corr| {abs(c):.2f})" if c is not None and math.isfinite(c) else ""
+        cor = (f" (|corr| {abs(c):.2f})" if c is not None and math.isfinite(c)
+               else f" (held-out cost within {p['heldout_cost_difference']:.2f}: both explain the data)"
+               if p.get("heldout_cost_difference") is not None else "")
         lines.append(f"  - {p['a']} vs {p['b']}{cor}; to separate them: {p['experiment']}")
     lines.append("")
     lines.append("LOCALISATION (nominal replay, all logs): worst channels")
@@ -147,7 +158,6 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
     robot = get_robot(robot_name)
     st = series_structure(Structure(fixed_base=fixed_base, physics_dt=physics_dt, robot=robot.name), model_terms)
     spec = replay_spec(robot, st)
-    kp = dict(zip(robot.joint_names, robot.kp))
     eff = dict(zip(robot.joint_names, robot.effort))
     for t, v in model_terms.items():
         v = float(v)
@@ -166,8 +176,13 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
             spec.joint(t.target).armature = spec.joint(t.target).armature + v
         elif f == "pd_gain":
             a = spec.actuator(t.target)
-            a.gainprm[0] = kp[t.target] * v
-            a.biasprm[1] = -kp[t.target] * v
+            a.gainprm[0] = a.gainprm[0] * v
+            a.biasprm[1] = a.biasprm[1] * v
+        elif f == "torque_constant":
+            a = spec.actuator(t.target)
+            a.gainprm[0] = a.gainprm[0] * v
+            a.biasprm[1] = a.biasprm[1] * v
+            a.biasprm[2] = a.biasprm[2] * v
         elif f == "torque_limit":
             for n in robot.joint_names:
                 spec.actuator(n).forcerange = [-eff[n] * v, eff[n] * v]

@@ -55,7 +55,7 @@ from common.spatial import quat_roll_pitch, quat_to_mat
 from sysid.candidates import FAMILIES, apply_terms, series_structure
 from sysid.data import Log, has_ground_truth, without_ground_truth
 from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
-from sysid.replay import (Window, _base_state, _cmd_history, _pool, _start_velocity, build_models,
+from sysid.replay import (Window, _CountedMujocoWarnings, _base_state, _cmd_history, _pool, _start_velocity, build_models,
                           measured, predict)
 from terrain import gaussian
 
@@ -187,9 +187,10 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
             datas = [mujoco.MjData(mlist[0]) for _ in range(nt)]
             state = np.empty((len(chunk), nstep, rm.nstate))
             sens = np.empty((len(chunk), nstep, mlist[0].nsensordata))
-            pool.rollout(mlist, datas, np.asarray(states), np.asarray(ctrls), nstep=nstep, skip_checks=True,
-                         state=state, sensordata=sens, control_spec=mujoco.mjtState.mjSTATE_CTRL.value,
-                         initial_warmstart=None, chunk_size=1)
+            with _CountedMujocoWarnings():
+                pool.rollout(mlist, datas, np.asarray(states), np.asarray(ctrls), nstep=nstep, skip_checks=True,
+                             state=state, sensordata=sens, control_spec=mujoco.mjtState.mjSTATE_CTRL.value,
+                             initial_warmstart=None, chunk_size=1)
             # rollout reports the state after each step and the sensors at its start: row k of the
             # log is the state after k*sub steps, i.e. the initial state then state[k*sub - 1]
             for j, (s, i) in enumerate(chunk):

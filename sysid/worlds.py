@@ -51,11 +51,13 @@ def identity_draw(robot, profile_name: str = "custom", **values) -> EffectDraw:
 
 def record_excitation(env, out_dir: str, *, n_logs: int = 4, seconds: float = 8.0, seed: int = 0,
                       scale: float = 1.0, pose: str = "crouch", prefix: str = "excite", progress=None,
-                      terrain=None) -> list[str]:
+                      terrain=None, segments=None, shares: dict | None = None) -> list[str]:
     """Record ``n_logs`` protocol logs (trajectory seeds ``seed + i``) in ``env``; returns the paths.
 
     ``terrain``: None (the world's own ground) or a callable ``i -> Heightfield | None`` giving the
-    ground of log ``i`` (e.g. :func:`rough_ground`).
+    ground of log ``i`` (e.g. :func:`rough_ground`). ``segments``: the protocol's segments
+    (:func:`sysid.excitation.protocol`; None: its default); ``shares``: segment -> share of the log
+    (e.g. a D-optimal design; None: the protocol's).
 
     Raises:
         ValueError: non-positive ``n_logs``; what :func:`sysid.excitation.protocol` raises.
@@ -70,12 +72,14 @@ def record_excitation(env, out_dir: str, *, n_logs: int = 4, seconds: float = 8.
     paths = []
     for i in range(n_logs):
         cmd = protocol(base.robot, seconds, seed=seed + i, control_dt=base.control_dt, pose=pose,
-                       fixed_base=base.fixed_base, scale=scale)
+                       fixed_base=base.fixed_base, scale=scale, shares=shares,
+                       **({} if segments is None else {"segments": segments}))
         opts = {"pose": pose}
         if terrain is not None:
             opts["terrain"] = terrain(i)
         rec = rollout(env, CommandLog(cmd), seed=seed + i, seconds=seconds, options=opts,
-                      meta={"source": "sgatwalk excite (sysid.excitation.protocol)", "excitation_seed": seed + i})
+                      meta={"source": "sgatwalk excite (sysid.excitation.protocol)", "excitation_seed": seed + i,
+                            **({"excitation_shares": dict(shares)} if shares else {})})
         p = rec.to_parquet(os.path.join(out_dir, f"{prefix}_{i:03d}.parquet"))
         paths.append(p)
         if progress:

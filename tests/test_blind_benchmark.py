@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pyarrow.parquet as pq
+import pytest
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -101,3 +102,23 @@ def test_a_latency_is_found_in_logs_of_the_referees_excitation(tmp_path):
                         "--calibration", str(tmp_path / "cal" / "calibration.json")])
     s = score(hidden, rep)
     assert s["pred_top1"] == "latency" and s["param_err"][0]["abs_ms"] < 2.0, s
+
+
+def test_uncertain_terms_are_not_findings_but_their_intervals_count():
+    truth = [{"family": "coulomb_friction", "targets": ["LElbowYaw"], "values": [0.13]}]
+    rep = _report(_eff("coulomb_friction", joints=["LElbowYaw"], value=0.14, ci=(0.12, 0.16), cost=100.0))
+    rep["uncertain"] = [_eff("pd_gain", joints=["LElbowYaw"], value=0.97, ci=(0.9, 1.05), cost=0.5),
+                        _eff("coulomb_friction", joints=["RKneePitch"], value=0.02, ci=(0.01, 0.03), cost=0.3)]
+    s = score(truth, rep)
+    assert s["spurious"] == [] and s["loc_pred"] == 1 and s["pred_matched"] == 1  # only findings count here
+    assert s["uncertain"] == 2 and s["uncertain_true"] == 0
+    # the finding covers 0.13; the uncertain kp holds the sim's x1; the uncertain friction misses the sim's 0
+    assert s["ci_cover"] == [True, True, False]
+
+
+def test_benchmark_refuses_unknown_extra_classes(capsys):
+    from benchmarks.sysid_blind import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--extra-classes", "warp_drive", "--out", "unused"])
+    assert exc.value.code == 2 and "warp_drive" in capsys.readouterr().err

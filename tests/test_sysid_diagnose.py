@@ -139,15 +139,16 @@ def test_foot_friction_found_from_stepping_logs():
     assert rep["heldout_rms_after"] < rep["heldout_rms_before"]
 
 
-@pytest.mark.parametrize("hidden", ["pd_gain", "joint_compliance"])
+@pytest.mark.parametrize("hidden", ["pd_gain", "torque_constant", "joint_compliance"])
 def test_softer_servo_and_series_compliance_are_told_apart(hidden):
-    """A kp x0.6 and a series spring of the same static stiffness (c = (1 - 0.6) / (0.6 kp)) at
-    RKneePitch: each is named as itself, with its value, not as the other (the spring takes the
-    servo damping off the output, which the chirp and steps show)."""
+    """A kp x0.6, a torque-constant error x0.6 (kp and kd together) and a series spring of the same
+    static stiffness (c = (1 - 0.6) / (0.6 kp)) at RKneePitch: each is named as itself, with its
+    value, not as one of the others (the spring takes the servo damping off the output, a kp-only
+    error keeps kd, a torque-constant error scales it: the chirp and steps show each)."""
     kp = dict(zip(nao_h25().joint_names, nao_h25().kp))["RKneePitch"]
-    truth = 0.6 if hidden == "pd_gain" else (1 - 0.6) / (0.6 * kp)
+    truth = (1 - 0.6) / (0.6 * kp) if hidden == "joint_compliance" else 0.6
     logs = synthetic_logs({Term(hidden, "RKneePitch"): truth}, n_logs=3, seconds=3.0, seed=4)
-    rep = diagnose(logs, families=("pd_gain", "joint_compliance", "sensor_bias"))
+    rep = diagnose(logs, families=("pd_gain", "torque_constant", "joint_compliance", "sensor_bias"))
     (e,) = rep["effects"]
     assert e["family"] == hidden and e["joints"] == ["RKneePitch"]
     assert abs(e["value"] - truth) < 0.05 * abs(truth - e["nominal"])

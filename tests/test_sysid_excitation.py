@@ -57,3 +57,37 @@ def test_floating_protocol_starts_with_the_slip_segment():
     assert np.ptp(spread) > 0.05
     b = protocol(r, 6.0, seed=1, fixed_base=False)
     assert not np.allclose(a[40:162], b[40:162])  # seeds give different slip segments
+
+
+def _saturated_steps(segments) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint: control steps of a 4 s fixed-base sim log whose PD torque demand
+    kp (q* - q) - kd q̇ (at the start of the step) exceeds the effort limit, and the largest applied
+    actuator force over the effort (MuJoCo clips it at ``forcerange``)."""
+    env = NaoSimEnv(fixed_base=True)
+    r = env.robot
+    cmd = protocol(r, 4.0, seed=3, segments=segments, control_dt=env.control_dt)
+    env.reset(seed=0)
+    eff, kp, kd = np.asarray(r.effort), np.asarray(r.kp), np.asarray(r.kd)
+    joints = [env.data.joint(n) for n in r.joint_names]
+    count = np.zeros(len(joints), int)
+    peak = np.zeros(len(joints))
+    for a, tgt in zip(cmd, r.expand_action(cmd)):
+        q = np.array([j.qpos[0] for j in joints])
+        qd = np.array([j.qvel[0] for j in joints])
+        count += np.abs(kp * (tgt - q) - kd * qd) > eff
+        env.step(a)
+        peak = np.maximum(peak, np.abs(env.data.actuator_force) / eff)
+    return count, peak
+
+
+def test_saturation_segment_drives_every_joint_into_its_torque_limit():
+    sat, peak = _saturated_steps(("saturation",))
+    default, _ = _saturated_steps(("holds", "ramps", "steps", "reversals", "gait", "chirp"))
+    assert (sat >= 3).all(), dict(zip(nao_h25().joint_names, sat))  # every joint, at several steps
+    assert (default >= 3).sum() < len(default) // 2  # the default protocol leaves most joints unsaturated
+    assert (peak > 0.999).sum() >= len(peak) // 3  # the clipped torque is what the joints get
+
+
+def test_saturation_segment_refuses_a_floating_base():
+    with pytest.raises(ValueError, match="fixed base"):
+        protocol(nao_h25(), 4.0, segments=("holds", "saturation"), fixed_base=False)

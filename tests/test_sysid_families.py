@@ -68,3 +68,17 @@ def test_terms_within_the_smallest_reported_effect_are_flagged():
     vals = {Term("sensor_bias", "LHipPitch"): 1e-4, Term("pd_gain", "RKneePitch"): 1.013,
             Term("pd_gain", "LKneePitch"): 0.9, Term("latency"): 0.02, Term("armature", "LHipRoll"): 5e-4}
     assert sorted(t.label() for t in _below_min_effect(vals)) == ["pd_gain[RKneePitch]", "sensor_bias[LHipPitch]"]
+
+
+def test_torque_constant_is_named_by_the_diagnosis_not_as_kp_plus_damping():
+    """A torque-constant error (kp and kd x1.4) lies in the span of the kp-only and the viscous
+    damping columns, so linear screening alone may pick those two; the refit's family competition
+    and backward elimination name the single family that made the logs, with its value."""
+    from sysid.diagnose import diagnose
+
+    logs = synthetic_logs({Term("torque_constant", "RHipPitch"): 1.4}, n_logs=3, seconds=3.0, seed=3, traj_seed=40,
+                          segments=("holds", "ramps", "steps", "reversals", "chirp"))
+    rep = diagnose(logs, families=FIXED_BASE_FAMILIES + ("torque_constant",))
+    fams = {(e["family"], tuple(e["joints"])): e for e in rep["effects"]}
+    assert list(fams) == [("torque_constant", ("RHipPitch",))], rep["verdict"]
+    assert abs(fams[("torque_constant", ("RHipPitch",))]["value"] - 1.4) < 0.05 * 0.4

@@ -109,3 +109,46 @@ def test_excite_cli_records_logs(tmp_path, capsys):
     assert logs[0].fixed_base and len(logs[0]) == 300 and not np.allclose(logs[0].cmd, logs[1].cmd)
     assert main(["excite", "--world", "real", "--effect", "nonsense", "--out", str(tmp_path)]) == 2
     assert main(["excite", "--world", "real", "--effect", "warp=1", "--out", str(tmp_path)]) == 2
+
+
+def test_excite_cli_design_and_segments(tmp_path, capfd):
+    """``--design d-optimal --design-only`` prints the shares and the families' identifiability and
+    records nothing; ``--segments +saturation`` records the extra segment; bad combinations exit 2.
+    The design's probe replays make MuJoCo warn (solver line searches, unstable probes): the
+    warnings are counted (``sysid.replay.MUJOCO_WARNINGS``), so stdout, file descriptor included,
+    holds only the JSON."""
+    from sysid.replay import MUJOCO_WARNINGS
+
+    before = sum(MUJOCO_WARNINGS.values())
+    rc = main(["excite", "--world", "sim", "--fixed-base", "--segments", "holds,saturation", "--design", "d-optimal",
+               "--design-only", "--json"])
+    assert rc == 0
+    d = json.loads(capfd.readouterr().out)["design"]
+    assert sum(MUJOCO_WARNINGS.values()) > before
+    assert set(d["shares"]) == {"holds", "saturation"} and abs(sum(d["shares"].values()) - 1) < 1e-9
+    assert {f["family"] for f in d["families"]} >= {"torque_limit", "pd_gain", "joint_compliance"}
+    out = tmp_path / "sat"
+    assert main(["excite", "--world", "sim", "--fixed-base", "--segments", "+saturation", "--logs", "1",
+                 "--seconds", "4", "--out", str(out), "--json"]) == 0
+    capfd.readouterr()
+    (lg,) = load_logs(str(out))
+    assert len(lg) == 400
+    for bad in (["--segments", "holds,nope", "--fixed-base"], ["--segments", "+saturation"],
+                ["--design", "d-optimal"], ["--design-only", "--fixed-base"]):
+        assert main(["excite", "--world", "sim", "--out", str(tmp_path / "x"), *bad]) == 2, bad
+        err = capfd.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "x").exists()
+
+
+def test_diagnose_families_plus_adds_to_the_defaults():
+    from experiments.cmd_diagnose import _families
+    from sysid.candidates import FIXED_BASE_FAMILIES
+    from sysid.synthetic import synthetic_logs
+
+    logs = synthetic_logs({}, n_logs=1, seconds=3.0)
+    fams = _families("+torque_constant", logs)
+    assert "torque_constant" not in FIXED_BASE_FAMILIES
+    assert set(fams) == set(FIXED_BASE_FAMILIES) | {"torque_constant"}
+    assert fams.index("torque_constant") == fams.index("pd_gain") + 1  # library order
+    assert _families("latency,pd_gain", logs) == ["latency", "pd_gain"]

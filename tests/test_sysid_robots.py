@@ -13,12 +13,10 @@ import pytest
 from envs.recording import RecordingError
 from experiments.cli import main
 from robots import get_robot, nao_h25
-from sysid.candidates import FAMILIES, FIXED_BASE_FAMILIES, Term, family_for, robot_scale
+from sysid.candidates import FAMILIES, Term, family_for, robot_scale
 from sysid.data import check_consistent, load_logs
 from sysid.diagnose import diagnose
 from sysid.excitation import joint_roles, protocol
-from sysid.identify import Problem, refit, screen
-from sysid.replay import whole_logs
 from sysid.synthetic import synthetic_logs
 
 LATENCY = 0.02  # [s], the hidden actuation latency of the G1's real world
@@ -132,15 +130,17 @@ def test_families_scale_to_the_robot():
     (Term("joint_compliance", "left_knee_joint"), 0.4 / (0.6 * 1390.0)),  # statically like kp x0.6
 ])
 def test_g1_family_injection_and_recovery(term, value):
-    """Synthetic G1 logs (the candidate augmentation itself, 1 mrad noise): screening names the
-    term, the refit recovers its value within 10 % of its departure from nominal."""
+    """Synthetic G1 logs (the candidate augmentation itself, 1 mrad noise): the diagnosis names the
+    term and only it, and recovers its value within 10 % of its departure from nominal. (Linear
+    screening alone may pick a torque-constant error for the knee spring, whose column is close;
+    the family competition on held-out logs decides.)"""
     g1 = get_robot("g1")
-    logs = synthetic_logs({term: value}, n_logs=2, seconds=3.0, seed=3, traj_seed=40, robot=g1,
+    logs = synthetic_logs({term: value}, n_logs=3, seconds=3.0, seed=3, traj_seed=40, robot=g1,
                           segments=("holds", "ramps", "steps", "reversals", "chirp"))
-    problem = Problem(logs, whole_logs(logs, [0]), whole_logs(logs, [1]), np.full(29, 1e-3))
-    sr = screen(problem, g1, {}, FIXED_BASE_FAMILIES)
-    assert term in sr.selected, [t.label() for t in sr.selected]
-    v = refit(problem, {term: sr.selected[term]}).values[term]
+    rep = diagnose(logs)
+    found = [(e["family"], e["joints"]) for e in rep["effects"]]
+    assert found == [(term.family, [term.target])], (found, rep["verdict"])
+    v = rep["effects"][0]["value"]
     assert abs(v - value) < 0.1 * abs(value - term.fam.nominal), v
 
 

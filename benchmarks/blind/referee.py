@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from .families import MIN_LINK_MASS, SEED_ORDER
+from .families import MIN_LINK_MASS, NOISE, SEED_ORDER
 from .worlds import make_world
 
 
@@ -122,7 +122,7 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
             v = rng.uniform(0.1, 0.3) * s
         elif family == "viscous_damping":
             v = rng.uniform(0.1, 0.4) * s
-        elif family == "pd_gain":
+        elif family in ("pd_gain", "torque_constant"):
             v = rng.uniform(0.5, 0.8) if rng.random() < 0.7 else rng.uniform(1.25, 1.6)
         elif family == "armature":
             v = rng.uniform(0.003, 0.012) * s
@@ -156,12 +156,13 @@ SOURCES = ("protocol", "referee")
 
 
 def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: float, seed: int,
-           fixed_base: bool = True, source: str = "protocol") -> float:
+           fixed_base: bool = True, source: str = "protocol", noise: float = NOISE) -> float:
     """Record ``n_logs`` excitation logs with ``hidden`` effects into ``out_dir`` (:func:`blind`: no
     ground truth, minimal metadata; files named ``log_NNN.parquet``).
 
     ``source``: ``"protocol"`` (``sysid.excitation``, what ``sgatwalk excite`` records) or
-    ``"referee"`` (:func:`.excitation.referee_commands`, fixed base only).
+    ``"referee"`` (:func:`.excitation.referee_commands`, fixed base only). ``noise``: encoder noise
+    standard deviation [rad].
 
     Raises:
         ValueError: unknown source, or the referee's source with a floating base.
@@ -176,7 +177,7 @@ def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: f
     if source == "referee" and not fixed_base:
         raise ValueError("the referee's excitation is for a fixed base only")
     t0 = time.perf_counter()
-    env = make_world(world, hidden, fixed_base)
+    env = make_world(world, hidden, fixed_base, noise=noise)
     tmp = out_dir + ".tmp"
     if source == "referee":
         paths = record_referee(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed)

@@ -23,7 +23,10 @@ def metrics(rows: list[dict]) -> dict:
     with any term found), ``spurious`` (trials with a reported term that is no true term),
     ``coverage`` (95 % intervals of every reported term holding the truth), ``precision``/``recall``
     (reported terms that are true / true terms found), ``param_err_median`` (non-latency true terms
-    found), ``latency_err_ms`` (median), ``both_found`` (two-effect trials), ``runtime_s`` (median)."""
+    found), ``latency_err_ms`` (median), ``both_found`` (two-effect trials), ``runtime_s`` (median),
+    ``uncertain`` (terms reported as uncertain / compensating: how many of them are true terms),
+    ``per_class`` (single-effect class -> top-1 and median parameter error of its true terms found).
+    Findings are the report's ``effects``; uncertain terms count only in ``coverage``."""
     single = [r for r in rows if r["kind"] == "single"]
     eff = [r for r in single if r["truth_class"] != "none"]
     none = [r for r in single if r["truth_class"] == "none"]
@@ -45,6 +48,13 @@ def metrics(rows: list[dict]) -> dict:
         "both_found": _frac(sum(set(r["score"]["true_families"]) <= set(r["score"]["pred_families"]) for r in two),
                             len(two)),
         "runtime_s": float(np.median([s["runtime_s"] for s in sc])) if sc else None,
+        "uncertain": _frac(sum(s.get("uncertain_true", 0) for s in sc), sum(s.get("uncertain", 0) for s in sc)),
+        "per_class": {c: {"top1": _frac(sum(r["score"]["pred_top1"] == c for r in rs), len(rs)),
+                          "param_err_median": (float(np.median(pe)) if (pe := [p["rel"] for r in rs
+                                                                              for p in r["score"]["param_err"]
+                                                                              if "rel" in p]) else None)}
+                      for c in sorted({r["truth_class"] for r in single})
+                      for rs in [[r for r in single if r["truth_class"] == c]]},
     }
 
 

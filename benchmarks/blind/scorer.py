@@ -3,7 +3,7 @@
 :func:`score` gives a trial's top-1 family (the effect whose removal hurts the held-out fit most;
 "none" when no effect is reported), the predicted and true family sets, joint/link localisation
 counts (family and target must match; every reported term counts against precision, whatever the
-truth, a global one included), per-term parameter errors |θ̂-θ|/|θ-θ_nominal| of the true terms found
+truth, a global one included; terms the report lists as uncertain are not findings), per-term parameter errors |θ̂-θ|/|θ-θ_nominal| of the true terms found
 (latency: absolute ms), 95 % CI coverage over every reported term (spurious terms: does the interval
 hold the sim's value), the spurious terms, held-out RMS before/after over the noise floor, gap closed
 and runtime.
@@ -52,6 +52,9 @@ def score(truth: list[dict], report: dict) -> dict:
     where the truth has one), ``spurious`` the others (with their labels); ``ci_cover`` has one entry
     per reported term (a true term's interval holds the true value, a spurious one's the sim's
     value); ``param_err`` has the true terms found. ``loc_tp`` / ``loc_true``: true terms found / all.
+    Terms the report lists as uncertain (``report["uncertain"]``: fitted but not claimed) are not
+    findings: they count in neither precision nor the spurious terms, but their intervals count in
+    ``ci_cover``; ``uncertain`` / ``uncertain_true``: how many there are / how many are a true term.
     """
     fams_true = {e["family"] for e in truth}
     eff = report["effects"]
@@ -78,6 +81,18 @@ def score(truth: list[dict], report: dict) -> dict:
         lo, hi = x["ci95"]
         cover.append(bool(lo is not None and hi is not None and lo <= v <= hi))
     cover += [_nominal_covered(x) for x, m in zip(eff, matched) if not m]
+    # uncertain terms (fitted, not claimed): not findings, but their intervals are claims too
+    unc = report.get("uncertain", [])
+    unc_true = [any(_matches(x, e, tg) for e, tg, _ in terms_true) for x in unc]
+    for x, m in zip(unc, unc_true):
+        if m:
+            (e, tg, v), = [(e, tg, v) for e, tg, v in terms_true if _matches(x, e, tg)][:1]
+            lo, hi = x["ci95"]
+            cover.append(bool(lo is not None and hi is not None and lo <= v <= hi))
+        else:
+            cover.append(_nominal_covered(x))
+    out["uncertain"] = len(unc)
+    out["uncertain_true"] = int(sum(unc_true))
     out["param_err"] = perr
     out["ci_cover"] = cover
     fl = report["noise_floor"]

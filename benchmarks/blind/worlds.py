@@ -35,7 +35,7 @@ def _arrays(effects: list[dict], robot) -> dict:
     """Referee arrays per joint (24) / link (25) from hidden effects."""
     nj, links = len(robot.joint_names), list(robot.links)
     jidx = {n: i for i, n in enumerate(robot.joint_names)}
-    a = {"kp_scale": np.ones(nj), "backlash": np.zeros(nj), "coulomb": np.zeros(nj), "damping": np.zeros(nj),
+    a = {"kp_scale": np.ones(nj), "kd_scale": np.ones(nj), "backlash": np.zeros(nj), "coulomb": np.zeros(nj), "damping": np.zeros(nj),
          "armature": np.zeros(nj), "bias": np.zeros(nj), "compliance": np.zeros(nj), "mass_scale": np.ones(len(links)), "latency": 0.0,
          "torque_scale": 1.0, "foot_friction": None, "ground_timeconst": None}
     for e in effects:
@@ -53,11 +53,17 @@ def _arrays(effects: list[dict], robot) -> dict:
                 a["torque_scale"] = v
             elif f == "link_mass":
                 a["mass_scale"][links.index(tg)] = v
+            elif f == "torque_constant":  # the servo's torque per unit of PD output: kp and kd together
+                a["kp_scale"][jidx[tg]] *= v
+                a["kd_scale"][jidx[tg]] *= v
             else:
                 key = {"pd_gain": "kp_scale", "backlash": "backlash", "coulomb_friction": "coulomb",
                        "viscous_damping": "damping", "armature": "armature", "sensor_bias": "bias",
                        "joint_compliance": "compliance"}[f]
-                a[key][jidx[tg]] = v
+                if key == "kp_scale":
+                    a[key][jidx[tg]] *= v  # composes with a torque-constant error on the same joint
+                else:
+                    a[key][jidx[tg]] = v
     return a
 
 
@@ -145,7 +151,7 @@ class RefereeSimWorld(NaoSimEnv):
             m.geom_solref[:, 0] = a["ground_timeconst"]
         mujoco.mj_setConst(m, self.data)
         self._kp = r.kp * a["kp_scale"]
-        self._kd = r.kd + a["damping"]
+        self._kd = r.kd * a["kd_scale"] + a["damping"]
         self._tmax = r.effort * a["torque_scale"]
         self._play = a["backlash"] / 2.0
         self._spring = _SeriesSpring(a["compliance"], self._kp, r.kd, self.physics_dt)
@@ -191,7 +197,7 @@ class RefereeRealWorld(NaoRealEnv):
 
         r = nao_h25()
         self.arr = a = _arrays(hidden, r)
-        draw = identity_draw(r, "referee", kp_scale=a["kp_scale"], backlash_rad=a["backlash"],
+        draw = identity_draw(r, "referee", kp_scale=a["kp_scale"], kd_scale=a["kd_scale"], backlash_rad=a["backlash"],
                              coulomb_friction_nm=a["coulomb"], viscous_damping=a["damping"],
                              torque_limit_scale=a["torque_scale"], mass_scale=a["mass_scale"],
                              encoder_noise_rad=noise, angle_noise_rad=ANGLE_NOISE, gyro_noise=GYRO_NOISE,
@@ -238,8 +244,9 @@ class RefereeRealWorld(NaoRealEnv):
 
 
 
-def make_world(world: str, hidden: list[dict], fixed_base: bool = True):
-    """The referee world ``world`` ("sim" or "real") with the ``hidden`` effects injected."""
+def make_world(world: str, hidden: list[dict], fixed_base: bool = True, noise: float = NOISE):
+    """The referee world ``world`` ("sim" or "real") with the ``hidden`` effects injected and
+    ``noise`` [rad] of encoder noise."""
     if world == "sim":
-        return RefereeSimWorld(hidden, fixed_base=fixed_base)
-    return RefereeRealWorld(hidden, fixed_base=fixed_base)
+        return RefereeSimWorld(hidden, noise=noise, fixed_base=fixed_base)
+    return RefereeRealWorld(hidden, noise=noise, fixed_base=fixed_base)
