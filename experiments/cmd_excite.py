@@ -49,10 +49,6 @@ def register(sub) -> argparse.ArgumentParser:
     return p
 
 
-#: The protocol's default segments (``sysid.excitation.SEGMENTS``; repeated here so ``--help`` stays light).
-SEGMENTS_DEFAULT = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
-
-
 def _segments(text: str) -> tuple[str, ...]:
     """``--segments``: a comma list of segment names, or ``+NAME,...`` to add to the default protocol."""
     from sysid.excitation import KNOWN_SEGMENTS, OPTIONAL_SEGMENTS, SEGMENTS
@@ -85,13 +81,14 @@ def run(args) -> dict:
     plan = None
     if args.design == "d-optimal":
         from sysid.design import design, format_design  # lazy: replays the sim
+        from sysid.excitation import SEGMENTS
 
         t_design = time.perf_counter()
 
         def say_err(line: str) -> None:  # a line per simulated segment, with elapsed time, to stderr
             print(f"{line} ({time.perf_counter() - t_design:.0f} s)", file=sys.stderr, flush=True)
 
-        d = design(robot, args.segments or SEGMENTS_DEFAULT, seconds=args.seconds, seed=args.seed, progress=say_err)
+        d = design(robot, args.segments or SEGMENTS, seconds=args.seconds, seed=args.seed, progress=say_err)
         shares, plan = d.shares, d.to_json()
         if not args.json:
             print(format_design(plan), flush=True)

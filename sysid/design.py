@@ -39,7 +39,7 @@ from common.defaults import CONTROL_DT, PHYSICS_DT
 from robots import RobotModel
 from sysid.candidates import FAMILIES, FIXED_BASE_FAMILIES, family_for, mass_links, term_min_effect
 from sysid.data import Log
-from sysid.excitation import SEGMENTS, _SHARE, protocol
+from sysid.excitation import SEGMENTS, SEGMENT_SHARES, protocol
 from sysid.identify import Problem, _columns_terms, _dictionary
 from sysid.replay import predict, whole_logs
 
@@ -145,7 +145,7 @@ def segment_information(robot: RobotModel, segments=SEGMENTS, *, seconds: float 
     cols = [c for c in cols if not c.label.endswith("(-)")]
     info, labels, fam_of = {}, [c.label for c in cols], [c.family for c in cols]
     for s in segments:
-        if s not in _SHARE or s in ("slip", "stepping"):
+        if s not in SEGMENT_SHARES or s in ("slip", "stepping"):
             raise ValueError(f"segment {s!r} is not a fixed-base protocol segment")
         lg = _segment_log(robot, s, seconds, seed)
         noise = 1e-3  # σ of the columns' unit; F scales as 1/σ², which the shares do not depend on
@@ -245,8 +245,8 @@ def design(robot: RobotModel, segments=SEGMENTS, *, seconds: float = 8.0, seed: 
     info, labels, fams = segment_information(robot, segments, seconds=segment_seconds, seed=seed, families=families,
                                              joints=joints, progress=progress)
     shares, it = d_optimal(info, min_share=min(min_share, 1.0 / len(segments)))
-    tot = sum(_SHARE[s] for s in segments)
-    default = {s: _SHARE[s] / tot for s in segments}
+    tot = sum(SEGMENT_SHARES[s] for s in segments)
+    default = {s: SEGMENT_SHARES[s] / tot for s in segments}
     se_d, ld_d = _se(info, default, seconds)
     se_o, ld_o = _se(info, shares, seconds)
     return Design(segments=segments, shares=shares, default_shares=default, terms=labels, families=fams,

@@ -518,6 +518,7 @@ class _Intervals:
     cost: float  # held-out cost C of ``model`` (dimensionless)
     effects: list[dict]  # report entries (:func:`_entry` + ``heldout_cost_without``), most needed first
     indistinguishable: list[dict]  # pairs of fitted terms with |correlation| > 0.9
+    terms: list = field(default_factory=list)  # the Term of each entry of ``effects``, same order
 
 
 @dataclass
@@ -799,7 +800,7 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
     records how much worse the held-out cost gets without it; effects are sorted by that, and
     term pairs with |correlation| > 0.9 are listed as indistinguishable. An empty model returns empty lists.
     """
-    effects, indist = [], []
+    effects, indist, terms_of = [], [], []
     if model:
         fit = refit(problem, model, grid=False, max_nfev=4)
         if float(problem.cost([fit.values], "heldout")[0]) <= cost:
@@ -812,18 +813,21 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
         ci, corr = confidence(fit, problem, tau, spread=spread, spread_dof=n_logs - 1 if spread else None)
         order = sorted(model, key=lambda u: (u.family, u.target or ""))
         c_drop = problem.cost([model] + [{u: v for u, v in model.items() if u != t} for t in order], "heldout")
+        pairs = []
         for t, cd in zip(order, c_drop[1:]):
             e = _entry(t, model[t], ci.get(t), robot)
             e["heldout_cost_without"] = float(cd - c_drop[0])  # how much worse held-out gets without it
-            effects.append(e)
-        effects.sort(key=lambda e: -e["heldout_cost_without"])
+            pairs.append((t, e))
+        pairs.sort(key=lambda te: -te[1]["heldout_cost_without"])
+        terms_of = [t for t, _ in pairs]
+        effects = [e for _, e in pairs]
         terms = fit.terms
         for i in range(len(terms)):
             for j in range(i + 1, len(terms)):
                 if abs(corr[i, j]) > 0.9:
                     indist.append({"a": terms[i].label(), "b": terms[j].label(), "corr": float(corr[i, j]),
                                    "experiment": _experiment(terms[i].family, terms[j].family)})
-    return _Intervals(model=model, cost=cost, effects=effects, indistinguishable=indist)
+    return _Intervals(model=model, cost=cost, effects=effects, indistinguishable=indist, terms=terms_of)
 
 
 def _identifiability(confusable: list, indist: list[dict], model: dict, ties: list = ()) -> list[dict]:
@@ -855,15 +859,13 @@ BOUND_TOL = 0.01
 COMPENSATION_SHARE = 0.1
 
 
-def _same_place(a: dict, b: dict) -> bool:
-    """Whether two report entries act on the same joint (a link term: on a joint its mass loads)."""
-    ja = set(a["joints"]) if len(a["joints"]) == 1 else set()
-    jb = set(b["joints"]) if len(b["joints"]) == 1 else set()
-    if a["links"]:
-        ja = set(a.get("_loads", []))
-    if b["links"]:
-        jb = set(b.get("_loads", []))
-    return bool(ja & jb)
+def _loaded_joints(t: Term, robot) -> set:
+    """The joints a term acts on: its joint, or for a link term the (up to 3) joints its mass loads."""
+    if t.fam.scope == "joint":
+        return {t.target}
+    if t.fam.scope == "link":
+        return set(joints_above(robot, t.target)[:3])
+    return set()
 
 
 def _vet(problem: Problem, iv: _Intervals, robot, clock: _Clock,
@@ -888,55 +890,42 @@ def _vet(problem: Problem, iv: _Intervals, robot, clock: _Clock,
     """
     margin = _margin(iv.cost, problem.k)
     effects = [dict(e) for e in iv.effects]
-    by_label = {t.label(): t for t in iv.model}
-    for e in effects:
-        e["reasons"] = []
-        e["_term"] = by_label.get(e["family"] + (f"[{(e['links'] or e['joints'])[0]}]"
-                                                  if e["links"] or len(e["joints"]) == 1 else ""))
-        if e["links"]:
-            e["_loads"] = joints_above(robot, e["links"][0])[:3]
-    for e in effects:
-        t = e["_term"]
+    reasons: list[list[str]] = [[] for _ in effects]
+    places = [_loaded_joints(t, robot) for t in iv.terms]
+    for i, (e, t) in enumerate(zip(effects, iv.terms)):
         need = e["heldout_cost_without"]
         if need < margin:
-            e["reasons"].append(f"the final model without it fits the held-out logs about as well "
-                                f"(cost {need:+.2f}, margin {margin:.2f})")
+            reasons[i].append(f"the final model without it fits the held-out logs about as well "
+                              f"(cost {need:+.2f}, margin {margin:.2f})")
         lo, hi = e["ci95"]
         if lo is None or hi is None or not (math.isfinite(lo) and math.isfinite(hi)):
-            e["reasons"].append("its value is not identifiable with this data (unbounded interval)")
+            reasons[i].append("its value is not identifiable with this data (unbounded interval)")
         elif lo <= e["nominal"] <= hi:
-            e["reasons"].append(f"its 95 % interval holds the sim's value ({FAMILIES[e['family']].fmt(e['nominal'])})")
-        if t is not None:
-            blo, bhi = term_bounds(t, robot)
-            tol = BOUND_TOL * (bhi - blo)
-            if e["value"] - blo <= tol or bhi - e["value"] <= tol:
-                e["reasons"].append(f"it sits at the bound of its family ({t.fam.fmt(blo if e['value'] - blo <= tol else bhi)}): "
-                                    "the family's shape does not fit, so the value means little")
-        stronger = [o for o in effects if o is not e and o["heldout_cost_without"] > need and _same_place(e, o)]
-        for o in stronger:
-            if need < COMPENSATION_SHARE * o["heldout_cost_without"]:
-                e["reasons"].append(f"a small correction beside {o['words']} at {o['where']} (held-out need "
-                                    f"{need:.2f} vs {o['heldout_cost_without']:.2f}): it compensates that term")
+            reasons[i].append(f"its 95 % interval holds the sim's value ({t.fam.fmt(e['nominal'])})")
+        blo, bhi = term_bounds(t, robot)
+        tol = BOUND_TOL * (bhi - blo)
+        if e["value"] - blo <= tol or bhi - e["value"] <= tol:
+            reasons[i].append(f"it sits at the bound of its family ({t.fam.fmt(blo if e['value'] - blo <= tol else bhi)}): "
+                              "the family's shape does not fit, so the value means little")
+        for j, o in enumerate(effects):
+            if (j != i and places[i] & places[j] and o["heldout_cost_without"] > need
+                    and need < COMPENSATION_SHARE * o["heldout_cost_without"]):
+                reasons[i].append(f"a small correction beside {o['words']} at {o['where']} (held-out need "
+                                  f"{need:.2f} vs {o['heldout_cost_without']:.2f}): it compensates that term")
                 break
     if len(iv.model) > 1:
-        for e in effects:
-            t = e["_term"]
-            if t is None or clock.over():
+        for i, (e, t) in enumerate(zip(effects, iv.terms)):
+            if reasons[i] or clock.over():  # already not a finding: no refit needed to say so
                 continue
             rest = {u: v for u, v in iv.model.items() if u != t}
             fit = refit(problem, rest, grid=False, max_nfev=6)
             rise = float(problem.cost([fit.values], "heldout")[0]) - iv.cost
             e["heldout_cost_without_refit"] = rise
-            if rise < margin and not any(r.startswith("the final model without it") for r in e["reasons"]):
-                e["reasons"].append(f"the other terms, refitted without it, explain the held-out logs as well "
-                                    f"(cost {rise:+.2f}, margin {margin:.2f}): it only compensates them")
-    found, uncertain = [], []
-    for e in effects:
-        e.pop("_term", None)
-        e.pop("_loads", None)
-        (uncertain if e["reasons"] else found).append(e)
-        if not e["reasons"]:
-            e.pop("reasons")
+            if rise < margin:
+                reasons[i].append(f"the other terms, refitted without it, explain the held-out logs as well "
+                                  f"(cost {rise:+.2f}, margin {margin:.2f}): it only compensates them")
+    found = [e for e, r in zip(effects, reasons) if not r]
+    uncertain = [{**e, "reasons": r} for e, r in zip(effects, reasons) if r]
     for e in uncertain:
         say(f"uncertain: {e['words']} {e['display']} at {e['where']}: {'; '.join(e['reasons'])}")
     return found, uncertain

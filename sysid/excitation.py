@@ -50,12 +50,12 @@ from robots import RobotModel
 
 SEGMENTS = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
 #: Share of the log each segment takes (fixed base), after 0.4 s of holding the start pose.
-_SHARE = {"holds": 0.17, "ramps": 0.13, "steps": 0.12, "reversals": 0.1, "gait": 0.16, "chirp": 0.32,
+SEGMENT_SHARES = {"holds": 0.17, "ramps": 0.13, "steps": 0.12, "reversals": 0.1, "gait": 0.16, "chirp": 0.32,
           "stepping": 0.5, "slip": 0.25, "saturation": 0.12}
 #: Segments outside the default protocol, added on request (``sgatwalk excite --segments``).
 OPTIONAL_SEGMENTS = ("saturation",)
 #: Every segment name :func:`protocol` knows.
-KNOWN_SEGMENTS = tuple(_SHARE)
+KNOWN_SEGMENTS = tuple(SEGMENT_SHARES)
 #: Saturation steps: the step is this multiple of the error at which the PD torque reaches the effort
 #: limit (effort / kp), at most :data:`SATURATION_RANGE_SHARE` of the joint's range.
 SATURATION_FACTOR = 1.5
@@ -230,8 +230,8 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     if not fixed_base and "stepping" not in segments:
         segments = list(_FLOATING) + [s for s in segments if s in ("holds", "gait")]
     for s in segments:
-        if s not in _SHARE:
-            raise ValueError(f"unknown excitation segment {s!r}; known: {', '.join(_SHARE)}")
+        if s not in SEGMENT_SHARES:
+            raise ValueError(f"unknown excitation segment {s!r}; known: {', '.join(SEGMENT_SHARES)}")
     rng = np.random.default_rng(seed)
     n = int(round(seconds / control_dt))
     q0 = robot.pose(pose, actuated=True)
@@ -249,7 +249,7 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     body = n - lead - tail
     if shares is not None and (any(not v >= 0 for v in shares.values()) or not sum(shares.values()) > 0):
         raise ValueError(f"shares must be non-negative and not all 0, got {shares}")
-    shares = np.array([(shares or {}).get(s, _SHARE[s]) for s in segments], dtype=float)
+    shares = np.array([(shares or {}).get(s, SEGMENT_SHARES[s]) for s in segments], dtype=float)
     lens = np.floor(shares / shares.sum() * body).astype(int)
     lens[-1] = body - lens[:-1].sum()
     out = [np.zeros((lead, na))]

@@ -515,7 +515,7 @@ def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.95
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
     half = z * sd
     if spread:
-        t_q = float(student_t.ppf(0.5 + 0.5 * (2 * norm.cdf(z) - 1), spread_dof)) if spread_dof else z
+        t_q = float(student_t.ppf(norm.cdf(z), spread_dof)) if spread_dof else z  # same two-sided level as z
         sp = np.array([spread.get(t, 0.0) for t in terms])
         half = np.sqrt(half ** 2 + (t_q * sp) ** 2)
         sd = np.sqrt(sd ** 2 + sp ** 2)

@@ -83,16 +83,17 @@ def score(truth: list[dict], report: dict) -> dict:
     cover += [_nominal_covered(x) for x, m in zip(eff, matched) if not m]
     # uncertain terms (fitted, not claimed): not findings, but their intervals are claims too
     unc = report.get("uncertain", [])
-    unc_true = [any(_matches(x, e, tg) for e, tg, _ in terms_true) for x in unc]
-    for x, m in zip(unc, unc_true):
-        if m:
-            (e, tg, v), = [(e, tg, v) for e, tg, v in terms_true if _matches(x, e, tg)][:1]
+    n_true = 0
+    for x in unc:
+        v = next((v for e, tg, v in terms_true if _matches(x, e, tg)), None)
+        if v is None:
+            cover.append(_nominal_covered(x))
+        else:
+            n_true += 1
             lo, hi = x["ci95"]
             cover.append(bool(lo is not None and hi is not None and lo <= v <= hi))
-        else:
-            cover.append(_nominal_covered(x))
     out["uncertain"] = len(unc)
-    out["uncertain_true"] = int(sum(unc_true))
+    out["uncertain_true"] = n_true
     out["param_err"] = perr
     out["ci_cover"] = cover
     fl = report["noise_floor"]
