@@ -34,8 +34,9 @@ from terrain import lumpy as lumpy_field
 
 #: The actuator families the identified world is diagnosed with: the library as it was when the
 #: README's fidelity table and Table I were measured. The servo torque-constant family
-#: (``torque_constant``, kp and kd together) joined the library later; adding it here changes the
-#: identified world, so it waits until those runs are repeated with it.
+#: (``torque_constant``, kp and kd together) and the parallel joint spring (``parallel_spring``)
+#: joined the library later; adding them here changes the identified world, so they wait until
+#: those runs are repeated with them.
 IDENTIFY_FIXED_FAMILIES = ("latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
                            "link_mass", "armature", "sensor_bias", "joint_compliance")
 

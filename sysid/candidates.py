@@ -21,6 +21,7 @@ sensor_bias         joint      rad       measured angle offset (replay starts at
 foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
 ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.01 -> 0.025
 joint_compliance    joint      rad/(N m) series spring hinge, ``jnt_stiffness`` = 1/c    0.18/kp
+parallel_spring     joint      N m/rad   ``jnt_stiffness`` (added; ``springref`` 0)   0.03 kp
 terrain_roughness   global     m         random heightfields (a distribution, fitted   (stochastic:
                                          by :mod:`sysid.roughness`)                    no column)
 ==================  =========  ========  ===========================================  ============
@@ -34,11 +35,29 @@ torque-constant or current-gain error): it scales kp and kd together, so the dam
 servo changes as √(kp) would not (a kp-only error, ``pd_gain``, keeps kd). A compliance below 1 / :func:`sysid.model.spring_stiffness_max` (a spring stiffer than the
 1 ms step integrates) is modelled at that bound.
 
+``parallel_spring`` is a passive elastic element across the joint, in parallel with the servo
+(cable harnesses and seals that resist bending, a counterbalance spring): a torque τ = -k q that
+pulls the joint toward its zero angle whatever the command. Counterbalancing springs enter the
+joint torque of the dynamic model as a term linear in q (W. Khalil and E. Dombre, *Modeling,
+Identification and Control of Robots*, Hermes Penton 2002: the dynamic model with spring terms);
+in MuJoCo it is the joint's ``stiffness`` with ``springref`` 0 (XML reference, joint; ``mjModel``
+fields ``jnt_stiffness`` and ``qpos_spring``, a passive force outside the actuator's force range).
+It differs from a kp error (``pd_gain``), whose torque kp (q* - q) vanishes at the target: with no
+load a joint with a wrong kp still reaches its target, while with a parallel spring every hold
+falls short of it by k / (kp + k) of the target angle, even without gravity (and a target at 0
+shows nothing). It differs from ``joint_compliance`` (series): a series spring carries the servo's
+torque to the output and only softens the joint (no pull toward 0, servo damping off the output);
+a parallel spring adds stiffness about the zero angle and leaves the servo's path as it is. Its
+probe, bounds and smallest reported effect are per joint, in proportion to the joint's kp
+(:func:`term_probe`, :func:`term_bounds`, :func:`term_min_effect`, :data:`PARALLEL_SPRING_KP`):
+probe 0.03 kp, at most 0.5 kp, reported from 0.005 kp.
+
 The probes, bounds and smallest reported effects above are the NAO's (the robot this library was
 tuned on). For another robot the families whose unit carries the actuators' size are scaled by a
 ratio of medians over the leg joints, robot / NAO (:func:`family_for`): Coulomb friction by the
 effort limit, viscous damping by the servo damping kd, armature by the joints' effective inertia,
-joint compliance by 1 / kp (its probe is per joint already: :func:`term_probe`). The others are
+joint compliance by 1 / kp (its probe is per joint already: :func:`term_probe`), a parallel spring by
+kp (its probe, bounds and smallest effect are per joint already). The others are
 dimensionless (x kp, x effort, x mass), angles or times, the same for any robot.
 
 ``terrain_roughness`` is *stochastic*: uneven ground is a random surface nobody measured, so it has
@@ -62,7 +81,7 @@ from robots import RobotModel, get_robot
 
 #: Every family name the report may use (issue 8).
 FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_constant", "torque_limit",
-                "link_mass", "armature", "joint_compliance", "foot_friction", "ground_compliance",
+                "link_mass", "armature", "joint_compliance", "parallel_spring", "foot_friction", "ground_compliance",
                 "terrain_roughness", "sensor_bias")
 
 
@@ -143,9 +162,19 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            0.1, 0.025, smooth=False, contact=True, min_effect=0.002),
     Family("joint_compliance", "series joint compliance (elastic transmission)", "joint", "rad/(N m)", 0.0, 0.0,
            4.0, 0.0059, min_effect=0.002, scale="1/kp"),
+    Family("parallel_spring", "parallel joint spring (passive stiffness toward the zero angle)", "joint", "N m/rad",
+           0.0, 0.0, 15.0, 0.9, min_effect=0.15, scale="kp"),
     Family("terrain_roughness", "uneven ground (random surface, RMS height)", "global", "m", 0.0, 0.0, 0.015, 0.003,
            contact=True, min_effect=0.0006, stochastic=True),
 )}
+#: A parallel spring's probe, upper bound and smallest reported effect per joint, as shares of that
+#: joint's servo stiffness kp. The NAO's servos saturate 0.1 rad from their target (effort / kp, legs
+#: 3 N m / 30 N m/rad), so a spring of 0.1 kp would already take its whole effort at 1 rad: the probe
+#: is 0.03 kp (holds fall 3 % short of their targets; on the legs 0.9 N m at 1 rad, a third of the
+#: effort, linear in the value), the bound 0.5 kp (every hold a third short), and the smallest
+#: reported effect 0.005 kp (a hold at 0.5 rad 2.5 mrad short, 0.15 N m/rad on the legs). On the
+#: NAO's legs (kp 30 N m/rad) these are the family's probe, hi and min_effect.
+PARALLEL_SPRING_KP = {"probe": 0.03, "hi": 0.5, "min_effect": 0.005}
 #: Families in the library that the default screening leaves out (``sgatwalk diagnose --families``
 #: adds them). ``torque_constant``: with both servo-gain variants on one joint, kp x a and a torque
 #: constant x b span every (kp, kd) pair, so together they emulate viscous damping as well; on the
@@ -185,7 +214,7 @@ REFERENCE_ROBOT = "nao_h25"
 #: over the leg joints; all joints when a robot has no ``legs`` group).
 SCALES = {"effort": "effort limit [N m]", "kd": "servo damping kd [N m s/rad]",
           "inertia": "effective joint inertia of the hanging robot at the zero pose [kg m^2]",
-          "1/kp": "inverse servo stiffness 1/kp [rad/(N m)]"}
+          "1/kp": "inverse servo stiffness 1/kp [rad/(N m)]", "kp": "servo stiffness kp [N m/rad]"}
 
 
 def _leg_median(robot: RobotModel, kind: str) -> float:
@@ -196,6 +225,8 @@ def _leg_median(robot: RobotModel, kind: str) -> float:
         v = robot.kd[idx]
     elif kind == "1/kp":
         v = 1.0 / robot.kp[idx]
+    elif kind == "kp":
+        v = robot.kp[idx]
     elif kind == "inertia":
         from sysid.model import joint_inertia
 
@@ -247,16 +278,28 @@ def term_probe(term: Term, robot: RobotModel) -> float:
     """Screening probe value of ``term``: the family's ``probe`` (scaled to ``robot``: :func:`family_for`),
     except for ``joint_compliance``, whose probe is the compliance that statically softens that joint
     like a kp x0.85, (1 / 0.85 - 1) / kp [rad/(N m)] (kp spans 1-30 N m/rad across NAO's joints,
-    50-1390 across the G1's)."""
+    50-1390 across the G1's), and ``parallel_spring``, whose probe is 0.03 kp of its joint
+    (:data:`PARALLEL_SPRING_KP`)."""
     if term.family == "joint_compliance":
         kp = float(robot.kp[robot.joint_index([term.target])[0]])
         return (1.0 / 0.85 - 1.0) / kp
+    if term.family == "parallel_spring":
+        return PARALLEL_SPRING_KP["probe"] * _joint_kp(term, robot)
     return family_for(term.family, robot).probe
+
+
+def _joint_kp(term: Term, robot: RobotModel | None) -> float:
+    """Servo stiffness kp [N m/rad] of ``term``'s joint on ``robot`` (None: the NAO)."""
+    robot = robot or get_robot(REFERENCE_ROBOT)
+    return float(robot.kp[robot.joint_index([term.target])[0]])
 
 
 def term_min_effect(term: Term, robot: RobotModel | None = None) -> float:
     """Smallest departure from nominal the report names for ``term`` (the family's ``min_effect``
-    scaled to ``robot``: :func:`family_for`), in the family's unit."""
+    scaled to ``robot``: :func:`family_for`), in the family's unit; a parallel spring's is 0.005 kp of
+    its joint (:data:`PARALLEL_SPRING_KP`)."""
+    if term.family == "parallel_spring":
+        return PARALLEL_SPRING_KP["min_effect"] * _joint_kp(term, robot)
     return family_for(term.family, robot).min_effect
 
 
@@ -264,7 +307,8 @@ def term_bounds(term: Term, robot: RobotModel | None = None) -> tuple[float, flo
     """(low, high) of ``term``'s value: the family's bounds (scaled to ``robot``: :func:`family_for`),
     except for a joint compliance: from 1 / :func:`sysid.model.spring_stiffness_max` of its joint
     (the stiffest spring the replay integrates; below it the candidate is that spring, so a fit never
-    reports less) to 4 / kp (a spring that leaves x0.2 of the servo stiffness).
+    reports less) to 4 / kp (a spring that leaves x0.2 of the servo stiffness); a parallel spring's,
+    from 0 to 0.5 kp of its joint (:data:`PARALLEL_SPRING_KP`).
 
     Args:
         robot: the robot the term is of; None: the NAO (the robot of :data:`REFERENCE_ROBOT`).
@@ -278,6 +322,8 @@ def term_bounds(term: Term, robot: RobotModel | None = None) -> tuple[float, flo
                 spring_stiffness_max(False, robot_name=robot.name)[term.target])
         kp = float(robot.kp[robot.joint_index([term.target])[0]])
         return max(fam.lo, 1.0 / k), min(fam.hi, 4.0 / kp)
+    if term.family == "parallel_spring":
+        return fam.lo, PARALLEL_SPRING_KP["hi"] * _joint_kp(term, robot)
     return fam.lo, fam.hi
 
 
@@ -408,6 +454,17 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
                 raise ValueError(f"joint compliance term on {tg} needs a replay model with a series spring there")
             k_max = spring_stiffness_max(rm.structure.fixed_base, rm.structure.physics_dt, robot.name)[tg]
             m.jnt_stiffness[rm.spring_jnt[tg]] = min(1.0 / max(v, 1e-12), k_max)
+        elif f == "parallel_spring":
+            # passive -k q on the joint's own (motor) hinge, about its zero angle: MuJoCo's joint
+            # spring is -stiffness (q - qpos_spring); an existing spring s about r and this one make
+            # (s + k) about s r / (s + k) (the replay models have s = 0, qpos_spring = qpos0 = 0).
+            # With series play/spring hinges on the joint it acts on the motor angle, not on the
+            # output (their sum), a difference of the dead band / the series deflection.
+            jnt, qa = int(m.dof_jntid[rm.dadr[jidx[tg]]]), int(rm.qadr[jidx[tg]])
+            s0 = float(m.jnt_stiffness[jnt])
+            if s0 + v > 0:
+                m.qpos_spring[qa] = s0 * float(m.qpos_spring[qa]) / (s0 + v)
+            m.jnt_stiffness[jnt] = s0 + v
         elif f == "foot_friction":
             m.geom_friction[:, 0] = v
         elif f == "ground_compliance":

@@ -56,6 +56,17 @@ EXPERIMENTS = {
     frozenset({"torque_constant", "joint_compliance"}): "a chirp through 1-4 Hz and steps: a series spring takes the "
                                                         "servo damping off the output, a torque-constant error keeps "
                                                         "its ratio to the stiffness",
+    frozenset({"pd_gain", "parallel_spring"}): "hold steps to targets of both signs and two sizes with the joint "
+                                               "unloaded (gravity across the joint axis or the link supported): a "
+                                               "kp error still reaches every target, a parallel spring falls short "
+                                               "by k / (kp + k) of the target, in proportion to it and toward 0",
+    frozenset({"sensor_bias", "parallel_spring"}): "holds at several angles of both signs: an encoder offset is the "
+                                                   "same at every angle, a parallel spring's shortfall grows with "
+                                                   "the angle and changes sign with it",
+    frozenset({"joint_compliance", "parallel_spring"}): "holds at several unloaded targets and a chirp through 1-4 "
+                                                        "Hz: a series spring reaches unloaded targets and takes the "
+                                                        "servo damping off the output, a parallel spring falls "
+                                                        "short toward 0 and stiffens the joint",
     frozenset({"backlash", "sensor_bias"}): "holds in postures with opposite gravity load on the joint, or load "
                                             "reversals: an encoder offset stays, backlash under a one-sided load "
                                             "flips sign with the load",
@@ -657,7 +668,65 @@ def _select(problem: Problem, setup: _Setup, before: _Before, names: list[str], 
     sel.model, sel.cost = elim.model, elim.cost
     sel.rejected.extend(elim.rejected)
     sel.budget_hit = sel.budget_hit or elim.budget_hit
+    merged = _merge_link_masses(problem, sel.model, sel.cost, robot, clock)
+    sel.model, sel.cost = merged.model, merged.cost
+    sel.rejected.extend(merged.rejected)
     return sel
+
+
+def _chain_path(robot, a: str, b: str) -> list[str] | None:
+    """Links from ``a`` to ``b`` inclusive when one is below the other in the kinematic tree (None otherwise)."""
+    parent = {j.child: j.parent for j in robot.joints}
+
+    def up(x: str, y: str) -> list[str] | None:
+        path = [x]
+        while path[-1] != y and path[-1] in parent:
+            path.append(parent[path[-1]])
+        return path if path[-1] == y else None
+
+    return up(a, b) or (lambda p: p[::-1] if p else None)(up(b, a))
+
+
+def _merge_link_masses(problem: Problem, model: dict, cost: float, robot, clock: _Clock) -> _Step:
+    """Parsimony for link masses: two mass terms on one chain (e.g. thigh and ankle) can stand in
+    for one mass error on a link between them (the tibia): their loads on the joints above add up
+    to nearly the same torques, and the greedy screening adds the two one at a time without ever
+    trying the link between. For every such pair, each link on the path between them (ends
+    included) replaces the pair as one term, refitted with the rest; the best single term is kept
+    if it fits the held-out logs within the selection margin of the pair (one parameter instead of
+    two, the pair's extra freedom not needed). Pairs are tried in order of their link names; a
+    replacement is recorded with both costs."""
+    k = problem.k
+    step = _Step(model=dict(model), cost=cost)
+    done: set = set()
+    while not clock.over():
+        masses = sorted((t for t in step.model if t.family == "link_mass"), key=lambda t: t.target)
+        pair = next(((a, b, path) for i, a in enumerate(masses) for b in masses[i + 1:]
+                     if (a, b) not in done and (path := _chain_path(robot, a.target, b.target))), None)
+        if pair is None:
+            break
+        a, b, path = pair
+        done.add((a, b))
+        rest = {t: v for t, v in step.model.items() if t not in (a, b)}
+        best = None
+        for ln in path:
+            t = Term("link_mass", ln)
+            if t in rest:
+                continue
+            start = {**rest, t: float(np.clip(0.5 * (step.model[a] + step.model[b]), *term_bounds(t, robot)))}
+            fit = refit(problem, start, grid=False, max_nfev=6)
+            c = float(problem.cost([fit.values], "heldout")[0])
+            if best is None or c < best[1]:
+                best = (t, c, dict(fit.values))
+        if best is not None and best[1] - step.cost < _margin(step.cost, k):
+            t, c, vals = best
+            for u in (a, b):
+                step.rejected.append({"term": u.label(), "family": "link_mass", "value": step.model[u],
+                                      "reason": f"{a.label()} and {b.label()} replaced by one mass term on the link "
+                                                f"between, {t.label()} x{vals[t]:.3f}: it fits the held-out logs as "
+                                                f"well (cost {c:.1f} vs {step.cost:.1f}) with one parameter"})
+            step.model, step.cost = vals, c
+    return step
 
 
 def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, families, bic0: float, rnd: int,

@@ -5,8 +5,9 @@
 units; uneven ground as the RMS height of a random surface). :class:`IdentifiedSimEnv` is
 :class:`envs.NaoSimEnv` with those effects built in by the same MuJoCo augmentations the diagnosis
 replayed (:func:`sysid.candidates.apply_terms`: actuator delay buffers for latency, series play and
-spring hinges for backlash and joint compliance, ``dof_frictionloss``, gains, effort limits, link
-masses, contact friction and time constant), so that what was fitted is what is walked on:
+spring hinges for backlash and joint compliance, ``dof_frictionloss``, gains, effort limits, joint
+stiffness for parallel springs, link masses, contact friction and time constant), so that what was
+fitted is what is walked on:
 
 * encoder offsets (``sensor_bias``) are added to the measured angles and subtracted from the
   targets (the servo reads the same encoder), like the real world's calibration offsets;

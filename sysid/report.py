@@ -195,6 +195,11 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
         elif f == "joint_compliance":
             k_max = spring_stiffness_max(fixed_base, physics_dt, robot.name)[t.target]
             spec.joint(t.target + "__spring").stiffness = [min(1.0 / max(v, 1e-12), k_max), 0.0, 0.0]
+        elif f == "parallel_spring":  # -k q about the zero angle: joint stiffness, springref 0 (combined
+            j = spec.joint(t.target)      # with any spring the joint had: (s + k) about s r / (s + k))
+            s0, r0 = float(j.stiffness[0]), float(j.springref)
+            j.springref = s0 * r0 / (s0 + v) if s0 + v > 0 else r0
+            j.stiffness = [s0 + v, *list(j.stiffness)[1:]]
         elif f == "sensor_bias":
             spec.add_numeric(name=f"sensor_bias:{t.target}", data=[v])
         elif f == "foot_friction":

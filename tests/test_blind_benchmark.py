@@ -122,3 +122,29 @@ def test_benchmark_refuses_unknown_extra_classes(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--extra-classes", "warp_drive", "--out", "unused"])
     assert exc.value.code == 2 and "warp_drive" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("world", ["real", "sim"])
+def test_the_referees_parallel_spring_holds_short_of_the_target(world):
+    """The referee's own parallel spring (PyBullet: -k q added to the clipped PD torque each physics
+    step; MuJoCo: the hinge's stiffness): a head yaw held by its PD at 0.5 rad settles at
+    kp / (kp + k) of where it settles without the spring, 0.5 kp / (kp + k) (fixed base, no gravity
+    on that axis)."""
+    from benchmarks.blind.worlds import make_world
+    from robots import nao_h25
+
+    robot = nao_h25()
+    j = robot.joint_names.index("HeadYaw")
+    kp, k = float(robot.kp[j]), 1.0
+    held = []
+    for hidden in ([], [{"family": "parallel_spring", "targets": ["HeadYaw"], "values": [k]}]):
+        env = make_world(world, hidden, fixed_base=True, noise=1e-9)
+        env.reset(seed=0)
+        a = env.q0[robot.actuated_index].copy()
+        a[robot.actuated_joint_names.index("HeadYaw")] = 0.5
+        for _ in range(100):
+            env.step(a)
+        held.append(float(env._state().q[j]))
+        env.close()
+    assert held[0] == pytest.approx(0.5, abs=2e-3)
+    assert held[1] == pytest.approx(held[0] * kp / (kp + k), abs=2e-3)

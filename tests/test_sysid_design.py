@@ -49,3 +49,16 @@ def test_protocol_follows_the_shares():
     assert first[1] < first[0]
     with pytest.raises(ValueError, match="shares"):
         protocol(r, 6.0, segments=("holds", "saturation"), shares={"holds": -1.0})
+
+
+def test_a_parallel_spring_is_identifiable_next_to_a_kp_error_and_an_offset():
+    """The design's information covers the parallel-spring family (per-joint probe and smallest
+    effect, shares of the joint's kp): with steps and holds, a spring at the knee and at the elbow
+    is identifiable at its smallest reported effect alongside a kp error and an encoder offset of
+    the same joints."""
+    d = design(nao_h25(), ("holds", "steps"), families=("pd_gain", "parallel_spring", "sensor_bias"),
+               joints=["LKneePitch", "RElbowRoll"], seconds=8.0, segment_seconds=2.5)
+    for j in ("LKneePitch", "RElbowRoll"):
+        i = d.terms.index(f"parallel_spring[{j}]")
+        assert Z95 * d.se_default[i] < 1.0 and Z95 * d.se_optimal[i] < 1.0
+    assert "parallel_spring" in format_design(d.to_json())

@@ -25,6 +25,7 @@ CASES = [
     ({Term("armature", "LKneePitch"): 0.008}, 0.15),
     ({Term("sensor_bias", "RShoulderRoll"): -0.012}, 0.05),
     ({Term("joint_compliance", "LHipPitch"): 0.02}, 0.10),  # [rad/(N m)]: k = 50 N m/rad vs kp 30
+    ({Term("parallel_spring", "LHipPitch"): 0.6}, 0.05),  # [N m/rad]: 2 % of kp 30
 ]
 
 
@@ -82,3 +83,87 @@ def test_torque_constant_is_named_by_the_diagnosis_not_as_kp_plus_damping():
     fams = {(e["family"], tuple(e["joints"])): e for e in rep["effects"]}
     assert list(fams) == [("torque_constant", ("RHipPitch",))], rep["verdict"]
     assert abs(fams[("torque_constant", ("RHipPitch",))]["value"] - 1.4) < 0.05 * 0.4
+
+
+def test_parallel_spring_is_minus_k_q_on_the_joint_alone():
+    """The augmentation is MuJoCo's joint spring about the zero angle: a knee held at 0.7 rad with
+    k = 5 N m/rad feels -3.5 N m of passive spring torque, no other dof any; the replay models'
+    spring reference (qpos_spring) is 0 on every robot hinge, and the series-spring model of the
+    same joint takes it on its motor hinge."""
+    import copy
+
+    import mujoco
+
+    from sysid.candidates import apply_terms, series_structure
+    from sysid.model import Structure, replay_model
+
+    robot = nao_h25()
+    i = robot.joint_names.index("LKneePitch")
+    for terms in ({Term("parallel_spring", "LKneePitch"): 5.0},
+                  {Term("parallel_spring", "LKneePitch"): 5.0, Term("joint_compliance", "LKneePitch"): 0.01}):
+        rm = replay_model(series_structure(Structure(fixed_base=True, physics_dt=0.001, robot=robot.name), terms))
+        assert np.all(rm.model.qpos_spring[rm.qadr] == 0.0) and np.all(rm.model.jnt_stiffness[
+            rm.model.dof_jntid[rm.dadr]] == 0.0)
+        m = copy.copy(rm.model)
+        apply_terms(rm, m, terms)
+        d = mujoco.MjData(m)
+        d.qpos[rm.qadr[i]] = 0.7
+        mujoco.mj_forward(m, d)
+        spring = d.qfrc_spring.copy()
+        assert spring[rm.dadr[i]] == pytest.approx(-3.5)
+        if Term("joint_compliance", "LKneePitch") in terms:  # the series hinge (undeflected) adds nothing
+            spring[rm.dadr[i]] = 0.0
+        assert np.abs(np.delete(spring, rm.dadr[i])).max() == 0.0
+
+
+@pytest.mark.parametrize("hidden", ["parallel_spring", "pd_gain"])
+def test_parallel_spring_and_kp_error_are_named_as_themselves(hidden):
+    """A parallel spring (1.2 N m/rad, 4 % of kp: every hold 4 % short of its target, toward 0) and
+    a kp error at the same hip: the diagnosis with the default library names each as itself, with
+    its value and a 95 % interval holding the truth; neither is called the other."""
+    from sysid.diagnose import diagnose
+
+    truth = {"parallel_spring": 1.2, "pd_gain": 0.7}[hidden]
+    logs = synthetic_logs({Term(hidden, "RHipPitch"): truth}, n_logs=3, seconds=3.0, seed=3, traj_seed=40,
+                          segments=("holds", "ramps", "steps", "reversals", "chirp"))
+    rep = diagnose(logs)
+    assert [(e["family"], e["joints"]) for e in rep["effects"]] == [(hidden, ["RHipPitch"])], rep["verdict"]
+    e = rep["effects"][0]
+    assert abs(e["value"] - truth) < 0.05 * abs(truth - e["nominal"])
+    assert e["ci95"][0] <= truth <= e["ci95"][1]
+    assert not rep.get("uncertain")
+
+
+def test_the_identified_model_carries_a_parallel_spring():
+    """The MJCF export writes the spring as the joint's stiffness about 0 (springref): loaded back,
+    ``jnt_stiffness`` is k and ``qpos_spring`` 0 on that joint and on no other."""
+    import mujoco
+
+    from sysid.report import export_mjcf
+
+    xml = export_mjcf({Term("parallel_spring", "LKneePitch"): 1.5, Term("pd_gain", "LKneePitch"): 0.9}, True, 0.001)
+    m = mujoco.MjModel.from_xml_string(xml)
+    robot = nao_h25()
+    jid = [m.joint(n).id for n in robot.joint_names]
+    k = m.jnt_stiffness[jid]
+    assert k[robot.joint_names.index("LKneePitch")] == pytest.approx(1.5)
+    assert np.count_nonzero(k) == 1 and np.all(m.qpos_spring[m.jnt_qposadr[jid]] == 0.0)
+
+
+def test_parallel_spring_scales_with_each_joints_kp():
+    """Probe, upper bound and smallest reported effect are shares of the joint's kp (the NAO's legs:
+    the family's numbers), so a wrist (kp 1) and a G1 knee get theirs."""
+    from robots import get_robot
+    from sysid.candidates import FAMILIES, family_for, term_bounds, term_min_effect, term_probe
+
+    nao, g1 = nao_h25(), get_robot("g1")
+    fam = FAMILIES["parallel_spring"]
+    knee, wrist = Term("parallel_spring", "LKneePitch"), Term("parallel_spring", "LWristYaw")
+    assert (term_probe(knee, nao), term_bounds(knee, nao)[1], term_min_effect(knee, nao)) == pytest.approx(
+        (fam.probe, fam.hi, fam.min_effect))
+    assert term_probe(wrist, nao) == pytest.approx(fam.probe / 30.0)
+    assert term_min_effect(wrist) == pytest.approx(fam.min_effect / 30.0)  # robot None: the NAO
+    g1_knee = Term("parallel_spring", "left_knee_joint")
+    kp = float(g1.kp[g1.joint_index(["left_knee_joint"])[0]])
+    assert term_probe(g1_knee, g1) == pytest.approx(0.03 * kp) and term_bounds(g1_knee, g1) == (0.0, 0.5 * kp)
+    assert family_for("parallel_spring", g1).probe == pytest.approx(fam.probe * 880.0 / 30.0)

@@ -114,7 +114,7 @@ def test_families_scale_to_the_robot():
     """Friction, damping, armature and compliance are scaled from the NAO's numbers by the robot's
     actuators (exactly x1 for the NAO); the dimensionless and angle families are not."""
     nao, g1 = nao_h25(), get_robot("g1")
-    for kind in ("effort", "kd", "inertia", "1/kp"):
+    for kind in ("effort", "kd", "inertia", "1/kp", "kp"):
         assert robot_scale("nao_h25", kind) == 1.0
     for name, fam in FAMILIES.items():
         assert family_for(name, nao) is fam

@@ -9,7 +9,7 @@ seed; ``NOMINAL`` is each family's no-effect value (the scale of the relative pa
 from __future__ import annotations
 
 FAMILIES = ["latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit", "link_mass",
-            "armature", "sensor_bias", "joint_compliance"]
+            "armature", "sensor_bias", "joint_compliance", "parallel_spring"]
 #: Classes the referee can inject that the tool's default library does not screen (``--classes``):
 #: a torque-constant error (kp and kd scaled together; ``sysid.candidates.OPTIONAL_FAMILIES``).
 OPTIONAL_CLASSES = ["torque_constant"]
@@ -23,9 +23,9 @@ CLASSES_FLOATING = {"sim": ["none", "foot_friction", "ground_compliance", "terra
 #: Class order behind each trial's seed (appending keeps earlier trials' draws unchanged).
 SEED_ORDER = ("none", "latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit",
               "link_mass", "armature", "sensor_bias", "none", "foot_friction", "ground_compliance",
-              "terrain_roughness", "joint_compliance", "torque_constant")
+              "terrain_roughness", "joint_compliance", "torque_constant", "parallel_spring")
 NOMINAL = {"latency": 0.0, "backlash": 0.0, "coulomb_friction": 0.0, "viscous_damping": 0.0, "pd_gain": 1.0,
-           "torque_constant": 1.0,
+           "torque_constant": 1.0, "parallel_spring": 0.0,
            "joint_compliance": 0.0, "torque_limit": 1.0, "link_mass": 1.0, "armature": 0.0, "sensor_bias": 0.0, "foot_friction": 0.8,
            "ground_compliance": 0.01, "terrain_roughness": 0.0}
 ANGLE_NOISE, GYRO_NOISE = 2e-3, 1e-2  # floating base: torso roll/pitch [rad], gyro [rad/s]

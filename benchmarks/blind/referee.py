@@ -84,7 +84,9 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
     (scored as the RMS height of the laid surfaces, :func:`roughness_truth`);
     joint compliance: a series spring of stiffness 1.5-4 x the joint's kp (statically x0.6-0.8 of the
     servo stiffness) on 1-3 joints of :func:`explicit_spring_stable_joints` other than HipYawPitch, value its compliance
-    1/k [rad/(N m)].
+    1/k [rad/(N m)]; parallel spring (a passive -k q across the joint: cables, seals, a counterbalance
+    spring): k 0.2-0.6 x effort/3 N m/rad (a torque of 7-20 % of the joint's effort at 1 rad, like the
+    Coulomb draws) on 1-3 of any actuated joints.
     """
     joints = list(robot.actuated_joint_names)
     eff = dict(zip(robot.joint_names, robot.effort))
@@ -130,6 +132,8 @@ def draw_effect(family: str, rng: np.random.Generator, robot) -> dict:
             v = rng.uniform(0.005, 0.02) * rng.choice([-1.0, 1.0])
         elif family == "joint_compliance":
             v = 1.0 / (rng.uniform(1.5, 4.0) * kp[j])
+        elif family == "parallel_spring":  # [N m/rad]
+            v = rng.uniform(0.2, 0.6) * s
         else:
             raise ValueError(family)
         vals.append(float(v))

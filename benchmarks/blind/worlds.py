@@ -8,12 +8,14 @@
   ``frictionloss`` with hard stiction (2 ms constraint time constant), link mass / armature as model
   edits, sensor bias as an offset on the logged angle, joint compliance as a massless motor behind a
   spring (:class:`_SeriesSpring`, backward Euler; the candidate is a MuJoCo series hinge with joint
-  stiffness and a light motor body).
+  stiffness and a light motor body), a parallel spring as the robot joint's own MuJoCo ``stiffness``
+  about the zero angle (outside the referee's clipped PD).
 * ``real`` (:class:`RefereeRealWorld`): the PyBullet world of ``envs/bullet_world.py`` (its own
   effect code: explicit PD, velocity-motor Coulomb friction, dead-band backlash, mass scaling), plus
   a referee FIFO with jitter for latency, a logged-angle offset for sensor bias and the same
-  massless-motor spring for joint compliance. PyBullet has no armature, so the ``armature`` class is
-  run in the sim world only.
+  massless-motor spring for joint compliance, and a parallel spring as an extra torque -k q added to
+  the clipped PD torque at every physics step (PyBullet has no joint stiffness). PyBullet has no
+  armature, so the ``armature`` class is run in the sim world only.
 
 :func:`make_world` builds either from a list of hidden effects (:func:`.referee.draw_effect`).
 """
@@ -36,7 +38,8 @@ def _arrays(effects: list[dict], robot) -> dict:
     nj, links = len(robot.joint_names), list(robot.links)
     jidx = {n: i for i, n in enumerate(robot.joint_names)}
     a = {"kp_scale": np.ones(nj), "kd_scale": np.ones(nj), "backlash": np.zeros(nj), "coulomb": np.zeros(nj), "damping": np.zeros(nj),
-         "armature": np.zeros(nj), "bias": np.zeros(nj), "compliance": np.zeros(nj), "mass_scale": np.ones(len(links)), "latency": 0.0,
+         "armature": np.zeros(nj), "bias": np.zeros(nj), "compliance": np.zeros(nj), "parallel": np.zeros(nj),
+         "mass_scale": np.ones(len(links)), "latency": 0.0,
          "torque_scale": 1.0, "foot_friction": None, "ground_timeconst": None}
     for e in effects:
         for tg, v in zip(e["targets"], e["values"]):
@@ -59,7 +62,7 @@ def _arrays(effects: list[dict], robot) -> dict:
             else:
                 key = {"pd_gain": "kp_scale", "backlash": "backlash", "coulomb_friction": "coulomb",
                        "viscous_damping": "damping", "armature": "armature", "sensor_bias": "bias",
-                       "joint_compliance": "compliance"}[f]
+                       "joint_compliance": "compliance", "parallel_spring": "parallel"}[f]
                 if key == "kp_scale":
                     a[key][jidx[tg]] *= v  # composes with a torque-constant error on the same joint
                 else:
@@ -144,6 +147,13 @@ class RefereeSimWorld(NaoSimEnv):
             m.body_inertia[b] *= a["mass_scale"][k]
         m.dof_armature[self._dadr] += a["armature"]
         m.dof_frictionloss[self._dadr] = a["coulomb"]
+        # parallel spring: the passive -k q of each robot hinge about its zero angle (MuJoCo joint
+        # stiffness, -stiffness (q - qpos_spring); the plain sim has neither)
+        jnt = m.dof_jntid[self._dadr]
+        if np.any(m.jnt_stiffness[jnt] != 0):
+            raise ValueError("the referee's sim world expects joints without stiffness")
+        m.jnt_stiffness[jnt] = a["parallel"]
+        m.qpos_spring[self._qadr] = 0.0
         m.dof_solref[self._dadr, 0] = 2 * self.physics_dt  # hard stiction, like PyBullet's motor friction
         if a["foot_friction"] is not None:
             m.geom_friction[:, 0] = a["foot_friction"]
@@ -215,7 +225,8 @@ class RefereeRealWorld(NaoRealEnv):
     def _advance(self, targets: np.ndarray) -> None:
         import pybullet
 
-        if self.arr["latency"] <= 0 and not self._spring:
+        par = self.arr["parallel"]
+        if self.arr["latency"] <= 0 and not self._spring and not np.any(par):
             return super()._advance(targets)
         p, b, idx = self.client, self.body, self._jidx
         kp, kd, tmax, play = self._kp, self._kd, self._tau_max, self._half_play
@@ -234,7 +245,7 @@ class RefereeRealWorld(NaoRealEnv):
             tau = kp * err - (kd + visc) * dq
             if sp:
                 tau[sp.mask] = sp.link_torque(cmd, q, tmax) - visc[sp.mask] * dq[sp.mask]
-            tau = np.clip(tau, -tmax, tmax)
+            tau = np.clip(tau, -tmax, tmax) - par * q  # a parallel spring is passive: outside the motor's limit
             p.setJointMotorControlArray(b, idx, pybullet.TORQUE_CONTROL, forces=tau.tolist())
             p.stepSimulation()
 
