@@ -36,8 +36,9 @@ def test_family_injection_and_recovery(truth, tol):
                           segments=("holds", "ramps", "steps", "reversals", "chirp"))
     floor = np.full(24, 1e-3)
     problem = Problem(logs, whole_logs(logs, [0]), whole_logs(logs, [1]), floor)
-    sr = screen(problem, robot, {}, FIXED_BASE_FAMILIES)
     (t_true, v_true), = truth.items()
+    # the default library, plus the truth's family where it is opt-in (sysid.candidates.OPTIONAL_FAMILIES)
+    sr = screen(problem, robot, {}, tuple(dict.fromkeys(FIXED_BASE_FAMILIES + (t_true.family,))))
     assert t_true in sr.selected, f"screening picked {[t.label() for t in sr.selected]}"
     fit = refit(problem, {t_true: sr.selected[t_true]})
     v = fit.values[t_true]
@@ -119,14 +120,16 @@ def test_parallel_spring_is_minus_k_q_on_the_joint_alone():
 @pytest.mark.parametrize("hidden", ["parallel_spring", "pd_gain"])
 def test_parallel_spring_and_kp_error_are_named_as_themselves(hidden):
     """A parallel spring (1.2 N m/rad, 4 % of kp: every hold 4 % short of its target, toward 0) and
-    a kp error at the same hip: the diagnosis with the default library names each as itself, with
-    its value and a 95 % interval holding the truth; neither is called the other."""
+    a kp error at the same hip: the diagnosis with the default library and the parallel spring
+    (opt-in) names each as itself, with its value and a 95 % interval holding the truth; neither is
+    called the other."""
+    from sysid.candidates import FIXED_BASE_FAMILIES
     from sysid.diagnose import diagnose
 
     truth = {"parallel_spring": 1.2, "pd_gain": 0.7}[hidden]
     logs = synthetic_logs({Term(hidden, "RHipPitch"): truth}, n_logs=3, seconds=3.0, seed=3, traj_seed=40,
                           segments=("holds", "ramps", "steps", "reversals", "chirp"))
-    rep = diagnose(logs)
+    rep = diagnose(logs, families=FIXED_BASE_FAMILIES + ("parallel_spring",))
     assert [(e["family"], e["joints"]) for e in rep["effects"]] == [(hidden, ["RHipPitch"])], rep["verdict"]
     e = rep["effects"][0]
     assert abs(e["value"] - truth) < 0.05 * abs(truth - e["nominal"])

@@ -9,10 +9,11 @@ seed; ``NOMINAL`` is each family's no-effect value (the scale of the relative pa
 from __future__ import annotations
 
 FAMILIES = ["latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "torque_limit", "link_mass",
-            "armature", "sensor_bias", "joint_compliance", "parallel_spring"]
-#: Classes the referee can inject that the tool's default library does not screen (``--classes``):
-#: a torque-constant error (kp and kd scaled together; ``sysid.candidates.OPTIONAL_FAMILIES``).
-OPTIONAL_CLASSES = ["torque_constant"]
+            "armature", "sensor_bias", "joint_compliance"]
+#: Classes the referee can inject that the tool's default library does not screen (``--extra-classes``):
+#: a torque-constant error (kp and kd scaled together) and a parallel joint spring
+#: (``sysid.candidates.OPTIONAL_FAMILIES``).
+OPTIONAL_CLASSES = ["torque_constant", "parallel_spring"]
 CLASSES = {"sim": ["none"] + FAMILIES, "real": ["none"] + [f for f in FAMILIES if f != "armature"]}
 #: Floating-base (standing/stepping) classes; PyBullet ground compliance is a stiffness/damping pair
 #: with no one-to-one map to MuJoCo's solref time constant, so it is run in the sim world only.
