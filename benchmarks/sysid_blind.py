@@ -58,7 +58,7 @@ from benchmarks.blind.referee import (SOURCES, draw_effect, draw_trial, explicit
                                       explicit_spring_stable_joints, opaque_id, plan_trials, record,
                                       roughness_truth, run_diagnose, trial_id)
 from benchmarks.blind.report import metrics, summarize  # noqa: E402
-from benchmarks.blind.scorer import score  # noqa: E402
+from benchmarks.blind.scorer import detectable, score  # noqa: E402
 from benchmarks.blind.worlds import RefereeRealWorld, RefereeSimWorld, make_world  # noqa: E402
 from robots import nao_h25  # noqa: E402
 
@@ -121,6 +121,9 @@ def main(argv=None) -> int:
     if os.path.exists(res_path):
         for line in open(res_path):
             r = json.loads(line)
+            if "detectable" not in r["score"]:  # scored before the flag existed: from the trial's report
+                with open(os.path.join(root, "trials", opaque_id(r["trial"], args.seed0), "report", "report.json")) as f:
+                    r["score"]["detectable"] = detectable(json.load(f))
             done[r["trial"]] = r
     # engine-gap calibration on "none" logs of this world (the tool's --calibrate)
     cal_dir = os.path.join(root, "calibration")

@@ -11,7 +11,8 @@ import pytest
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from benchmarks.blind.referee import META_KEYS, opaque_id, record, trial_id  # noqa: E402
-from benchmarks.blind.scorer import score  # noqa: E402
+from benchmarks.blind.report import metrics  # noqa: E402
+from benchmarks.blind.scorer import DETECTABLE_RMS, score  # noqa: E402
 
 
 def _eff(family, joints=(), links=(), value=0.0, ci=(None, None), cost=1.0):
@@ -19,9 +20,11 @@ def _eff(family, joints=(), links=(), value=0.0, ci=(None, None), cost=1.0):
             "heldout_cost_without": cost}
 
 
-def _report(*effects):
+def _report(*effects, peak: float = 5.0):
+    """A diagnosis report; ``peak``: the largest channel RMS over floor before fitting (localisation)."""
     return {"effects": list(effects), "noise_floor": 1e-3, "heldout_rms_before": 5e-3, "heldout_rms_after": 1e-3,
-            "gap_closed": 0.8, "runtime_s": 1.0}
+            "gap_closed": 0.8, "runtime_s": 1.0,
+            "localisation": {"channels": {"HeadYaw": {"rms_over_floor": 1.0}, "LKneePitch": {"rms_over_floor": peak}}}}
 
 
 def test_the_blind_folder_holds_only_a_robots_own_logs(tmp_path):
@@ -148,3 +151,21 @@ def test_the_referees_parallel_spring_holds_short_of_the_target(world):
         env.close()
     assert held[0] == pytest.approx(0.5, abs=2e-3)
     assert held[1] == pytest.approx(held[0] * kp / (kp + k), abs=2e-3)
+
+
+def test_top1_on_detectable_effects_leaves_out_effects_below_the_noise():
+    """An effect whose signal stays below the noise (no channel at 1.22x its floor before fitting)
+    counts in the all-trials top-1 but not in the detectable one; a detectable miss counts in both."""
+    lat = [{"family": "latency", "targets": [None], "values": [0.02]}]
+    mass = [{"family": "link_mass", "targets": ["LTibia"], "values": [1.05]}]
+    fric = [{"family": "coulomb_friction", "targets": ["LKneePitch"], "values": [0.1]}]
+    rows = [{"kind": "single", "truth_class": "latency",
+             "score": score(lat, _report(_eff("latency", value=0.02, ci=(0.019, 0.021), cost=9.0)))},
+            {"kind": "single", "truth_class": "link_mass", "score": score(mass, _report(peak=1.1))},
+            {"kind": "single", "truth_class": "coulomb_friction", "score": score(fric, _report(peak=2.6))},
+            {"kind": "single", "truth_class": "none", "score": score([], _report(peak=1.0))}]
+    assert [r["score"]["detectable"] for r in rows] == [True, False, True, False]
+    assert 1.1 < DETECTABLE_RMS < 1.3
+    m = metrics(rows)
+    assert (m["top1"]["k"], m["top1"]["n"]) == (1, 3)
+    assert (m["top1_detectable"]["k"], m["top1_detectable"]["n"]) == (1, 2)

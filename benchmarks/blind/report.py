@@ -25,10 +25,13 @@ def metrics(rows: list[dict]) -> dict:
     (reported terms that are true / true terms found), ``param_err_median`` (non-latency true terms
     found), ``latency_err_ms`` (median), ``both_found`` (two-effect trials), ``runtime_s`` (median),
     ``uncertain`` (terms reported as uncertain / compensating: how many of them are true terms),
-    ``per_class`` (single-effect class -> top-1 and median parameter error of its true terms found).
+    ``per_class`` (single-effect class -> top-1 and median parameter error of its true terms found),
+    ``top1_detectable`` (top-1 over the single-effect trials whose effect is detectable:
+    :data:`.scorer.DETECTABLE_RMS`).
     Findings are the report's ``effects``; uncertain terms count only in ``coverage``."""
     single = [r for r in rows if r["kind"] == "single"]
     eff = [r for r in single if r["truth_class"] != "none"]
+    det = [r for r in eff if r["score"]["detectable"]]
     none = [r for r in single if r["truth_class"] == "none"]
     two = [r for r in rows if r["kind"] == "two"]
     sc = [r["score"] for r in rows]
@@ -38,6 +41,7 @@ def metrics(rows: list[dict]) -> dict:
     return {
         "trials": len(rows), "single": len(single), "two": len(two),
         "top1": _frac(sum(r["score"]["pred_top1"] == r["truth_class"] for r in eff), len(eff)),
+        "top1_detectable": _frac(sum(r["score"]["pred_top1"] == r["truth_class"] for r in det), len(det)),
         "none_fp": _frac(sum(bool(r["score"]["pred_families"]) for r in none), len(none)),
         "spurious": _frac(sum(bool(s.get("spurious")) for s in sc), len(sc)),
         "coverage": _frac(sum(cov), len(cov)),
