@@ -865,7 +865,8 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
 
     The final refit is kept only if it does not raise the held-out cost. Intervals come from
     :func:`sysid.identify.confidence` with the training residual's integrated autocorrelation and,
-    with more than one log, the spread of per-log refits (:func:`_trajectory_spread`). Each effect
+    with more than one log, the spread of per-log refits (:func:`_trajectory_spread`), plus the
+    model-form bound of :func:`sysid.identify.discrepancy_bound`. Each effect
     records how much worse the held-out cost gets without it; effects are sorted by that, and
     term pairs with |correlation| > 0.9 are listed as indistinguishable. An empty model returns empty lists.
     """
