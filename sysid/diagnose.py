@@ -679,12 +679,16 @@ def _chain_path(robot, a: str, b: str) -> list[str] | None:
     parent = {j.child: j.parent for j in robot.joints}
 
     def up(x: str, y: str) -> list[str] | None:
+        """x, its parent, ... up to y; None when y is not above x."""
         path = [x]
         while path[-1] != y and path[-1] in parent:
             path.append(parent[path[-1]])
         return path if path[-1] == y else None
 
-    return up(a, b) or (lambda p: p[::-1] if p else None)(up(b, a))
+    if (path := up(a, b)) is not None:
+        return path
+    path = up(b, a)
+    return path[::-1] if path is not None else None
 
 
 def _merge_link_masses(problem: Problem, model: dict, cost: float, robot, clock: _Clock) -> _Step:

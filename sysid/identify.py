@@ -478,7 +478,15 @@ def refit(problem: Problem, start: dict, free: list | None = None, *, max_nfev: 
     return FitResult(vals, free, float(res.fun @ res.fun), J, res.fun, nfev[0])
 
 
-def discrepancy_bound(fit: FitResult, problem: Problem, tau_int: float, share: float = 0.05) -> np.ndarray:
+def _gram_eig(J: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eigenvalues w, eigenvectors V of JᵀJ and the mask of directions kept (w > 1e-10 max w; the
+    others are near-null: the data do not fix the terms along them)."""
+    w, V = np.linalg.eigh(J.T @ J)
+    return w, V, w > 1e-10 * max(float(w.max()), 1e-300)
+
+
+def discrepancy_bound(fit: FitResult, problem: Problem, tau_int: float, share: float = 0.05,
+                      eig: tuple | None = None) -> np.ndarray:
     """(p,) worst-case shift of each fitted term [physical units] that a systematic model
     discrepancy hiding in the training residual can cause (the model-form part of an interval).
 
@@ -494,8 +502,9 @@ def discrepancy_bound(fit: FitResult, problem: Problem, tau_int: float, share: f
     a mean square of n_eff,c = n_c / τ_int independent samples). The part of d along the terms'
     sensitivities is absorbed by the fit and cannot be seen; the bound takes it to be no larger than
     what can be seen, so ‖d‖² = Σ n_c δ_c² over the channels that carry at least ``share`` of term
-    i's sensitivity energy, with δ_c² the sum of the two. It is a bound under that assumption, not a guarantee: a discrepancy
-    that has exactly the shape of a candidate is indistinguishable from it by any interval.
+    i's sensitivity energy, with δ_c² the sum of the two. It is a bound under that assumption, not a
+    guarantee: a discrepancy that has exactly the shape of a candidate is indistinguishable from it
+    by any interval.
 
     Statistical intervals (Gauss-Newton, per-log spread) shrink with more data; this one shrinks
     only as the fit approaches the floor on longer logs, which is what a model-form error does.
@@ -503,6 +512,7 @@ def discrepancy_bound(fit: FitResult, problem: Problem, tau_int: float, share: f
     Args:
         fit: the refit (its Jacobian and residual are in floor units).  tau_int: the residual's
             integrated autocorrelation time [samples].  share: channel selection threshold.
+        eig: :func:`_gram_eig` of ``fit.jac`` when the caller has it (:func:`confidence`).
 
     Returns:
         (p,) bounds in the terms' physical units, in ``fit.terms`` order; zeros without a Jacobian,
@@ -518,10 +528,7 @@ def discrepancy_bound(fit: FitResult, problem: Problem, tau_int: float, share: f
     e_c = np.bincount(ch, r ** 2, minlength=k) / np.maximum(n_c, 1.0)
     n_eff = np.maximum(n_c / max(1.0, tau_int), 1.0)
     delta2 = np.maximum(e_c - 1.0, 0.0) + 2.0 * np.sqrt(2.0 / n_eff)
-    A = J.T @ J
-    w, V = np.linalg.eigh(A)
-    wmax = max(float(w.max()), 1e-300)
-    keep = w > 1e-10 * wmax
+    w, V, keep = eig if eig is not None else _gram_eig(J)
     inv_diag = (V[:, keep] ** 2 / w[keep]).sum(axis=1)
     out = np.zeros(p)
     for i in range(p):
@@ -564,10 +571,8 @@ def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.95
     J = fit.jac
     n = len(fit.resid)
     s2 = float(fit.resid @ fit.resid) / max(1, n - p)
-    A = J.T @ J
-    w, V = np.linalg.eigh(A)
-    wmax = max(float(w.max()), 1e-300)
-    inv_w = np.where(w > 1e-10 * wmax, 1.0 / np.maximum(w, 1e-300), np.inf)
+    w, V, keep = _gram_eig(J)
+    inv_w = np.where(keep, 1.0 / np.maximum(w, 1e-300), np.inf)
     cov = np.zeros((p, p))
     for k in range(p):
         if np.isfinite(inv_w[k]):
@@ -582,7 +587,7 @@ def confidence(fit: FitResult, problem: Problem, tau_int: float, z: float = 1.95
         half = np.sqrt(half ** 2 + (t_q * sp) ** 2)
         sd = np.sqrt(sd ** 2 + sp ** 2)
     if model_form:
-        half = half + discrepancy_bound(fit, problem, tau_int)
+        half = half + discrepancy_bound(fit, problem, tau_int, eig=(w, V, keep))
     for k in null:
         sd[np.abs(V[:, k]) > 0.1] = np.inf
         half[np.abs(V[:, k]) > 0.1] = np.inf
