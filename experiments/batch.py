@@ -124,7 +124,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         eps = [copy.copy(tr) for _ in range(B)]
         spec = tr.spec
         H = np.empty((B, spec.history, spec.state_dim))
-        Z = np.empty((B, n, spec.state_dim)) if tr.samples else None
+        Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
     params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
     engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
     sim.reset(seeds, terrains)
@@ -135,7 +135,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
             eps[i].reset(seeds[i])
             H[i] = spec.states(sim.obs[i])
             if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
-                Z[i] = eps[i].rng.standard_normal((n, spec.state_dim))
+                Z[i] = eps[i].rng.standard_normal((n, tr.noise_dim))
     engine.reset(sim.obs)
     layout = env.layout
     na = env.action_space.shape[0]

@@ -27,6 +27,7 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
 
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
 ``inverse_command`` (0/1), ``residual`` (0/1: sample only the variance the sim does not have),
+``mixture`` (K: SGAT's forward model a mixture of K Gaussians, a mixture density network),
 ``hidden`` (e.g. ``128x128``), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
@@ -147,7 +148,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind == "identified" and k in ("terms", "ground"):
                 kw[f"identified_{k}"] = bool(int(v))
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
-                                                              "real", "sim", "noise", "residual", "method",
+                                                              "real", "sim", "noise", "residual", "method", "mixture",
                                                               "gaits", "state", "history"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
@@ -161,6 +162,8 @@ def parse_world(text: str) -> WorldSpec:
                     kw["state"] = v
                 elif k == "history":
                     kw["history"] = int(v)
+                elif k == "mixture":
+                    gkw["components"] = int(v)
                 elif k == "residual":
                     gkw["residual_noise"] = bool(int(v))
                 elif k == "alpha":

@@ -94,6 +94,9 @@ class GroundingConfig:
             their own seeds; SGAT draws a member per episode (:class:`ActionTransformer`).
         inverse_command: the inverse model also sees the commanded action (a denoising inverse model,
             :class:`sgat.models.InverseModel`).
+        components: SGAT's forward model as a mixture of this many diagonal Gaussians (a mixture
+            density network, :class:`sgat.models.ForwardModel`; the SGAT paper's footnote); 1: one
+            Gaussian, as the paper.
         residual_noise: SGAT on a stochastic sim: also fit a stochastic forward model of the sim and
             sample the real forward model with the variance the sim does not already have
             (:class:`sgat.transformer.ActionTransformer` ``sim_forward``).
@@ -107,6 +110,7 @@ class GroundingConfig:
     ensemble: int = 1
     inverse_command: bool = False
     residual_noise: bool = False
+    components: int = 1
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -119,11 +123,15 @@ class GroundingConfig:
             raise ValueError(f"alpha must be in [0, 1], got {self.alpha}")
         if int(self.ensemble) < 1:
             raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
+        if int(self.components) < 1:
+            raise ValueError(f"components must be >= 1, got {self.components}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
+        if d["components"] == 1:  # added later: left out at its default, so saved configs and caches still match
+            d.pop("components")
         return d
 
 
@@ -168,7 +176,9 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
         s = seed + 7919 * i
         fi = np.arange(len(Xf)) if i == 0 else np.random.default_rng([s, 1]).integers(0, len(Xf), len(Xf))
         ii = np.arange(len(Xi)) if i == 0 else np.random.default_rng([s, 2]).integers(0, len(Xi), len(Xi))
-        fwd = ForwardModel(S, A, history=k, stochastic=(cfg.method == "sgat"), hidden=cfg.hidden)
+        sgat = cfg.method == "sgat"
+        fwd = ForwardModel(S, A, history=k, stochastic=sgat, hidden=cfg.hidden,
+                           components=int(cfg.components) if sgat else 1)
         rf.append(fwd.fit(Xf[fi], Yf[fi], seed=s, **kw))
         inv = InverseModel(S, A, history=k, hidden=cfg.hidden, command_input=cfg.inverse_command)
         ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, **kw))

@@ -2,8 +2,10 @@
 
 * :class:`ForwardModel` ``f_real(s_t, a_t)`` predicts the state change ``s_{t+1} - s_t``.
   SGAT: a diagonal Gaussian (mean and log standard deviation per dimension, log sigma clamped
-  to ``[LOG_STD_MIN, LOG_STD_MAX]``), trained by Gaussian negative log-likelihood; GAT: the same
-  network with a mean head only, trained by mean squared error.
+  to ``[LOG_STD_MIN, LOG_STD_MAX]``), trained by Gaussian negative log-likelihood, or a mixture of
+  ``components`` diagonal Gaussians (a mixture density network, Bishop 1994; the SGAT paper's
+  footnote on multi-modal transitions); GAT: the same network with a mean head only, trained by
+  mean squared error.
 * :class:`InverseModel` ``f_sim^-1(s_t, s_{t+1})`` predicts the action from ``[s_t, s_{t+1} - s_t]``
   by mean squared error.
 
@@ -26,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from scipy.special import ndtr
 from torch import nn
 from common.files import atomic_path
 
@@ -69,10 +72,10 @@ class _Model(nn.Module):
 
     kind = "model"
 
-    def __init__(self, n_in: int, n_out: int, hidden=(64, 64), n_heads: int = 1):
+    def __init__(self, n_in: int, n_out: int, hidden=(64, 64), n_heads: int = 1, n_extra: int = 0):
         super().__init__()
         self.n_in, self.n_out, self.hidden, self.n_heads = int(n_in), int(n_out), tuple(int(h) for h in hidden), n_heads
-        self.net = _MLP(self.n_in, self.n_out * n_heads, self.hidden)
+        self.net = _MLP(self.n_in, self.n_out * n_heads + int(n_extra), self.hidden)
         self.register_buffer("x_mean", torch.zeros(self.n_in, dtype=torch.float64))
         self.register_buffer("x_std", torch.ones(self.n_in, dtype=torch.float64))
         self.register_buffer("y_mean", torch.zeros(self.n_out, dtype=torch.float64))
@@ -231,47 +234,129 @@ class ForwardModel(_Model):
         action_dim: grounded-action size A.
         stochastic: True for SGAT (Gaussian, NLL), False for GAT (mean, MSE).
         hidden: hidden layer sizes (paper: (64, 64)).
+        components: K diagonal Gaussians in a mixture (a mixture density network, Bishop 1994,
+            "Mixture Density Networks", eq. 22-26; the SGAT paper's footnote: a multi-modal
+            transition, such as a swing foot that now and then catches a bump, is not one Gaussian).
+            1 (default): one Gaussian. Only with ``stochastic``.
 
-    Input layout: ``[s_{t-k+1}, ..., s_t, a_t]`` of size k*S + A; output: Δs of size S.
+    Input layout: ``[s_{t-k+1}, ..., s_t, a_t]`` of size k*S + A; output: Δs of size S. Network
+    output (normalised units): K means (K*S), K log standard deviations (K*S) and, for K > 1, K
+    mixture logits.
+
+    Raises:
+        ValueError: components < 1, or > 1 without ``stochastic``.
     """
 
     kind = "forward"
 
     def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, stochastic: bool = True,
-                 hidden=(64, 64)):
+                 hidden=(64, 64), components: int = 1):
         self.state_dim, self.action_dim, self.history, self.stochastic = int(state_dim), int(action_dim), int(history), bool(stochastic)
+        self.components = int(components)
+        if self.components < 1 or (self.components > 1 and not self.stochastic):
+            raise ValueError(f"components must be >= 1 (and 1 for a deterministic model), got {components}")
+        K = self.components
         super().__init__(self.history * self.state_dim + self.action_dim, self.state_dim, hidden,
-                         n_heads=2 if self.stochastic else 1)
+                         n_heads=2 * K if self.stochastic else 1, n_extra=K if K > 1 else 0)
+
+    @property
+    def noise_dim(self) -> int:
+        """Standard normal draws one sample takes: S, plus one that picks the mixture component."""
+        return self.state_dim + (1 if self.components > 1 else 0)
 
     def config(self) -> dict:
-        return {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim,
-                "history": self.history, "stochastic": self.stochastic}
+        cfg = {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim,
+               "history": self.history, "stochastic": self.stochastic}
+        if self.components > 1:
+            cfg["components"] = self.components
+        return cfg
 
     @classmethod
     def from_config(cls, cfg: dict) -> "ForwardModel":
         return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], stochastic=cfg["stochastic"],
-                   hidden=tuple(cfg["hidden"]))
+                   hidden=tuple(cfg["hidden"]), components=int(cfg.get("components", 1)))
+
+    def _split(self, out):
+        """(means (..., K, S), log stds (..., K, S), log weights (..., K)) of normalised outputs
+        (torch tensors or NumPy arrays)."""
+        K, S = self.components, self.n_out
+        lead = out.shape[:-1]
+        mu = out[..., :K * S].reshape(*lead, K, S)
+        log_std = out[..., K * S:2 * K * S].reshape(*lead, K, S)
+        if isinstance(out, torch.Tensor):
+            log_std = log_std.clamp(LOG_STD_MIN, LOG_STD_MAX)
+            logw = torch.log_softmax(out[..., 2 * K * S:], -1) if K > 1 else torch.zeros(*lead, 1, dtype=out.dtype)
+        else:
+            log_std = np.clip(log_std, LOG_STD_MIN, LOG_STD_MAX)
+            if K > 1:
+                z = out[..., 2 * K * S:]
+                z = z - z.max(-1, keepdims=True)
+                logw = z - np.log(np.exp(z).sum(-1, keepdims=True))
+            else:
+                logw = np.zeros((*lead, 1))
+        return mu, log_std, logw
 
     def _loss(self, out, y):
         if not self.stochastic:
             return ((out - y) ** 2).mean()
-        mu, log_std = out[:, :self.n_out], out[:, self.n_out:].clamp(LOG_STD_MIN, LOG_STD_MAX)
-        return (0.5 * ((y - mu) / log_std.exp()) ** 2 + log_std).mean() + 0.5 * math.log(2 * math.pi)
+        if self.components == 1:  # the plain Gaussian NLL (written as before: the same fits to the bit)
+            mu, log_std = out[:, :self.n_out], out[:, self.n_out:].clamp(LOG_STD_MIN, LOG_STD_MAX)
+            return (0.5 * ((y - mu) / log_std.exp()) ** 2 + log_std).mean() + 0.5 * math.log(2 * math.pi)
+        mu, log_std, logw = self._split(out)
+        # per-dimension negative log-likelihood (the mean over S, so K = 1 is the plain Gaussian NLL)
+        lp = -(0.5 * ((y[:, None, :] - mu) / log_std.exp()) ** 2 + log_std).sum(-1)
+        return -torch.logsumexp(logw + lp, -1).mean() / self.n_out + 0.5 * math.log(2 * math.pi)
+
+    def mixture(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Weights (..., K), means (..., K, S) and standard deviations (..., K, S) of Δs
+        (unnormalised). GAT: one component of zero width.
+
+        Raises:
+            ValueError: the model is deterministic (GAT).
+        """
+        if not self.stochastic:
+            raise ValueError("a deterministic (GAT) forward model has no distribution")
+        p = self.numpy_params()
+        mu, log_std, logw = self._split(self._raw(X))
+        return np.exp(logw), mu * p["y_std"] + p["y_mean"], np.exp(log_std) * p["y_std"]
 
     def predict(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Mean and standard deviation of Δs (unnormalised), each (..., S); std is 0 for GAT."""
-        out = self._raw(X)
-        p = self.numpy_params()
-        mu = out[..., :self.n_out] * p["y_std"] + p["y_mean"]
+        """Mean and standard deviation of Δs (unnormalised), each (..., S); std is 0 for GAT. For a
+        mixture: its mean and the standard deviation of the whole mixture (law of total variance)."""
         if not self.stochastic:
+            p = self.numpy_params()
+            mu = self._raw(X) * p["y_std"] + p["y_mean"]
             return mu, np.zeros_like(mu)
-        log_std = np.clip(out[..., self.n_out:], LOG_STD_MIN, LOG_STD_MAX)
-        return mu, np.exp(log_std) * p["y_std"]
+        w, mu, sd = self.mixture(X)
+        if self.components == 1:
+            return mu[..., 0, :], sd[..., 0, :]
+        m = np.einsum("...k,...ks->...s", w, mu)
+        var = np.einsum("...k,...ks->...s", w, sd ** 2 + mu ** 2) - m ** 2
+        return m, np.sqrt(np.maximum(var, 0.0))
+
+    def sample_with(self, X: np.ndarray, z: np.ndarray) -> np.ndarray:
+        """A sample of Δs from standard normal draws ``z`` (..., :attr:`noise_dim`): μ + σ z for one
+        Gaussian; for a mixture, the component whose cumulative weight first exceeds Φ(z[..., 0])
+        (inverse-CDF sampling) and then its μ_k + σ_k z[..., 1:]. The mean for GAT."""
+        if not self.stochastic:
+            return self.predict(X)[0]
+        w, mu, sd = self.mixture(X)
+        z = np.asarray(z, dtype=np.float64)
+        if self.components == 1:
+            return mu[..., 0, :] + sd[..., 0, :] * z
+        u = ndtr(z[..., 0])  # uniform on (0, 1)
+        k = np.minimum((np.cumsum(w, -1) <= u[..., None]).sum(-1), self.components - 1)
+        pick = np.take_along_axis
+        mu_k = pick(mu, k[..., None, None], -2)[..., 0, :]
+        sd_k = pick(sd, k[..., None, None], -2)[..., 0, :]
+        return mu_k + sd_k * z[..., 1:]
 
     def sample(self, X: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """A sample of Δs ~ N(mu, sigma^2) (SGAT); the mean for GAT."""
-        mu, std = self.predict(X)
-        return mu if not self.stochastic else mu + std * rng.standard_normal(mu.shape)
+        """A sample of Δs (SGAT; :meth:`sample_with` of ``rng``'s standard normals); the mean for GAT."""
+        mu = self.predict(X)[0]
+        if not self.stochastic:
+            return mu
+        return self.sample_with(X, rng.standard_normal((*mu.shape[:-1], self.noise_dim)))
 
 
 class InverseModel(_Model):

@@ -160,6 +160,8 @@ class ActionTransformer:
         for f, i in zip(fwds, invs):
             if (f.state_dim, f.action_dim, f.history) != (S, A, k) or (i.state_dim, i.action_dim, i.history) != (S, A, k):
                 raise ValueError(f"model sizes do not match the grounding spec (S={S}, A={A}, k={k})")
+        if len({f.components for f in fwds}) > 1:
+            raise ValueError("ensemble members disagree on the number of mixture components")
         if len({i.command_input for i in invs}) > 1:
             raise ValueError("ensemble members disagree on whether the inverse model sees the command")
         sims = _members(sim_forward)
@@ -198,17 +200,19 @@ class ActionTransformer:
     def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None) -> np.ndarray:
         """Member k's grounded action; ``normal(shape)`` draws the SGAT noise (default: ``self.rng``)."""
         fwd, inv = self.forwards[k], self.inverses[k]
+        S = self.spec.state_dim
         normal = normal or self.rng.standard_normal
         x = np.concatenate([hist, a], axis=-1)
         if not sample:
             ds = fwd.predict(x)[0]
         elif self.sim_forwards:
-            mu, sd = fwd.predict(x)
+            mu, sd = fwd.predict(x)  # a mixture: its mean and total spread
             sd_sim = self.sim_forwards[k].predict(x)[1]
-            ds = mu + np.sqrt(np.maximum(sd ** 2 - sd_sim ** 2, 0.0)) * normal(mu.shape)
+            ds = mu + np.sqrt(np.maximum(sd ** 2 - sd_sim ** 2, 0.0)) * normal((*mu.shape[:-1], fwd.noise_dim))[..., -S:]
+        elif fwd.stochastic:  # ForwardModel.sample with the given generator
+            ds = fwd.sample_with(x, normal((*x.shape[:-1], fwd.noise_dim)))
         else:
-            mu, sd = fwd.predict(x)  # ForwardModel.sample with the given generator
-            ds = mu + sd * normal(mu.shape) if fwd.stochastic else mu
+            ds = fwd.predict(x)[0]
         z = [hist, ds, a] if inv.command_input else [hist, ds]
         return inv.predict(np.concatenate(z, axis=-1))
 
@@ -231,8 +235,14 @@ class ActionTransformer:
     @property
     def samples(self) -> bool:
         """Whether :meth:`transform` draws noise: SGAT with stochastic forward models draws
-        ``spec.state_dim`` standard normals from ``self.rng`` per call."""
+        :attr:`noise_dim` standard normals from ``self.rng`` per call."""
         return bool(self.forwards) and self.method == "sgat" and self.forwards[0].stochastic
+
+    @property
+    def noise_dim(self) -> int:
+        """Standard normals one SGAT step draws: ``spec.state_dim``, plus one that picks the component
+        of a mixture-density forward model (:attr:`sgat.models.ForwardModel.noise_dim`)."""
+        return self.forwards[0].noise_dim if self.forwards else self.spec.state_dim
 
     def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None) -> np.ndarray:
         """:meth:`transform` for n episodes at once, each with its own ensemble member and noise.
@@ -240,9 +250,9 @@ class ActionTransformer:
         Args:
             hist: state histories (n, k*S); a: actions (n, A).
             members: n ensemble members (each episode's draw at :meth:`reset`).
-            noise: (n, S) standard normal draws, row i the next ``S`` draws of episode i's generator
-                (needed when :attr:`samples`; a generator's draws of (T, S) at once are its next T
-                draws of (S,), so a caller may draw a whole episode's noise at its start).
+            noise: (n, :attr:`noise_dim`) standard normal draws, row i the next draws of episode i's
+                generator (needed when :attr:`samples`; a generator's draws of (T, d) at once are its
+                next T draws of (d,), so a caller may draw a whole episode's noise at its start).
 
         Returns:
             (n, A); row i is bit-identical to :meth:`transform` ``(hist[i], a[i])`` of a transformer

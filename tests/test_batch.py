@@ -41,18 +41,18 @@ def _assert_same(a: list[dict], b: list[dict]) -> None:
 
 @pytest.fixture(scope="module")
 def transformers(tmp_path_factory):
-    """Saved SGAT (2-member ensemble) and GAT transformers with random (untrained) weights: they
-    push the legs around enough to make some walks fall."""
+    """Saved SGAT (2-member ensemble; one Gaussian and a 3-component mixture) and GAT transformers
+    with random (untrained) weights: they push the legs around enough to make some walks fall."""
     spec = grounding_spec(NaoSimEnv())
     S, A = spec.state_dim, spec.action_dim
     out = {}
-    for method, stochastic in (("sgat", True), ("gat", False)):
-        torch.manual_seed(7 if stochastic else 8)
-        fw = [ForwardModel(S, A, stochastic=stochastic) for _ in range(2)]
+    for name, method, K in (("sgat", "sgat", 1), ("gat", "gat", 1), ("sgat-mdn", "sgat", 3)):
+        torch.manual_seed({"sgat": 7, "gat": 8}.get(name, 9))
+        fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K) for _ in range(2)]
         inv = [InverseModel(S, A, command_input=True) for _ in range(2)]
-        path = tmp_path_factory.mktemp(method)
+        path = tmp_path_factory.mktemp(name)
         ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0).save(path)
-        out[method] = str(path)
+        out[name] = str(path)
     return out
 
 
@@ -71,13 +71,14 @@ def report(tmp_path_factory):
     return str(path)
 
 
-@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "identified", "hybrid"])
+@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "identified", "hybrid"])
 def test_batched_episodes_are_bit_identical_to_single_episodes(world, transformers, report):
     """Every MuJoCo world the optimizer trains in: results and recordings equal run_episode's,
     falls included."""
     kw = {"sim": {"world": "sim"}, "ane": {"world": "sim", "action_noise": 0.05},
           "sgat": {"world": "grounded", "transformer": transformers.get("sgat")},
           "gat": {"world": "grounded", "transformer": transformers.get("gat")},
+          "sgat-mdn": {"world": "grounded", "transformer": transformers.get("sgat-mdn")},
           "identified": {"world": "identified", "identified": [report]},
           "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]}}[world]
     tasks = [{**kw, "theta": th, "seed": 10 + i, "seconds": SECONDS, "record": True}

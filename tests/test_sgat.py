@@ -214,3 +214,62 @@ def test_gat_transformer_recovers_a_known_action_gain(fitted):
         sk = rng.normal(0, 1, 3)
         assert np.abs(t.transform(sk, ak) - g * ak).max() < 0.06, (ak, t.transform(sk, ak))
         assert np.abs(half.transform(sk, ak) - (1 + g) / 2 * ak).max() < 0.04
+
+
+def _bumpy(n, seed):
+    """Δs = a M^T + small noise, except that with probability 0.2 (a swing foot catching a bump) the
+    first state dimension jumps by -0.6 more: a two-mode transition one Gaussian cannot hold."""
+    rng = np.random.default_rng(seed)
+    s, a = rng.uniform(-1, 1, (n, 3)), rng.uniform(-1, 1, (n, 2))
+    bump = rng.random(n) < 0.2
+    ds = a @ M.T + rng.normal(0, 0.03, (n, 3))
+    ds[bump, 0] -= 0.6
+    return np.hstack([s, a]), ds, bump
+
+
+def test_mixture_forward_model_recovers_a_two_mode_transition(tmp_path):
+    """A mixture density forward model (components=2) finds the rare mode (weight ~0.2, offset
+    -0.6) that one Gaussian smears into a wide symmetric spread, beats it on held-out likelihood,
+    samples both modes at their rates, and survives save/load."""
+    X, Y, _ = _bumpy(6000, 0)
+    one = ForwardModel(3, 2, stochastic=True)
+    one.fit(X, Y, seed=0, lr=3e-3)
+    mdn = ForwardModel(3, 2, stochastic=True, components=2)
+    mdn.fit(X, Y, seed=0, lr=3e-3)
+    Xt, Yt, _ = _bumpy(2000, 1)
+
+    def nll(m):
+        w, mu, sd = m.mixture(Xt)
+        lp = (-0.5 * ((Yt[:, None] - mu) / sd) ** 2 - np.log(sd) - 0.5 * np.log(2 * np.pi)).sum(-1)
+        return -np.log((w * np.exp(lp)).sum(-1)).mean()
+
+    assert nll(mdn) < nll(one) - 0.5, (nll(mdn), nll(one))
+    w, mu, sd = mdn.mixture(Xt)
+    rare = np.argmin(w.mean(0))
+    assert abs(w[:, rare].mean() - 0.2) < 0.05
+    offset = (mu[:, rare, 0] - mu[:, 1 - rare, 0]).mean()
+    assert abs(offset + 0.6) < 0.06, offset
+    # the mixture's moments: the mean is the weighted mean, the spread includes the gap between modes
+    m, s = mdn.predict(Xt)
+    assert np.allclose(m, np.einsum("nk,nks->ns", w, mu))
+    assert s[:, 0].mean() > 0.2 and s[:, 1].mean() < 0.1
+    # samples of one input: about 20 % in the rare mode
+    x = np.repeat(Xt[:1], 20000, 0)
+    d = mdn.sample(x, np.random.default_rng(3))[:, 0]
+    lo = (d < (mu[0, 0, 0] + mu[0, 1, 0]) / 2).mean()
+    assert abs(lo - w[0, rare]) < 0.02, (lo, w[0, rare])
+    # one Gaussian cannot: its samples are symmetric about the mean
+    d1 = one.sample(x, np.random.default_rng(3))[:, 0]
+    assert abs(np.median(d1) - d1.mean()) < 0.03
+    path = tmp_path / "mdn.pt"
+    mdn.save(path)
+    back = ForwardModel.load(path, expect_in=5, expect_out=3)
+    assert back.components == 2
+    assert np.array_equal(back.sample_with(Xt[:5], np.ones((5, 4))), mdn.sample_with(Xt[:5], np.ones((5, 4))))
+
+
+def test_mixture_forward_model_rejects_bad_settings():
+    with pytest.raises(ValueError, match="components"):
+        ForwardModel(3, 2, stochastic=False, components=2)
+    with pytest.raises(ValueError, match="components"):
+        ForwardModel(3, 2, components=0)
