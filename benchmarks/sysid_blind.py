@@ -172,10 +172,10 @@ def main(argv=None) -> int:
               f"{rep['model']} | top1 {sc['pred_top1']} | after/floor {sc['rms_after_over_floor']:.2f} | "
               f"{sc['runtime_s']:.0f} s", flush=True)
         with open(os.path.join(root, "summary.md"), "w") as f:
-            f.write(summarize(rows, args.world, world_classes))
+            f.write(summarize(rows, args.world, world_classes, args.noise))
     with open(os.path.join(root, "summary.md"), "w") as f:
-        f.write(summarize(rows, args.world, world_classes))
-    print(summarize(rows, args.world, world_classes))
+        f.write(summarize(rows, args.world, world_classes, args.noise))
+    print(summarize(rows, args.world, world_classes, args.noise))
     if args.save:
         from experiments.readme import save_benchmark
 

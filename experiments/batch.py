@@ -135,7 +135,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
             eps[i].reset(seeds[i])
             H[i] = spec.states(sim.obs[i])
             if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
-                Z[i] = eps[i].rng.standard_normal((n, tr.noise_dim))
+                Z[i] = eps[i].correlate(eps[i].rng.standard_normal((n, tr.noise_dim)))
     engine.reset(sim.obs)
     layout = env.layout
     na = env.action_space.shape[0]

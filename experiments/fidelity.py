@@ -28,6 +28,7 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
 ``inverse_command`` (0/1), ``residual`` (0/1: sample only the variance the sim does not have),
 ``mixture`` (K: SGAT's forward model a mixture of K Gaussians, a mixture density network),
+``memory`` (τ [s]: SGAT's sampling noise correlated over τ, an AR(1) process; 0: white),
 ``hidden`` (e.g. ``128x128``), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
@@ -55,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from common.defaults import EPISODE_SECONDS
+from common.defaults import CONTROL_DT, EPISODE_SECONDS
 from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.episodes import EpisodeLog
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
@@ -148,7 +149,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind == "identified" and k in ("terms", "ground"):
                 kw[f"identified_{k}"] = bool(int(v))
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
-                                                              "real", "sim", "noise", "residual", "method", "mixture",
+                                                              "real", "sim", "noise", "residual", "method", "mixture", "memory",
                                                               "gaits", "state", "history"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
@@ -164,6 +165,8 @@ def parse_world(text: str) -> WorldSpec:
                     kw["history"] = int(v)
                 elif k == "mixture":
                     gkw["components"] = int(v)
+                elif k == "memory":  # seconds -> control steps
+                    gkw["noise_memory"] = float(v) / CONTROL_DT
                 elif k == "residual":
                     gkw["residual_noise"] = bool(int(v))
                 elif k == "alpha":

@@ -97,6 +97,8 @@ class GroundingConfig:
         components: SGAT's forward model as a mixture of this many diagonal Gaussians (a mixture
             density network, :class:`sgat.models.ForwardModel`; the SGAT paper's footnote); 1: one
             Gaussian, as the paper.
+        noise_memory: correlation time [control steps] of SGAT's sampling noise (0: white, as the
+            paper; :class:`sgat.transformer.ActionTransformer`).
         residual_noise: SGAT on a stochastic sim: also fit a stochastic forward model of the sim and
             sample the real forward model with the variance the sim does not already have
             (:class:`sgat.transformer.ActionTransformer` ``sim_forward``).
@@ -111,6 +113,7 @@ class GroundingConfig:
     inverse_command: bool = False
     residual_noise: bool = False
     components: int = 1
+    noise_memory: float = 0.0
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -125,13 +128,16 @@ class GroundingConfig:
             raise ValueError(f"ensemble must be >= 1, got {self.ensemble}")
         if int(self.components) < 1:
             raise ValueError(f"components must be >= 1, got {self.components}")
+        if not (np.isfinite(self.noise_memory) and self.noise_memory >= 0):
+            raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {self.noise_memory}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
-        if d["components"] == 1:  # added later: left out at its default, so saved configs and caches still match
-            d.pop("components")
+        for k, default in (("components", 1), ("noise_memory", 0.0)):  # added later: left out at their
+            if d[k] == default:                                            # defaults, so saved configs and
+                d.pop(k)                                                   # caches still match
         return d
 
 
@@ -188,7 +194,8 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
             fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden)
             fs.fit(Xs[ii], sim.dS[ii], seed=s + 2, **kw)
             sims.append(fs)
-    tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None)
+    tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None,
+                           noise_memory=cfg.noise_memory)
     return GroundingFit(tr, rf, ri, {"n_real": len(real), "n_sim": len(sim)})
 
 

@@ -16,6 +16,7 @@ roll/pitch) and a history of k frames.
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections import deque
 from dataclasses import dataclass
@@ -127,6 +128,12 @@ class ActionTransformer:
         alpha: blend ã = (1 - α) a + α g(s, a), in [0, 1]; required when models are given (the
             paper's formula is α = 1; the GAT/GARAT code uses 0.5).
         seed: seed of the sampling generator (re-seeded by :meth:`reset`).
+        noise_memory: correlation time [steps] of SGAT's sampling noise (0: white, the paper). With
+            τ > 0 the standard normals behind each Δŝ sample form a stationary AR(1) process,
+            z_t = c z_{t-1} + sqrt(1 - c²) ε_t with c = exp(-1/τ): every step's sample has the
+            forward model's distribution, but deviations persist over about τ steps, as a real
+            trial's do (a stiffer joint, a bump under the foot, for a whole stride) instead of
+            averaging out within a stride.
 
     An ensemble expresses model uncertainty the way PETS's trajectory sampling does (Chua et al.,
     NeurIPS 2018, §4.2 "TS∞"): SGAT draws one member per episode at :meth:`reset` and keeps it for
@@ -145,7 +152,9 @@ class ActionTransformer:
     """
 
     def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
-                 alpha: float | None = None, seed: int = 0, sim_forward=None):
+                 alpha: float | None = None, seed: int = 0, sim_forward=None, noise_memory: float = 0.0):
+        if not (math.isfinite(float(noise_memory)) and float(noise_memory) >= 0.0):
+            raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {noise_memory}")
         if method not in METHODS:
             raise ValueError(f"unknown grounding method {method!r}; choose from {', '.join(METHODS)}")
         fwds, invs = _members(forward), _members(inverse)
@@ -171,6 +180,10 @@ class ActionTransformer:
         self.method, self.alpha, self.seed = method, float(alpha), seed
         self.member = 0
         self.rng = np.random.default_rng(seed)
+        self.noise_memory = float(noise_memory)
+        self._c = math.exp(-1.0 / self.noise_memory) if self.noise_memory > 0 else 0.0
+        self._s = math.sqrt(1.0 - self._c ** 2)
+        self._z = None
 
     @property
     def forward(self):
@@ -194,6 +207,7 @@ class ActionTransformer:
         """Re-seed the sampling generator (an episode's seed makes grounded rollouts repeatable) and,
         for an SGAT ensemble, draw the episode's member."""
         self.rng = np.random.default_rng(self.seed if seed is None else np.random.SeedSequence([int(seed), 0x5a7]))
+        self._z = None
         if self.n_members > 1 and self.method == "sgat":
             self.member = int(self.rng.integers(self.n_members))
 
@@ -223,7 +237,7 @@ class ActionTransformer:
             return a.copy()
         hist = np.asarray(hist, dtype=np.float64)
         if self.method == "sgat" and self.forwards[0].stochastic:
-            g = self._ground(self.member, hist, a, sample=True)
+            g = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None)
         else:
             g = np.mean([self._ground(k, hist, a, sample=False) for k in range(self.n_members)], axis=0)
         return self._blend(a, g)
@@ -237,6 +251,21 @@ class ActionTransformer:
         """Whether :meth:`transform` draws noise: SGAT with stochastic forward models draws
         :attr:`noise_dim` standard normals from ``self.rng`` per call."""
         return bool(self.forwards) and self.method == "sgat" and self.forwards[0].stochastic
+
+    def _normal(self, shape) -> np.ndarray:
+        """The next step's SGAT noise with memory: z_t = c z_{t-1} + sqrt(1 - c²) ε_t, z_0 = ε_0."""
+        eps = self.rng.standard_normal(shape)
+        self._z = eps if self._z is None else self._c * self._z + self._s * eps
+        return self._z
+
+    def correlate(self, Z: np.ndarray) -> np.ndarray:
+        """An episode's standard normal draws (T, d), drawn at once, turned in place into the noise
+        :meth:`transform` uses step by step (the same arithmetic: bit-identical); white noise
+        (``noise_memory`` 0) is returned as it is."""
+        if self._c > 0:
+            for t in range(1, len(Z)):
+                Z[t] = self._c * Z[t - 1] + self._s * Z[t]
+        return Z
 
     @property
     def noise_dim(self) -> int:
@@ -298,6 +327,8 @@ class ActionTransformer:
             m.save(os.path.join(directory, "sim_" + ff))
         meta = {"method": self.method, "alpha": self.alpha, "seed": self.seed, "identity": self.is_identity,
                 "members": self.n_members, "sim_forward": bool(self.sim_forwards), "spec": self.spec.to_dict()}
+        if self.noise_memory > 0:
+            meta["noise_memory"] = self.noise_memory
         atomic_write_text(os.path.join(directory, "transformer.json"), json.dumps(meta, indent=1))
         return directory
 
@@ -329,7 +360,7 @@ class ActionTransformer:
                                          f"this setting needs {want}")
                 invs.append(inv)
         return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"],
-                   sim_forward=sims or None)
+                   sim_forward=sims or None, noise_memory=float(meta.get("noise_memory", 0.0)))
 
 
 class GroundedEnv(gym.Wrapper):

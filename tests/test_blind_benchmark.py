@@ -169,3 +169,14 @@ def test_top1_on_detectable_effects_leaves_out_effects_below_the_noise():
     m = metrics(rows)
     assert (m["top1"]["k"], m["top1"]["n"]) == (1, 3)
     assert (m["top1_detectable"]["k"], m["top1_detectable"]["n"]) == (1, 2)
+
+
+def test_summary_names_the_trials_encoder_noise():
+    """summary.md's header states the noise the trial logs were recorded with, not the default."""
+    from benchmarks.blind.report import summarize
+
+    lat = [{"family": "latency", "targets": [None], "values": [0.02]}]
+    row = {"kind": "single", "truth_class": "latency", "seed": 1000, "n_logs": 4, "seconds": 6.0,
+           "score": score(lat, _report(_eff("latency", value=0.02, ci=(0.019, 0.021), cost=9.0)))}
+    assert "encoder noise 3 mrad" in summarize([row], "real", ["latency"], 3.0)
+    assert "encoder noise 1 mrad" in summarize([row], "real", ["latency"])

@@ -273,3 +273,33 @@ def test_mixture_forward_model_rejects_bad_settings():
         ForwardModel(3, 2, stochastic=False, components=2)
     with pytest.raises(ValueError, match="components"):
         ForwardModel(3, 2, components=0)
+
+
+def test_sgat_noise_with_memory_is_a_stationary_ar1_process(fitted, tmp_path):
+    """noise_memory τ: every step's noise is standard normal, consecutive steps correlate with
+    exp(-1/τ), the step-by-step draws equal correlate() of the episode's draws at once, a re-seeded
+    episode repeats, and the setting survives save/load; τ = 0 is the paper's white noise."""
+    sgat, _, inv = fitted
+    spec = _spec()
+    tr = ActionTransformer(spec, sgat, inv, method="sgat", alpha=1.0, noise_memory=10.0)
+    tr.reset(3)
+    steps = np.array([tr._normal((3,)) for _ in range(20000)])
+    assert abs(steps.std() - 1) < 0.03
+    c = np.mean([np.corrcoef(steps[:-1, j], steps[1:, j])[0, 1] for j in range(3)])
+    assert abs(c - np.exp(-0.1)) < 0.02, c
+    tr.reset(3)
+    at_once = tr.correlate(tr.rng.standard_normal((20000, 3)))
+    assert np.array_equal(at_once, steps)
+    white = ActionTransformer(spec, sgat, inv, method="sgat", alpha=1.0)
+    z = np.random.default_rng(0).standard_normal((100, 3))
+    assert np.array_equal(white.correlate(z.copy()), z)
+    s, a = np.zeros(3), np.array([0.3, -0.2])
+    tr.reset(5)
+    first = [tr.transform(s, a) for _ in range(5)]
+    tr.save(tmp_path)
+    back = ActionTransformer.load(tmp_path)
+    assert back.noise_memory == 10.0
+    back.reset(5)
+    assert np.array_equal(np.array([back.transform(s, a) for _ in range(5)]), np.array(first))
+    with pytest.raises(ValueError, match="noise_memory"):
+        ActionTransformer(spec, sgat, inv, method="sgat", alpha=1.0, noise_memory=-1)

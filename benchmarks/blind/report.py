@@ -62,8 +62,9 @@ def metrics(rows: list[dict]) -> dict:
     }
 
 
-def summarize(rows: list[dict], world: str, classes=None) -> str:
-    """Markdown tables of the benchmark results."""
+def summarize(rows: list[dict], world: str, classes=None, noise_mrad: float | None = None) -> str:
+    """Markdown tables of the benchmark results; ``noise_mrad``: the trial logs' encoder noise
+    (default: the benchmark's 1 mrad)."""
     single = [r for r in rows if r["kind"] == "single"]
     two = [r for r in rows if r["kind"] == "two"]
     L = [f"## sysid blind benchmark, world = {world} ({'MuJoCo sim-as-real' if world == 'sim' else 'PyBullet real'})", ""]
@@ -72,7 +73,7 @@ def summarize(rows: list[dict], world: str, classes=None) -> str:
         classes = classes or CLASSES[world]
         L.append(f"Single-effect trials: {len(single)} ({len(classes)} classes x {len(seeds)} seeds: {seeds}); "
                  f"{single[0]['n_logs']} logs x {single[0]['seconds']:g} s per trial "
-                 f"(train {single[0]['n_logs'] - 1}, held out 1), encoder noise {1000 * NOISE:g} mrad.")
+                 f"(train {single[0]['n_logs'] - 1}, held out 1), encoder noise {1000 * NOISE if noise_mrad is None else noise_mrad:g} mrad.")
         L.append("")
         top1 = np.mean([r["score"]["pred_top1"] == r["truth_class"] for r in single])
         none = [r for r in single if r["truth_class"] == "none"]
