@@ -29,10 +29,15 @@ def test_parse_world_options():
     assert not parse_world("identified:ground=0").identified_ground and not parse_world("identified:terms=0").identified_terms
     # a world's cache key changes with any setting, not with its name; options at their defaults hash as before
     assert parse_world("sgat").key == parse_world("sgat:alpha=0.5:ensemble=5").key != parse_world("sgat:alpha=0.4").key
+    assert parse_world("sgat").key == parse_world("sgat:mixture=1:memory=0").key
+    m = parse_world("sgat:mixture=3:memory=0.5")
+    assert (m.grounding.components, m.grounding.noise_memory) == (3, pytest.approx(50.0))  # 0.5 s at 100 Hz
+    assert len({parse_world(w).key for w in ("sgat", "sgat:mixture=3", "sgat:memory=0.5", "sgat:mixture=3:memory=0.5")}) == 4
     for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
                        ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
                        ("sgat:real=0", "real_walks"), ("sgat:state=arms", "state"), ("hybrid:method=ane", "method"),
-                       ("identified:alpha=1", "unknown option")]:
+                       ("identified:alpha=1", "unknown option"), ("sgat:mixture=0", "components"),
+                       ("sgat:memory=-1", "noise_memory"), ("ane:mixture=2", "unknown option")]:
         with pytest.raises(ValueError, match=words):
             parse_world(bad)
     with pytest.raises(ValueError, match="repeats"):
