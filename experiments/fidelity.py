@@ -29,7 +29,7 @@ Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ens
 ``inverse_command`` (0/1), ``residual`` (0/1: sample only the variance the sim does not have),
 ``mixture`` (K: SGAT's forward model a mixture of K Gaussians, a mixture density network),
 ``memory`` (τ [s]: SGAT's sampling noise correlated over τ, an AR(1) process; 0: white),
-``hidden`` (e.g. ``128x128``), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
+``hidden`` (e.g. ``128x128``; ``0``: linear models), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
 ``history`` (frames of state the models see); ``method`` (sgat/gat) for ``hybrid``; of ``ane``: ``sigma``;
@@ -176,7 +176,9 @@ def parse_world(text: str) -> WorldSpec:
                 elif k == "inverse_command":
                     gkw["inverse_command"] = bool(int(v))
                 elif k == "hidden":
-                    gkw["hidden"] = tuple(int(h) for h in v.split("x"))
+                    gkw["hidden"] = () if v == "0" else tuple(int(h) for h in v.split("x"))  # 0: linear models
+                    if any(h < 1 for h in gkw["hidden"]):
+                        raise ValueError(f"world {text!r}: unknown option value hidden={v!r} (e.g. 64x64, or 0: linear)")
                 elif k == "epochs":
                     gkw["max_epochs"] = int(v)
                 elif k == "real":
