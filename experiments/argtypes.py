@@ -84,6 +84,20 @@ workers = Number(int, 1, 256)
 fraction = Number(float, 0.0, 1.0)
 
 
+def hidden_layers(text: str) -> tuple[int, ...]:
+    """Hidden layer sizes of the grounding models: ``64x64`` -> (64, 64); ``0`` -> () (linear models)."""
+    t = str(text).strip().lower()
+    if t == "0":
+        return ()
+    try:
+        sizes = tuple(int(h) for h in t.split("x"))
+    except ValueError:
+        sizes = ()
+    if not sizes or any(not 1 <= h <= 4096 for h in sizes):
+        raise argparse.ArgumentTypeError(f"hidden layers must look like 64x64 (sizes 1 to 4096) or 0 (linear), got {text!r}")
+    return sizes
+
+
 def _nearest_existing(path: str) -> str:
     p = os.path.abspath(path)
     while not os.path.exists(p):

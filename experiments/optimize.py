@@ -129,6 +129,8 @@ class OptimizeConfig:
                      "episodes_per_candidate", "select_episodes", "history", "model_epochs", "ensemble"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if any(int(h) < 1 for h in self.hidden):
+            raise ValueError(f"hidden layer sizes must be >= 1 (an empty list: linear models), got {list(self.hidden)}")
         if int(self.eval_trials) < 0:
             raise ValueError(f"eval_trials must be >= 0 (0: no real evaluation), got {self.eval_trials}")
         if self.popsize < 2:

@@ -90,6 +90,15 @@ def _fidelity(res: dict) -> str:
     if targets:
         lines += ["", "SGAT against the targets of the grounding issue:", ""]
         lines += [f"* {'met' if ok else '**not met**'}: {t} — {v}" for t, ok, v in targets]
+    variants = [n for n in res["worlds"] if n.startswith("sgat:")]
+    if targets and variants:
+        lines += ["", "The SGAT variants against the same targets (✓ met, ✗ not met):", "",
+                  "| world | " + " | ".join(t.replace("|", "\\|") for t, _, _ in targets) + " |",
+                  "|---|" + "---|" * len(targets)]
+        for n in variants:
+            tv = fidelity_targets(res, n)
+            lines.append(f"| `{n}` | " + " | ".join(
+                ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
     if res.get("wall_s") is not None:
         lines += ["", f"The run took {res['wall_s'] / 60:.1f} min."]
     return "\n".join(lines)

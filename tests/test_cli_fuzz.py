@@ -37,6 +37,8 @@ def _cases():
                 bad = ["<missing>", "<dir>"]
             elif t is A.in_path:
                 bad = ["<missing>"]
+            elif t is A.hidden_layers:
+                bad = ["0x3", "64x", "abc", "-1"]
             else:
                 continue
             for v in bad:
@@ -98,6 +100,14 @@ def test_bad_combinations_are_one_line_exit_2(argv, needle, tmp_path, monkeypatc
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "error:" in lines[0] and needle in lines[0], err
     assert not new, f"left behind: {sorted(new)}"
+
+
+def test_hidden_layers_option():
+    """--hidden of optimize/table1: sizes joined by x, or 0 for linear grounding models."""
+    assert A.hidden_layers("64x64") == (64, 64) and A.hidden_layers("0") == () and A.hidden_layers("16") == (16,)
+    for bad in ("", "0x3", "64x", "x", "5000"):
+        with pytest.raises(argparse.ArgumentTypeError, match="hidden"):
+            A.hidden_layers(bad)
 
 
 def test_help_exits_0(capsys):

@@ -303,3 +303,23 @@ def test_sgat_noise_with_memory_is_a_stationary_ar1_process(fitted, tmp_path):
     assert np.array_equal(np.array([back.transform(s, a) for _ in range(5)]), np.array(first))
     with pytest.raises(ValueError, match="noise_memory"):
         ActionTransformer(spec, sgat, inv, method="sgat", alpha=1.0, noise_memory=-1)
+
+
+def test_linear_models_recover_a_linear_map(tmp_path):
+    """hidden=(): the forward model is linear in (s, a) (mean and log σ), the inverse model linear in
+    (s, Δs); on a linear system both recover the map, and they save and load."""
+    s, a, ds = synthetic(4000, 0)
+    fwd = ForwardModel(3, 2, stochastic=True, hidden=())
+    fwd.fit(np.hstack([s, a]), ds, seed=0, lr=3e-3)
+    s2, a2, _ = synthetic(500, 5)
+    mu, std = fwd.predict(np.hstack([s2, a2]))
+    assert np.abs(mu - a2 @ M.T).max() < 0.05
+    assert np.all(np.abs(std.mean(0) / SIGMA - 1) < 0.1)
+    s3, a3, ds3 = synthetic(3000, 1, noise=False)
+    inv = InverseModel(3, 2, hidden=())
+    inv.fit(np.hstack([s3, ds3]), a3, seed=0, lr=3e-3)
+    s4, a4, ds4 = synthetic(500, 6, noise=False)
+    assert np.sqrt(((inv.predict(np.hstack([s4, ds4])) - a4) ** 2).mean()) < 0.02
+    fwd.save(tmp_path / "f.pt")
+    back = ForwardModel.load(tmp_path / "f.pt")
+    assert back.hidden == () and np.array_equal(back.predict(np.hstack([s2, a2]))[0], mu)
