@@ -165,7 +165,10 @@ def _table1(res: dict) -> str:
         lines.append(f"| {t['step']} | {t['a'].upper()} vs {'θ0' if t['b'] == 'theta0' else t['b'].upper()} | "
                      f"{f['mean_diff']:+.2f} ± {f['se_diff']:.2f} (p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} "
                      f"(p = {x['p_value']:.2g}) |")
-    lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
+    if res["verdict"]:
+        lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
+    if res.get("wall_s"):
+        lines += ["", f"The run took {res['wall_s'] / 60:.0f} min."]
     return "\n".join(lines)
 
 
