@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.special import ndtr
+from scipy.special import log_softmax, ndtr
 from torch import nn
 from common.files import atomic_path
 
@@ -288,12 +288,7 @@ class ForwardModel(_Model):
             logw = torch.log_softmax(out[..., 2 * K * S:], -1) if K > 1 else torch.zeros(*lead, 1, dtype=out.dtype)
         else:
             log_std = np.clip(log_std, LOG_STD_MIN, LOG_STD_MAX)
-            if K > 1:
-                z = out[..., 2 * K * S:]
-                z = z - z.max(-1, keepdims=True)
-                logw = z - np.log(np.exp(z).sum(-1, keepdims=True))
-            else:
-                logw = np.zeros((*lead, 1))
+            logw = log_softmax(out[..., 2 * K * S:], -1) if K > 1 else np.zeros((*lead, 1))
         return mu, log_std, logw
 
     def _loss(self, out, y):
@@ -309,7 +304,7 @@ class ForwardModel(_Model):
 
     def mixture(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Weights (..., K), means (..., K, S) and standard deviations (..., K, S) of Δs
-        (unnormalised). GAT: one component of zero width.
+        (unnormalised); one Gaussian is a mixture of K = 1.
 
         Raises:
             ValueError: the model is deterministic (GAT).
