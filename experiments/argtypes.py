@@ -84,8 +84,12 @@ workers = Number(int, 1, 256)
 fraction = Number(float, 0.0, 1.0)
 
 
-def hidden_layers(text: str) -> tuple[int, ...]:
-    """Hidden layer sizes of the grounding models: ``64x64`` -> (64, 64); ``0`` -> () (linear models)."""
+def parse_hidden(text: str) -> tuple[int, ...]:
+    """Hidden layer sizes of the grounding models: ``64x64`` -> (64, 64); ``0`` -> () (linear models).
+
+    Raises:
+        ValueError: anything else (sizes outside 1..4096, empty parts).
+    """
     t = str(text).strip().lower()
     if t == "0":
         return ()
@@ -94,8 +98,16 @@ def hidden_layers(text: str) -> tuple[int, ...]:
     except ValueError:
         sizes = ()
     if not sizes or any(not 1 <= h <= 4096 for h in sizes):
-        raise argparse.ArgumentTypeError(f"hidden layers must look like 64x64 (sizes 1 to 4096) or 0 (linear), got {text!r}")
+        raise ValueError(f"hidden layers must look like 64x64 (sizes 1 to 4096) or 0 (linear), got {text!r}")
     return sizes
+
+
+def hidden_layers(text: str) -> tuple[int, ...]:
+    """:func:`parse_hidden` as an argparse type (``--hidden`` of optimize and table1)."""
+    try:
+        return parse_hidden(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _nearest_existing(path: str) -> str:

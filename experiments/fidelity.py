@@ -58,6 +58,7 @@ import numpy as np
 
 from common.defaults import CONTROL_DT, EPISODE_SECONDS
 from common.files import WallClock, atomic_path, atomic_write_text, jsonable
+from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
 from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 from experiments.identify import calibrate_engines, identify_real
@@ -176,9 +177,7 @@ def parse_world(text: str) -> WorldSpec:
                 elif k == "inverse_command":
                     gkw["inverse_command"] = bool(int(v))
                 elif k == "hidden":
-                    gkw["hidden"] = () if v == "0" else tuple(int(h) for h in v.split("x"))  # 0: linear models
-                    if any(h < 1 for h in gkw["hidden"]):
-                        raise ValueError(f"world {text!r}: unknown option value hidden={v!r} (e.g. 64x64, or 0: linear)")
+                    gkw["hidden"] = parse_hidden(v)  # 0: linear models
                 elif k == "epochs":
                     gkw["max_epochs"] = int(v)
                 elif k == "real":

@@ -318,13 +318,13 @@ class ForwardModel(_Model):
     def predict(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Mean and standard deviation of Δs (unnormalised), each (..., S); std is 0 for GAT. For a
         mixture: its mean and the standard deviation of the whole mixture (law of total variance)."""
-        if not self.stochastic:
-            p = self.numpy_params()
-            mu = self._raw(X) * p["y_std"] + p["y_mean"]
-            return mu, np.zeros_like(mu)
+        if self.components == 1:  # GAT or one Gaussian: the per-step hot path, plain slices
+            out, p = self._raw(X), self.numpy_params()
+            mu = out[..., :self.n_out] * p["y_std"] + p["y_mean"]
+            if not self.stochastic:
+                return mu, np.zeros_like(mu)
+            return mu, np.exp(np.clip(out[..., self.n_out:], LOG_STD_MIN, LOG_STD_MAX)) * p["y_std"]
         w, mu, sd = self.mixture(X)
-        if self.components == 1:
-            return mu[..., 0, :], sd[..., 0, :]
         m = np.einsum("...k,...ks->...s", w, mu)
         var = np.einsum("...k,...ks->...s", w, sd ** 2 + mu ** 2) - m ** 2
         return m, np.sqrt(np.maximum(var, 0.0))
@@ -333,12 +333,11 @@ class ForwardModel(_Model):
         """A sample of Δs from standard normal draws ``z`` (..., :attr:`noise_dim`): μ + σ z for one
         Gaussian; for a mixture, the component whose cumulative weight first exceeds Φ(z[..., 0])
         (inverse-CDF sampling) and then its μ_k + σ_k z[..., 1:]. The mean for GAT."""
-        if not self.stochastic:
-            return self.predict(X)[0]
+        if self.components == 1:
+            mu, sd = self.predict(X)
+            return mu if not self.stochastic else mu + sd * np.asarray(z, dtype=np.float64)
         w, mu, sd = self.mixture(X)
         z = np.asarray(z, dtype=np.float64)
-        if self.components == 1:
-            return mu[..., 0, :] + sd[..., 0, :] * z
         u = ndtr(z[..., 0])  # uniform on (0, 1)
         k = np.minimum((np.cumsum(w, -1) <= u[..., None]).sum(-1), self.components - 1)
         pick = np.take_along_axis
