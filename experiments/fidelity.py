@@ -573,7 +573,8 @@ def plot(res: dict, path: str) -> None:
     n = len(worlds)
     cols = min(3, n)
     rows = int(math.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.8 * rows), squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.8 * rows), squeeze=False,
+                             layout="constrained")  # leaves room for the suptitle (tight_layout does not)
     real = np.array(res["real"]["fitness"])
     se = np.array(res["real"]["fitness_se"])
     lo = min(real.min(), min(min(d["fitness"]) for _, w in worlds for d in w["draws"])) - 2
@@ -595,7 +596,6 @@ def plot(res: dict, path: str) -> None:
         ax.axis("off")
     fig.suptitle(f"fidelity: {len(real)} gaits, fitness = speed [cm/s] − 15 per fall; ceiling ρ "
                  f"{res['real']['ceiling']:.2f}", fontsize=10)
-    fig.tight_layout()
     with atomic_path(path, suffix=".png") as tmp:
         fig.savefig(tmp, dpi=110)
     plt.close(fig)
