@@ -55,7 +55,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--inverse-command", dest="inverse_command", action="store_true", default=None,
                    help="the inverse model also sees the commanded action (default off)")
     p.add_argument("--hidden", type=A.hidden_layers, help="hidden layers of the forward and inverse models, e.g. 64x64 "
-                   "(default); 0: linear models (README, sgatwalk fidelity: the second round of SGAT variants)")
+                   "(the paper's tanh networks); 0: linear models (default; README, sgatwalk fidelity)")
     p.add_argument("--model-epochs", type=A.count(1, 100000), help=f"max training epochs of each model (default {d.model_epochs})")
     p.add_argument("--no-aggregate", dest="aggregate", action="store_false", default=None,
                    help="fit each grounding step's models on θ_i's walks only (default: on the walks of "

@@ -34,8 +34,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--generations", type=A.count(1, 10000), help="CMA-ES generations per grounding step (default: optimize's)")
     p.add_argument("--grounding-steps", type=A.count(1, 100), help="grounding steps (default: optimize's)")
     p.add_argument("--seconds", type=A.seconds, help="episode length [s] (default 7.5)")
-    p.add_argument("--hidden", type=A.hidden_layers, help="hidden layers of the grounding models (default: optimize's, "
-                   "64x64; 0: linear)")
+    p.add_argument("--hidden", type=A.hidden_layers, help="hidden layers of the grounding models, e.g. 64x64 "
+                   "(default: optimize's, 0 = linear)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", help="run episodes on a Ray cluster")

@@ -86,11 +86,12 @@ def _fidelity(res: dict) -> str:
                      f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "
                      f"{_f(s['brier']['median'], '{:.3f}')} [{_f(s['brier']['min'], '{:.3f}')}, "
                      f"{_f(s['brier']['max'], '{:.3f}')}] | {', '.join(data) or 'none'} |")
-    targets = fidelity_targets(res)
+    ref = _first_world(res, "sgat")
+    targets = fidelity_targets(res, ref) if ref else []
     if targets:
-        lines += ["", "SGAT against the targets of the grounding issue:", ""]
+        lines += ["", f"SGAT (`{ref}`) against the targets of the grounding issue:", ""]
         lines += [f"* {'met' if ok else '**not met**'}: {t} — {v}" for t, ok, v in targets]
-    variants = [n for n in res["worlds"] if n.startswith("sgat:")]
+    variants = [n for n, w in res["worlds"].items() if w.get("kind") == "sgat" and n != ref]
     if targets and variants:
         lines += ["", "The SGAT variants against the same targets (✓ met, ✗ not met):", "",
                   "| world | " + " | ".join(t.replace("|", "\\|") for t, _, _ in targets) + " |",
@@ -117,9 +118,16 @@ def _optimize(res: dict) -> str:
     return "\n".join(lines)
 
 
+def _first_world(res: dict, kind: str) -> str | None:
+    """The first world of ``kind`` that a fidelity result lists (its reference world of that kind:
+    the others are variants), or None."""
+    return next((n for n, w in res["worlds"].items() if w.get("kind", n.split(":")[0]) == kind), None)
+
+
 def fidelity_targets(res: dict, world: str = "sgat") -> list[tuple[str, bool, str]]:
     """The issue's targets for a grounded world (default SGAT) on a fidelity result:
-    ``[(target, met, measured)]``; empty if the world is not in the result."""
+    ``[(target, met, measured)]``, compared with the plain sim and the first GAT world listed;
+    empty if the world is not in the result."""
     if world not in res["worlds"]:
         return []
     w = res["worlds"][world]
@@ -131,15 +139,16 @@ def fidelity_targets(res: dict, world: str = "sgat") -> list[tuple[str, bool, st
            ("median |bias| ≤ 2 fitness points", w["summary"]["abs_bias_median"] <= 2,
             f"{w['summary']['abs_bias_median']:.1f}"),
            ("bias spread over the draws ≤ 4", w["summary"]["bias"]["spread"] <= 4, f"{w['summary']['bias']['spread']:.1f}")]
-    for other in ("sim", "gat"):
-        if other in res["worlds"]:
+    gat = _first_world(res, "gat")
+    for label, other in (("SIM", "sim" if "sim" in res["worlds"] else None), ("GAT", gat)):
+        if other:
             ob = res["worlds"][other]["draws"]
             ref = [ob[min(i, len(ob) - 1)]["brier"] for i in range(len(draws))]
             ok = all(d["brier"] < r for d, r in zip(draws, ref))
-            out.append((f"Brier below {other.upper()}'s on every draw", ok,
+            out.append((f"Brier below {label}'s on every draw", ok,
                         ", ".join(f"{d['brier']:.3f} vs {r:.3f}" for d, r in zip(draws, ref))))
-    if "gat" in res["worlds"]:
-        g = res["worlds"]["gat"]["draws"]
+    if gat:
+        g = res["worlds"][gat]["draws"]
         ok = all(d["rho"] >= e["rho"] for d, e in zip(draws, g))
         out.append(("ρ ≥ GAT's on every draw", ok, ", ".join(f"{d['rho']:.2f} vs {e['rho']:.2f}" for d, e in zip(draws, g))))
     return out
@@ -341,6 +350,8 @@ def render(text: str, results_dir: str = RESULTS) -> str:
         if mach:
             body += (f"\n<sub>Saved by a run on {mach['cpus']} cores; 1-minute load average {mach['load_before']:.1f} at "
                      f"its start, {mach['load_after']:.1f} at its end (for a resumed run: of its last invocation).</sub>\n")
+        if doc.get("relabelled"):
+            body += f"\n<sub>{doc['relabelled']}</sub>\n"
         return m.group(1) + body + m.group(4)
 
     return _BLOCK.sub(block, text)

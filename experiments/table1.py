@@ -14,8 +14,9 @@ every resulting gait scored on the same paired real trials, and paired tests bet
    SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?), and every
    method vs θ0.
 
-Everything resumes: the optimization runs from their checkpoints, the evaluation from
-``episodes.jsonl``.
+The result keeps every gait's real trials (``trials``: fitness and falls per trial seed), so a later
+run on the same trial seeds can be paired with it trial by trial. Everything resumes: the
+optimization runs from their checkpoints, the evaluation from ``episodes.jsonl``.
 """
 
 from __future__ import annotations
@@ -170,8 +171,12 @@ class Table1:
             for m in cfg.methods:
                 tests.append({"step": st, "a": m, "b": "theta0", **paired([f"{m}|{st}|{s}" for s in range(cfg.seeds)],
                                                                           ["theta0"] * cfg.seeds)})
+        # every gait's real trials (index j = trial seed j of the table), so a later run on the same trial
+        # seeds can be paired with this one trial by trial
+        trials = {g: {"fitness": [round(float(x), 4) for x in self._vec(g, "fitness")],
+                      "fell": [int(x) for x in self._vec(g, "fell")]} for g in ["theta0", *sorted(set(gaits) - {"theta0"})]}
         return {"config": cfg.to_dict(), "rows": rows, "tests": tests, "real_data": real_data,
-                "verdict": verdict(rows, tests)}
+                "verdict": verdict(rows, tests), "trials": trials}
 
 
 def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:

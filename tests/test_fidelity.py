@@ -92,6 +92,13 @@ def test_table1_resumes_after_sigkill(tmp_path):
     assert [(r["method"], r["step"]) for r in a["rows"]] == [("theta0", 0), ("sgat", 1), ("none", 1)]
     assert a["rows"][1]["n"] == 2 * 3 and a["rows"][0]["n"] == 3
     assert {(t["a"], t["b"]) for t in a["tests"]} == {("sgat", "none"), ("sgat", "theta0"), ("none", "theta0")}
+    # the per-trial record (for pairing a later run trial by trial) is what the rows pool
+    tr = a["trials"]
+    assert set(tr) == {"theta0", "sgat|1|0", "sgat|1|1", "none|1|0", "none|1|1"}
+    assert all(len(v["fitness"]) == len(v["fell"]) == 3 for v in tr.values())
+    sg = tr["sgat|1|0"]["fitness"] + tr["sgat|1|1"]["fitness"]
+    assert np.mean(sg) == pytest.approx(a["rows"][1]["fitness_mean"], abs=1e-3)
+    assert sum(tr["sgat|1|0"]["fell"] + tr["sgat|1|1"]["fell"]) == a["rows"][1]["falls"]
     run = tmp_path / "killed"
     cmd = [sys.executable, "-m", "experiments.cli", "table1", *T1, "--out", str(run), "--json"]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT), stdout=subprocess.DEVNULL,
@@ -105,5 +112,5 @@ def test_table1_resumes_after_sigkill(tmp_path):
     assert not (run / "table1.json").exists()
     assert main(["table1", *T1, "--out", str(run), "--json"]) == 0
     b = json.loads((run / "table1.json").read_text())
-    assert a["rows"] == b["rows"] and a["tests"] == b["tests"]
+    assert a["rows"] == b["rows"] and a["tests"] == b["tests"] and a["trials"] == b["trials"]
     assert np.isfinite(b["rows"][1]["fitness_mean"])

@@ -26,3 +26,29 @@ def test_render_fills_a_block_from_its_results_file(tmp_path):
     with pytest.raises(KeyError):
         readme.render("<!-- results:nope -->\n<!-- /results:nope -->", results_dir=str(tmp_path))
     json.loads((tmp_path / "table1-x.json").read_text())
+
+
+def _world(kind, rhos, briers, bias=1.0, spread=2.0):
+    return {"kind": kind, "draws": [{"rho": r, "brier": b} for r, b in zip(rhos, briers)],
+            "summary": {"abs_bias_median": bias, "bias": {"spread": spread}}}
+
+
+def test_fidelity_targets_compare_with_the_first_gat_world_listed():
+    """The reference SGAT and GAT worlds of a fidelity block are the first of their kind listed (the
+    others are variants), whatever their names: a relabelled `gat:hidden=64x64` is GAT's reference."""
+    res = {"real": {"ceiling": 0.9}, "worlds": {
+        "sim": _world("sim", [0.4], [0.40]),
+        "gat:hidden=64x64": _world("gat", [0.5, 0.6], [0.30, 0.20]),
+        "sgat:hidden=64x64": _world("sgat", [0.85, 0.7], [0.25, 0.30], bias=1.5, spread=5.0),
+        "sgat": _world("sgat", [0.9, 0.95], [0.10, 0.15]),
+        "gat": _world("gat", [0.99, 0.99], [0.01, 0.01])}}
+    assert readme._first_world(res, "sgat") == "sgat:hidden=64x64" and readme._first_world(res, "gat") == "gat:hidden=64x64"
+    assert readme._first_world(res, "hybrid") is None
+    t = {txt: ok for txt, ok, _ in readme.fidelity_targets(res, "sgat")}
+    assert t["worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling"] and t["median |bias| ≤ 2 fitness points"]
+    assert t["Brier below SIM's on every draw"] and t["Brier below GAT's on every draw"] and t["ρ ≥ GAT's on every draw"]
+    t = {txt: ok for txt, ok, _ in readme.fidelity_targets(res, "sgat:hidden=64x64")}
+    assert not t["worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling"] and not t["bias spread over the draws ≤ 4"]
+    assert t["Brier below SIM's on every draw"] and not t["Brier below GAT's on every draw"]  # 0.30 vs GAT's 0.20
+    assert t["ρ ≥ GAT's on every draw"]
+    assert readme.fidelity_targets(res, "ane") == []
