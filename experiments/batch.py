@@ -124,6 +124,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         eps = [copy.copy(tr) for _ in range(B)]
         spec = tr.spec
         H = np.empty((B, spec.history, spec.state_dim))
+        P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
         Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
     params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
     engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
@@ -157,8 +158,15 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         act = cmd.copy()
         if grounded:
             ai = spec.action_index
+            past = None
+            if P is not None:
+                if k == 0:  # padded with the first command, as sgat.GroundedEnv and sgat.grounding.stack_past
+                    P[idx] = cmd[:, ai][:, None]
+                past = P[idx].reshape(len(idx), -1)
             act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
-                                               None if Z is None else Z[idx, k])
+                                               None if Z is None else Z[idx, k], past)
+            if P is not None:
+                P[idx] = np.concatenate([P[idx, 1:], cmd[:, ai][:, None]], axis=1)
         actions[idx] = act
         for j in np.flatnonzero(noisy[idx]).tolist():
             actions[idx[j]] = noise[idx[j]].perturb(act[j])

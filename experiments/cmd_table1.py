@@ -36,6 +36,10 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=A.seconds, help="episode length [s] (default 7.5)")
     p.add_argument("--hidden", type=A.hidden_layers, help="hidden layers of the grounding models, e.g. 64x64 "
                    "(default: optimize's, 0 = linear)")
+    p.add_argument("--history", type=A.count(1, 10), help="frames of state history the grounding models see "
+                   "(default: optimize's)")
+    p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
+                   "pair every row with it (e.g. another grounding setting)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
     p.add_argument("--ray-address", help="run episodes on a Ray cluster")
@@ -45,9 +49,10 @@ def register(sub) -> argparse.ArgumentParser:
 def run(args) -> dict:
     opt = {k: v for k, v in (("popsize", args.popsize), ("generations", args.generations),
                              ("grounding_steps", args.grounding_steps), ("seconds", args.seconds),
-                             ("hidden", None if args.hidden is None else list(args.hidden))) if v is not None}
+                             ("hidden", None if args.hidden is None else list(args.hidden)),
+                             ("history", args.history)) if v is not None}
     cfg = Table1Config(methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()), seeds=args.seeds,
-                       trials=args.trials, seed=args.seed, optimize=opt)
+                       trials=args.trials, seed=args.seed, optimize=opt, baseline=args.baseline)
     cfg.validate()
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731 - progress on stderr, also with --json
     with make_executor(args.workers, args.ray_address) as ex:

@@ -32,7 +32,8 @@ Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ens
 ``hidden`` (e.g. ``128x128``; ``0``: linear models), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
-``history`` (frames of state the models see); ``method`` (sgat/gat) for ``hybrid``; of ``ane``: ``sigma``;
+``history`` (frames of state the models see), ``commands`` (c: the forward model also sees the c
+previous commands, so the transformer can represent an actuation latency); ``method`` (sgat/gat) for ``hybrid``; of ``ane``: ``sigma``;
 of ``identified``: ``terms=0`` (only the identified ground) or ``ground=0`` (only the deterministic
 effects), to see which part of the identified physics carries its fidelity.
 
@@ -60,7 +61,7 @@ from common.defaults import CONTROL_DT, EPISODE_SECONDS
 from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
-from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
+from experiments.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 from experiments.identify import calibrate_engines, identify_real
 from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
 from experiments.tasks import fit_grounding_task
@@ -97,9 +98,13 @@ class WorldSpec:
     data_gaits: int = 1
     sigma: float = 0.05  # ane
     state: str = "legs"  # grounding state (experiments.grounding.nao_spec)
-    history: int = 1  # frames of state history the models see
+    history: int | None = None  # frames of state history the models see (None: DEFAULT_HISTORY if grounded, else 1)
     identified_terms: bool = True  # identified: the deterministic effects (ablation switch)
     identified_ground: bool = True  # identified: the uneven ground (ablation switch)
+
+    def __post_init__(self) -> None:
+        if self.history is None:
+            object.__setattr__(self, "history", DEFAULT_HISTORY if self.grounded else 1)
 
     @property
     def key(self) -> str:
@@ -151,7 +156,7 @@ def parse_world(text: str) -> WorldSpec:
                 kw[f"identified_{k}"] = bool(int(v))
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory",
-                                                              "gaits", "state", "history"):
+                                                              "gaits", "state", "history", "commands"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
                 elif k == "method":
@@ -166,6 +171,8 @@ def parse_world(text: str) -> WorldSpec:
                     kw["history"] = int(v)
                 elif k == "mixture":
                     gkw["components"] = int(v)
+                elif k == "commands":
+                    gkw["command_history"] = int(v)
                 elif k == "memory":  # seconds -> control steps
                     gkw["noise_memory"] = float(v) / CONTROL_DT
                 elif k == "residual":

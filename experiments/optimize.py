@@ -69,7 +69,7 @@ from common.files import atomic_path
 from common.files import atomic_write_bytes as _atomic_write
 from envs import Recording
 from experiments.batch import expected_generation_seconds, map_episodes
-from experiments.grounding import (DEFAULT_GROUNDING, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS,
+from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS,
                                    fit_nao_grounding)
 from experiments.identify import calibrate_engines, identify_real
 from sgat.algorithm import grounding_loop, new_progress
@@ -103,7 +103,7 @@ class OptimizeConfig:
     eval_trials: int = 10
     profile: str = "real"
     grounding_state: str = "legs"
-    history: int = 1
+    history: int = DEFAULT_HISTORY
     alpha: float = DEFAULT_GROUNDING.alpha
     hybrid_alpha: float = HYBRID_GROUNDING.alpha
     ensemble: int = DEFAULT_GROUNDING.ensemble

@@ -174,6 +174,16 @@ def _table1(res: dict) -> str:
         lines.append(f"| {t['step']} | {t['a'].upper()} vs {'θ0' if t['b'] == 'theta0' else t['b'].upper()} | "
                      f"{f['mean_diff']:+.2f} ± {f['se_diff']:.2f} (p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} "
                      f"(p = {x['p_value']:.2g}) |")
+    if res.get("baseline"):
+        b = res["baseline"]
+        lines += ["", f"Against the baseline run (`{b.get('command') or b['path']}`; the same optimization seeds and "
+                  "real trials, pairs = seed × trial; a difference > 0: this run's gaits are fitter):", "",
+                  "| step | method | fitness difference (paired permutation p) | falls: only this run / only the baseline (McNemar p) |",
+                  "|---|---|---|---|"]
+        for t in b["tests"]:
+            f, x = t["fitness"], t["falls"]
+            lines.append(f"| {t['step']} | {t['method'].upper()} | {f['mean_diff']:+.2f} ± {f['se_diff']:.2f} "
+                         f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |")
     if res["verdict"]:
         lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
     if res.get("wall_s"):

@@ -15,7 +15,9 @@ every resulting gait scored on the same paired real trials, and paired tests bet
    method vs θ0.
 
 The result keeps every gait's real trials (``trials``: fitness and falls per trial seed), so a later
-run on the same trial seeds can be paired with it trial by trial. Everything resumes: the
+run on the same trial seeds can be paired with it trial by trial: with ``baseline`` (an earlier
+run's ``table1.json``, e.g. another grounding setting) every (method, step) both runs have is tested
+against the baseline's gait of the same optimization seed on the same trials (:func:`compare_runs`). Everything resumes: the
 optimization runs from their checkpoints, the evaluation from ``episodes.jsonl``.
 """
 
@@ -49,6 +51,7 @@ class Table1Config:
     trials: int = 30
     seed: int = 0
     optimize: dict = dataclasses.field(default_factory=dict)  # OptimizeConfig overrides (e.g. popsize)
+    baseline: str | None = None  # an earlier run's table1.json to pair every row with (compare_runs)
 
     def validate(self) -> None:
         from experiments.optimize import METHODS, OptimizeConfig  # lazy: loads torch and the engines; keeps sgatwalk --help fast
@@ -62,6 +65,8 @@ class Table1Config:
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         OptimizeConfig(**{**self.optimize, "methods": tuple(self.methods)}).validate()
+        if self.baseline is not None:
+            load_baseline(self.baseline, self)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -85,7 +90,8 @@ class Table1:
 
     def _check_config(self) -> None:
         """Claim the run directory (``experiments.episodes.EpisodeLog``); more seeds reuse what was done."""
-        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=("seeds",), say=self._say)
+        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=("seeds", "baseline"),
+                               say=self._say)
         self._episodes = self._log.done
 
     def _optimize(self, s: int) -> dict:
@@ -124,6 +130,10 @@ class Table1:
         self._say(f"real evaluation: {len(gaits)} gaits x {cfg.trials} paired trials")
         self._log.run(self.ex, tasks, "real evaluation", progress=self.progress)
         out = self.result(gaits, real_data, predicted)
+        if cfg.baseline is not None:
+            out["baseline"] = {"path": cfg.baseline, "command": load_baseline(cfg.baseline, cfg).get("command"),
+                               "tests": compare_runs(out, load_baseline(cfg.baseline, cfg), seed=cfg.seed)}
+            out["verdict"] += baseline_verdict(out["baseline"]["tests"])
         out["wall_s"] = clock.save()
         atomic_write_text(os.path.join(self.run_dir, "table1.json"), json.dumps(jsonable(out), indent=1))
         atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(out) + "\n")
@@ -179,6 +189,80 @@ class Table1:
                 "verdict": verdict(rows, tests), "trials": trials}
 
 
+def load_baseline(path: str, cfg: Table1Config) -> dict:
+    """An earlier Table I result (``table1.json``, or a README result file holding one under ``result``)
+    that can be paired with a run of ``cfg``: the same real trial seeds (``seed``, ``trials``) and
+    per-trial results (``trials``).
+
+    Raises:
+        FileNotFoundError: no such file. ValueError: not a Table I result, without per-trial results,
+            or on other trial seeds (named).
+    """
+    with open(path) as f:
+        try:
+            doc = json.load(f)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"baseline {path!r} is not JSON: {exc}") from None
+    res = doc.get("result", doc) if isinstance(doc, dict) else None
+    if not isinstance(res, dict) or "rows" not in res or "config" not in res:
+        raise ValueError(f"baseline {path!r} is not a Table I result (table1.json)")
+    if "trials" not in res:
+        raise ValueError(f"baseline {path!r} has no per-trial results (made before table1.json kept them)")
+    bc = res["config"]
+    if (bc.get("seed"), bc.get("trials")) != (cfg.seed, cfg.trials):
+        raise ValueError(f"baseline {path!r} ran other real trials (seed {bc.get('seed')}, {bc.get('trials')} trials; "
+                         f"this run: seed {cfg.seed}, {cfg.trials}): its rows cannot be paired with this run's")
+    return {**res, "command": doc.get("command")}
+
+
+def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
+    """Paired tests of this run's rows against a baseline run's (:func:`load_baseline`): for every
+    (method, step) both runs have, the gaits of the optimization seeds both ran, each walked on the
+    same real trial seeds; pairs = (seed, trial). ``mean_diff`` > 0: this run's gaits are fitter.
+
+    Returns:
+        ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar}]``; θ0 is
+        checked, not tested: the same gait on the same trials must give the same results.
+
+    Raises:
+        ValueError: θ0's real trials differ between the runs (not the same trials after all).
+    """
+    a, b = res["trials"], base["trials"]
+    if a["theta0"] != b["theta0"]:
+        raise ValueError("θ0's real trials differ from the baseline's: the runs did not walk the same trials")
+    keys = sorted((k for k in a if k != "theta0" and k in b), key=lambda k: (k.split("|")[0], int(k.split("|")[1]),
+                                                                             int(k.split("|")[2])))
+    groups: dict[tuple, list[str]] = {}
+    for k in keys:
+        m, st, _ = k.split("|")
+        groups.setdefault((m, int(st)), []).append(k)
+    out = []
+    for (m, st), ks in groups.items():
+        fa = np.concatenate([a[k]["fitness"] for k in ks])
+        fb = np.concatenate([b[k]["fitness"] for k in ks])
+        xa = np.concatenate([a[k]["fell"] for k in ks])
+        xb = np.concatenate([b[k]["fell"] for k in ks])
+        out.append({"method": m, "step": st, "seeds": [int(k.split("|")[2]) for k in ks],
+                    "fitness": paired_permutation_test(fa, fb, seed=seed), "falls": mcnemar_test(xa, xb)})
+    return out
+
+
+def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:
+    """One sentence per (method, step) compared with the baseline run."""
+    out = []
+    for t in tests:
+        f, x = t["fitness"], t["falls"]
+        name = f"step {t['step']}: {t['method'].upper()} of this run"
+        if f["p_value"] < alpha:
+            out.append(f"{name} {'beats' if f['mean_diff'] > 0 else 'is worse than'} the baseline's on fitness by "
+                       f"{f['mean_diff']:+.1f} (paired permutation p = {f['p_value']:.3g}; falls {x['only_a']} vs "
+                       f"{x['only_b']} discordant, McNemar p = {x['p_value']:.3g})")
+        else:
+            out.append(f"{name}: no significant difference from the baseline's (fitness {f['mean_diff']:+.1f} ± "
+                       f"{f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g})")
+    return out
+
+
 def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:
     """One sentence per tested comparison, in words, whichever way it falls."""
     out = []
@@ -219,6 +303,12 @@ def format_table(res: dict) -> str:
         f, x = t["fitness"], t["falls"]
         lines.append(f"  step {t['step']}: {t['a']:>8s} vs {t['b']:<8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
                      f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})")
+    if res.get("baseline"):
+        lines += ["", f"against the baseline {res['baseline']['path']} (same gait seeds and trials; a = this run):"]
+        for t in res["baseline"]["tests"]:
+            f, x = t["fitness"], t["falls"]
+            lines.append(f"  step {t['step']}: {t['method']:>8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
+                         f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})")
     lines.append("")
     lines += [f"verdict: {v}" for v in res["verdict"]]
     return "\n".join(lines)

@@ -21,13 +21,15 @@ from sgat.transformer import METHODS, ActionTransformer, GroundingSpec
 
 @dataclass
 class Transitions:
-    """Stacked transitions: histories H (N, k*S), applied actions A (N, A), state changes dS (N, S)
-    and commanded actions C (N, A) (None: the applied ones)."""
+    """Stacked transitions: histories H (N, k*S), applied actions A (N, A), state changes dS (N, S),
+    commanded actions C (N, A) (None: the applied ones) and the c actions applied before each one,
+    P (N, c*A), oldest first (None: c = 0; :func:`stack_past`)."""
 
     H: np.ndarray
     A: np.ndarray
     dS: np.ndarray
     C: np.ndarray | None = None
+    P: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.H)
@@ -41,18 +43,41 @@ class Transitions:
         if not parts:
             raise ValueError("no transitions")
         C = None if all(p.C is None for p in parts) else np.concatenate([p.commands for p in parts])
-        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("H", "A", "dS")), C)
+        if len({p.past_commands for p in parts}) > 1:
+            raise ValueError("transitions with different numbers of past actions cannot be stacked")
+        P = None if parts[0].P is None else np.concatenate([p.P for p in parts])
+        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("H", "A", "dS")), C, P)
+
+    @property
+    def past_commands(self) -> int:
+        """c: the number of earlier actions each row holds in ``P``."""
+        return 0 if self.P is None else self.P.shape[1] // max(self.A.shape[1], 1)
+
+    def forward_input(self) -> np.ndarray:
+        """The forward model's input rows ``[H, P, A]`` (:class:`sgat.models.ForwardModel`), (N, k*S + (c+1)*A)."""
+        return np.concatenate([self.H] + ([] if self.P is None else [self.P]) + [self.A], 1)
+
+
+def stack_past(A: np.ndarray, c: int) -> np.ndarray:
+    """(T, A) actions of one trajectory -> (T, c*A): row t holds ``a_{t-c}, ..., a_{t-1}``, oldest
+    first, padded with ``a_0`` before the start (as the transformer pads at an episode's first step)."""
+    A = np.asarray(A, dtype=np.float64)
+    idx = np.clip(np.arange(len(A))[:, None] + np.arange(-c, 0)[None], 0, None)
+    return A[idx].reshape(len(A), -1)
 
 
 def trajectory_transitions(obs: np.ndarray, actions: np.ndarray, spec: GroundingSpec,
-                           commands: np.ndarray | None = None) -> Transitions:
+                           commands: np.ndarray | None = None, past: int = 0) -> Transitions:
     """Transitions of one trajectory: ``obs`` (T, n_obs) observed before each ``actions`` (T, n_act)
     was applied (row t of ``obs`` is s_t; the transition t -> t+1 uses actions[t]); ``commands``
-    (T, n_act): what the agent commanded (None: the applied actions).
+    (T, n_act): what the agent commanded (None: the applied actions); ``past``: how many earlier
+    applied actions each transition keeps (``P``, for a forward model with a command history).
 
     Raises:
-        ValueError: mismatched lengths or fewer than 2 steps.
+        ValueError: mismatched lengths, fewer than 2 steps or past < 0.
     """
+    if int(past) < 0:
+        raise ValueError(f"past must be >= 0, got {past}")
     obs = np.asarray(obs, dtype=np.float64)
     actions = np.asarray(actions, dtype=np.float64)
     if len(obs) != len(actions) or len(obs) < 2 or (commands is not None and len(commands) != len(obs)):
@@ -60,7 +85,9 @@ def trajectory_transitions(obs: np.ndarray, actions: np.ndarray, spec: Grounding
     S = spec.states(obs)
     H = spec.stack_history(S)
     C = None if commands is None else np.asarray(commands, dtype=np.float64)[:-1][:, spec.action_index]
-    return Transitions(H[:-1], actions[:-1][:, spec.action_index], S[1:] - S[:-1], C)
+    A = actions[:, spec.action_index]
+    P = stack_past(A, int(past))[:-1] if past else None
+    return Transitions(H[:-1], A[:-1], S[1:] - S[:-1], C, P)
 
 
 def recording_observations(rec, layout) -> np.ndarray:
@@ -75,9 +102,10 @@ def recording_observations(rec, layout) -> np.ndarray:
     return np.stack([rec.columns[n] for n in layout.names], axis=1)
 
 
-def recording_transitions(recs, layout, spec: GroundingSpec) -> Transitions:
-    """Transitions of ``envs.Recording``s: applied actions (``app``, else ``cmd``) and commands (``cmd``)."""
-    parts = [trajectory_transitions(recording_observations(r, layout), r.group("app"), spec, r.group("cmd"))
+def recording_transitions(recs, layout, spec: GroundingSpec, past: int = 0) -> Transitions:
+    """Transitions of ``envs.Recording``s: applied actions (``app``, else ``cmd``) and commands (``cmd``);
+    ``past``: earlier applied actions kept per transition (:func:`trajectory_transitions`)."""
+    parts = [trajectory_transitions(recording_observations(r, layout), r.group("app"), spec, r.group("cmd"), past)
              for r in recs if len(r) >= 2]
     return Transitions.concat(parts)
 
@@ -99,6 +127,11 @@ class GroundingConfig:
             Gaussian, as the paper.
         noise_memory: correlation time [control steps] of SGAT's sampling noise (0: white, as the
             paper; :class:`sgat.transformer.ActionTransformer`).
+        command_history: c, the forward model also sees the c actions commanded before ``a_t``
+            (:class:`sgat.models.ForwardModel` ``commands``). A one-step model f(s_t, a_t) cannot
+            represent an actuation latency: the real joint answers a command given some steps ago,
+            which neither s_t nor a_t shows; with the command history the transformer can (0: the
+            paper's one-step model).
         residual_noise: SGAT on a stochastic sim: also fit a stochastic forward model of the sim and
             sample the real forward model with the variance the sim does not already have
             (:class:`sgat.transformer.ActionTransformer` ``sim_forward``).
@@ -114,6 +147,7 @@ class GroundingConfig:
     residual_noise: bool = False
     components: int = 1
     noise_memory: float = 0.0
+    command_history: int = 0
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -130,12 +164,14 @@ class GroundingConfig:
             raise ValueError(f"components must be >= 1, got {self.components}")
         if not (np.isfinite(self.noise_memory) and self.noise_memory >= 0):
             raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {self.noise_memory}")
+        if int(self.command_history) < 0:
+            raise ValueError(f"command_history must be >= 0, got {self.command_history}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
-        for k, default in (("components", 1), ("noise_memory", 0.0)):  # added later: left out at their
+        for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0)):  # added later: left out at their
             if d[k] == default:                                            # defaults, so saved configs and
                 d.pop(k)                                                   # caches still match
         return d
@@ -168,15 +204,23 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     (rows drawn with replacement) with seeds ``seed + 7919 i`` (bagging: Breiman 1996; deep ensembles:
     Lakshminarayanan et al., NeurIPS 2017).
 
+    With ``cfg.command_history`` c > 0 both ``real`` and ``sim`` must hold c past actions per
+    transition (``recording_transitions(..., past=c)``).
+
     Raises:
-        ValueError: unusable data (see :meth:`sgat.models._Model.fit`).
+        ValueError: unusable data (see :meth:`sgat.models._Model.fit`), or transitions without the
+            past actions the config asks for.
     """
     S, A, k = spec.state_dim, spec.action_dim, spec.history
+    c = int(cfg.command_history)
+    if real.past_commands != c or (cfg.residual_noise and sim.past_commands != c):
+        raise ValueError(f"the config's command_history is {c} but the transitions hold {real.past_commands} "
+                         f"past actions (real) and {sim.past_commands} (sim): build them with past={c}")
     kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size}
-    Xf, Yf = np.concatenate([real.H, real.A], 1), real.dS
+    Xf, Yf = real.forward_input(), real.dS
     inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
-    Xs = np.concatenate([sim.H, sim.A], 1)  # the sim's own forward model: applied actions in, its spread out
+    Xs = sim.forward_input()  # the sim's own forward model: applied actions in, its spread out
     fwds, invs, sims, rf, ri = [], [], [], [], []
     for i in range(int(cfg.ensemble)):
         s = seed + 7919 * i
@@ -184,14 +228,14 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
         ii = np.arange(len(Xi)) if i == 0 else np.random.default_rng([s, 2]).integers(0, len(Xi), len(Xi))
         sgat = cfg.method == "sgat"
         fwd = ForwardModel(S, A, history=k, stochastic=sgat, hidden=cfg.hidden,
-                           components=int(cfg.components) if sgat else 1)
+                           components=int(cfg.components) if sgat else 1, commands=c)
         rf.append(fwd.fit(Xf[fi], Yf[fi], seed=s, **kw))
         inv = InverseModel(S, A, history=k, hidden=cfg.hidden, command_input=cfg.inverse_command)
         ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, **kw))
         fwds.append(fwd)
         invs.append(inv)
         if cfg.residual_noise and cfg.method == "sgat":
-            fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden)
+            fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden, commands=c)
             fs.fit(Xs[ii], sim.dS[ii], seed=s + 2, **kw)
             sims.append(fs)
     tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None,

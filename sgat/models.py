@@ -238,25 +238,32 @@ class ForwardModel(_Model):
             "Mixture Density Networks", eq. 22-26; the SGAT paper's footnote: a multi-modal
             transition, such as a swing foot that now and then catches a bump, is not one Gaussian).
             1 (default): one Gaussian. Only with ``stochastic``.
+        commands: c, the actions commanded before ``a_t`` the model also sees (a command history:
+            with an actuation latency the real state change answers commands given a few steps
+            ago, which the one-step model of the paper cannot represent). 0 (default): none.
 
-    Input layout: ``[s_{t-k+1}, ..., s_t, a_t]`` of size k*S + A; output: Δs of size S. Network
+    Input layout: ``[s_{t-k+1}, ..., s_t, a_{t-c}, ..., a_{t-1}, a_t]`` of size k*S + (c+1)*A;
+    output: Δs of size S. Network
     output (normalised units): K means (K*S), K log standard deviations (K*S) and, for K > 1, K
     mixture logits.
 
     Raises:
-        ValueError: components < 1, or > 1 without ``stochastic``.
+        ValueError: components < 1, or > 1 without ``stochastic``; commands < 0.
     """
 
     kind = "forward"
 
     def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, stochastic: bool = True,
-                 hidden=(64, 64), components: int = 1):
+                 hidden=(64, 64), components: int = 1, commands: int = 0):
         self.state_dim, self.action_dim, self.history, self.stochastic = int(state_dim), int(action_dim), int(history), bool(stochastic)
         self.components = int(components)
+        self.commands = int(commands)
         if self.components < 1 or (self.components > 1 and not self.stochastic):
             raise ValueError(f"components must be >= 1 (and 1 for a deterministic model), got {components}")
+        if self.commands < 0:
+            raise ValueError(f"commands must be >= 0, got {commands}")
         K = self.components
-        super().__init__(self.history * self.state_dim + self.action_dim, self.state_dim, hidden,
+        super().__init__(self.history * self.state_dim + (self.commands + 1) * self.action_dim, self.state_dim, hidden,
                          n_heads=2 * K if self.stochastic else 1, n_extra=K if K > 1 else 0)
 
     @property
@@ -269,12 +276,15 @@ class ForwardModel(_Model):
                "history": self.history, "stochastic": self.stochastic}
         if self.components > 1:
             cfg["components"] = self.components
+        if self.commands:
+            cfg["commands"] = self.commands
         return cfg
 
     @classmethod
     def from_config(cls, cfg: dict) -> "ForwardModel":
         return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], stochastic=cfg["stochastic"],
-                   hidden=tuple(cfg["hidden"]), components=int(cfg.get("components", 1)))
+                   hidden=tuple(cfg["hidden"]), components=int(cfg.get("components", 1)),
+                   commands=int(cfg.get("commands", 0)))
 
     def _split(self, out):
         """(means (..., K, S), log stds (..., K, S), log weights (..., K)) of normalised outputs

@@ -176,6 +176,8 @@ class ActionTransformer:
         sims = _members(sim_forward)
         if sims and (len(sims) != len(fwds) or not all(m.stochastic for m in sims)):
             raise ValueError("give one stochastic sim forward model per ensemble member, or none")
+        if len({f.commands for f in fwds + sims}) > 1:
+            raise ValueError("forward models disagree on the number of past commands they see")
         self.spec, self.forwards, self.inverses, self.sim_forwards = spec, fwds, invs, sims
         self.method, self.alpha, self.seed = method, float(alpha), seed
         self.member = 0
@@ -184,6 +186,24 @@ class ActionTransformer:
         self._c = math.exp(-1.0 / self.noise_memory) if self.noise_memory > 0 else 0.0
         self._s = math.sqrt(1.0 - self._c ** 2)
         self._z = None
+
+    @property
+    def commands(self) -> int:
+        """c: the past commands (before the current one) the forward models see; callers pass them
+        as ``past`` (0: none, the paper's one-step model)."""
+        return self.forwards[0].commands if self.forwards else 0
+
+    def _check_past(self, past, lead: tuple) -> np.ndarray | None:
+        if not self.commands:
+            return None
+        if past is None:
+            raise ValueError(f"the forward models see the {self.commands} previous commands: give them as past")
+        past = np.asarray(past, dtype=np.float64)
+        want = (*lead, self.commands * self.spec.action_dim)
+        if past.shape != want:
+            raise ValueError(f"past must have shape {want} (the {self.commands} previous commands, oldest first), "
+                             f"got {past.shape}")
+        return past
 
     @property
     def forward(self):
@@ -211,12 +231,13 @@ class ActionTransformer:
         if self.n_members > 1 and self.method == "sgat":
             self.member = int(self.rng.integers(self.n_members))
 
-    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None) -> np.ndarray:
-        """Member k's grounded action; ``normal(shape)`` draws the SGAT noise (default: ``self.rng``)."""
+    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None, past=None) -> np.ndarray:
+        """Member k's grounded action; ``normal(shape)`` draws the SGAT noise (default: ``self.rng``);
+        ``past``: the previous commands (forward models with a command history)."""
         fwd, inv = self.forwards[k], self.inverses[k]
         S = self.spec.state_dim
         normal = normal or self.rng.standard_normal
-        x = np.concatenate([hist, a], axis=-1)
+        x = np.concatenate([hist, a] if past is None else [hist, past, a], axis=-1)
         if not sample:
             ds = fwd.predict(x)[0]
         elif self.sim_forwards:
@@ -230,16 +251,23 @@ class ActionTransformer:
         z = [hist, ds, a] if inv.command_input else [hist, ds]
         return inv.predict(np.concatenate(z, axis=-1))
 
-    def transform(self, hist: np.ndarray, a: np.ndarray) -> np.ndarray:
-        """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A)."""
+    def transform(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
+        """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A);
+        ``past`` (..., c*A): the c commands before ``a``, oldest first (required when
+        :attr:`commands` > 0; at an episode's first steps, pad with the first command).
+
+        Raises:
+            ValueError: ``past`` missing or of the wrong shape for a transformer with a command history.
+        """
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
             return a.copy()
         hist = np.asarray(hist, dtype=np.float64)
+        past = self._check_past(past, a.shape[:-1])
         if self.method == "sgat" and self.forwards[0].stochastic:
-            g = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None)
+            g = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None, past=past)
         else:
-            g = np.mean([self._ground(k, hist, a, sample=False) for k in range(self.n_members)], axis=0)
+            g = np.mean([self._ground(k, hist, a, sample=False, past=past) for k in range(self.n_members)], axis=0)
         return self._blend(a, g)
 
     def _blend(self, a: np.ndarray, g: np.ndarray) -> np.ndarray:
@@ -273,7 +301,8 @@ class ActionTransformer:
         of a mixture-density forward model (:attr:`sgat.models.ForwardModel.noise_dim`)."""
         return self.forwards[0].noise_dim if self.forwards else self.spec.state_dim
 
-    def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None) -> np.ndarray:
+    def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None,
+                           past: np.ndarray | None = None) -> np.ndarray:
         """:meth:`transform` for n episodes at once, each with its own ensemble member and noise.
 
         Args:
@@ -282,6 +311,7 @@ class ActionTransformer:
             noise: (n, :attr:`noise_dim`) standard normal draws, row i the next draws of episode i's
                 generator (needed when :attr:`samples`; a generator's draws of (T, d) at once are its
                 next T draws of (d,), so a caller may draw a whole episode's noise at its start).
+            past: (n, c*A) each episode's previous commands (needed when :attr:`commands` > 0).
 
         Returns:
             (n, A); row i is bit-identical to :meth:`transform` ``(hist[i], a[i])`` of a transformer
@@ -289,12 +319,14 @@ class ActionTransformer:
             same BLAS routine per item on (n, 1, d) stacks as on one (d,) row).
 
         Raises:
-            ValueError: noise missing when the transformer samples.
+            ValueError: noise missing when the transformer samples; ``past`` missing or mis-shaped.
         """
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
             return a.copy()
         h3, a3 = np.asarray(hist, dtype=np.float64)[:, None, :], a[:, None, :]
+        p3 = self._check_past(past, a.shape[:-1])
+        p3 = None if p3 is None else p3[:, None, :]
         if self.samples:
             if noise is None:
                 raise ValueError("an SGAT transformer samples: give each episode's standard normal draws (noise)")
@@ -303,9 +335,10 @@ class ActionTransformer:
             g = np.empty_like(a3)
             for k in np.unique(members).tolist():
                 sel = np.flatnonzero(members == k)
-                g[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel])
+                g[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
+                                      past=None if p3 is None else p3[sel])
         else:
-            g = np.mean([self._ground(k, h3, a3, sample=False) for k in range(self.n_members)], axis=0)
+            g = np.mean([self._ground(k, h3, a3, sample=False, past=p3) for k in range(self.n_members)], axis=0)
         return self._blend(a3, g)[:, 0]
 
     # -- persistence ---------------------------------------------------------------------------
@@ -350,9 +383,12 @@ class ActionTransformer:
         if not meta["identity"]:
             S, A, k = spec.state_dim, spec.action_dim, spec.history
             for ff, fi in cls._files(int(meta.get("members", 1))):
-                fwds.append(ForwardModel.load(os.path.join(directory, ff), expect_in=k * S + A, expect_out=S))
-                if meta.get("sim_forward"):
-                    sims.append(ForwardModel.load(os.path.join(directory, "sim_" + ff), expect_in=k * S + A, expect_out=S))
+                for name, into in [(ff, fwds)] + ([("sim_" + ff, sims)] if meta.get("sim_forward") else []):
+                    fwd = ForwardModel.load(os.path.join(directory, name), expect_out=S)
+                    if fwd.n_in != k * S + (fwd.commands + 1) * A:
+                        raise ModelFileError(f"{os.path.join(directory, name)!r}: model has {fwd.n_in} inputs, "
+                                             f"this setting needs {k * S + (fwd.commands + 1) * A}")
+                    into.append(fwd)
                 inv = InverseModel.load(os.path.join(directory, fi), expect_out=A)
                 want = (k + 1) * S + (A if inv.command_input else 0)
                 if inv.n_in != want:
@@ -383,6 +419,7 @@ class GroundedEnv(gym.Wrapper):
         self.transformer = transformer
         self.ctrl_cost_weight = ctrl_cost_weight
         self._hist: deque = deque(maxlen=transformer.spec.history)
+        self._past: deque = deque(maxlen=max(transformer.commands, 1))
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
@@ -396,9 +433,12 @@ class GroundedEnv(gym.Wrapper):
         s = self.transformer.spec.states(obs)
         self._hist.clear()
         self._hist.extend([s] * self.transformer.spec.history)
+        self._past.clear()
 
     def ground(self, action) -> np.ndarray:
-        """The action to apply for the agent's ``action`` (a new array), given the state history.
+        """The action to apply for the agent's ``action`` (a new array), given the state history
+        (and, for a transformer with a command history, the agent's earlier commands: each call
+        appends ``action`` to them, so call it once per step).
 
         Raises:
             ValueError: wrong shape, NaN or infinite entries (non-identity transformer).
@@ -412,7 +452,14 @@ class GroundedEnv(gym.Wrapper):
             if not np.all(np.isfinite(a)):
                 raise ValueError("action contains NaN or infinite values")
             hist = np.concatenate(list(self._hist))
-            applied[spec.action_index] = self.transformer.transform(hist, a[spec.action_index])
+            ag = a[spec.action_index]
+            past = None
+            if self.transformer.commands:
+                if not self._past:  # the first step: pad with the first command (as stack_past does)
+                    self._past.extend([ag] * self.transformer.commands)
+                past = np.concatenate(list(self._past))
+                self._past.append(ag)
+            applied[spec.action_index] = self.transformer.transform(hist, ag, past)
         return applied
 
     def observe(self, obs: np.ndarray) -> None:

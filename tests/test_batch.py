@@ -46,10 +46,10 @@ def transformers(tmp_path_factory):
     spec = grounding_spec(NaoSimEnv())
     S, A = spec.state_dim, spec.action_dim
     out = {}
-    for name, method, K, memory in (("sgat", "sgat", 1, 0), ("gat", "gat", 1, 0), ("sgat-mdn", "sgat", 3, 0),
-                                    ("sgat-memory", "sgat", 1, 20.0)):
+    for name, method, K, memory, c in (("sgat", "sgat", 1, 0, 0), ("gat", "gat", 1, 0, 0), ("sgat-mdn", "sgat", 3, 0, 0),
+                                       ("sgat-memory", "sgat", 1, 20.0, 0), ("gat-commands", "gat", 1, 0, 3)):
         torch.manual_seed({"sgat": 7, "gat": 8}.get(name, 9))
-        fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K) for _ in range(2)]
+        fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K, commands=c) for _ in range(2)]
         inv = [InverseModel(S, A, command_input=True) for _ in range(2)]
         path = tmp_path_factory.mktemp(name)
         ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0, noise_memory=memory).save(path)
@@ -72,7 +72,8 @@ def report(tmp_path_factory):
     return str(path)
 
 
-@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "sgat-memory", "identified", "hybrid"])
+@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "sgat-memory", "gat-commands", "identified",
+                                   "hybrid"])
 def test_batched_episodes_are_bit_identical_to_single_episodes(world, transformers, report):
     """Every MuJoCo world the optimizer trains in: results and recordings equal run_episode's,
     falls included."""
@@ -81,6 +82,7 @@ def test_batched_episodes_are_bit_identical_to_single_episodes(world, transforme
           "gat": {"world": "grounded", "transformer": transformers.get("gat")},
           "sgat-mdn": {"world": "grounded", "transformer": transformers.get("sgat-mdn")},
           "sgat-memory": {"world": "grounded", "transformer": transformers.get("sgat-memory")},
+          "gat-commands": {"world": "grounded", "transformer": transformers.get("gat-commands")},
           "identified": {"world": "identified", "identified": [report]},
           "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]}}[world]
     tasks = [{**kw, "theta": th, "seed": 10 + i, "seconds": SECONDS, "record": True}

@@ -114,3 +114,40 @@ def test_table1_resumes_after_sigkill(tmp_path):
     b = json.loads((run / "table1.json").read_text())
     assert a["rows"] == b["rows"] and a["tests"] == b["tests"] and a["trials"] == b["trials"]
     assert np.isfinite(b["rows"][1]["fitness_mean"])
+    # the same run paired with itself as a baseline (resumed: nothing is walked again) differs by nothing
+    assert main(["table1", *T1, "--out", str(run), "--baseline", str(ref / "table1.json"), "--json"]) == 0
+    c = json.loads((run / "table1.json").read_text())
+    assert c["rows"] == a["rows"]
+    assert {(t["method"], t["step"]) for t in c["baseline"]["tests"]} == {("sgat", 1), ("none", 1)}
+    assert all(t["fitness"]["mean_diff"] == 0 and t["falls"]["only_a"] == t["falls"]["only_b"] == 0
+               for t in c["baseline"]["tests"])
+
+
+def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
+    """compare_runs pairs (method, step, seed) gaits trial by trial: a run whose every trial is 1 point
+    fitter than the baseline's and falls once less shows exactly that; runs on other trials are refused."""
+    from experiments.table1 import Table1Config, compare_runs, load_baseline
+
+    rng = np.random.default_rng(3)
+    base = {"theta0": {"fitness": [1.0, 2.0], "fell": [0, 1]}}
+    for s in range(2):
+        base[f"sgat|1|{s}"] = {"fitness": rng.normal(0, 3, 10).tolist(), "fell": [1] * 10}
+    run = {k: {"fitness": [x + (k != "theta0") for x in v["fitness"]], "fell": list(v["fell"])} for k, v in base.items()}
+    run["sgat|1|0"]["fell"][4] = 0
+    run["gat|1|0"] = {"fitness": [0.0] * 10, "fell": [0] * 10}  # not in the baseline: not compared
+    (t,) = compare_runs({"trials": run}, {"trials": base})
+    assert (t["method"], t["step"], t["seeds"]) == ("sgat", 1, [0, 1])
+    assert t["fitness"]["mean_diff"] == pytest.approx(1.0) and t["fitness"]["p_value"] < 1e-3
+    assert (t["falls"]["only_a"], t["falls"]["only_b"]) == (0, 1)
+    with pytest.raises(ValueError, match="θ0"):
+        compare_runs({"trials": {**run, "theta0": {"fitness": [0.0, 2.0], "fell": [0, 1]}}}, {"trials": base})
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({"command": "x", "result": {"config": {"seed": 0, "trials": 30}, "rows": [], "trials": base}}))
+    assert load_baseline(str(path), Table1Config())["command"] == "x"
+    with pytest.raises(ValueError, match="other real trials"):
+        load_baseline(str(path), Table1Config(seed=1))
+    path.write_text(json.dumps({"config": {"seed": 0, "trials": 30}, "rows": []}))
+    with pytest.raises(ValueError, match="per-trial"):
+        load_baseline(str(path), Table1Config())
+    assert main(["table1", *T1, "--baseline", str(path), "--out", str(tmp_path / "r")]) != 0
+    assert "per-trial" in capsys.readouterr().err

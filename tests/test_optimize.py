@@ -95,7 +95,10 @@ def test_wrong_shape_weights_are_rejected(tmp_path):
     tr = ActionTransformer(spec, ForwardModel(24, 11), InverseModel(24, 11), alpha=0.5)
     tr.save(tmp_path / "m")
     ForwardModel(10, 11).save(tmp_path / "m" / "forward.pt")
-    with pytest.raises(ModelFileError, match="inputs"):
+    with pytest.raises(ModelFileError, match="10 outputs"):
+        ActionTransformer.load(tmp_path / "m")
+    ForwardModel(24, 12).save(tmp_path / "m" / "forward.pt")  # right outputs, one action too many
+    with pytest.raises(ModelFileError, match="36 inputs, this setting needs 35"):
         ActionTransformer.load(tmp_path / "m")
 
 

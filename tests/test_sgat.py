@@ -323,3 +323,48 @@ def test_linear_models_recover_a_linear_map(tmp_path):
     fwd.save(tmp_path / "f.pt")
     back = ForwardModel.load(tmp_path / "f.pt")
     assert back.hidden == () and np.array_equal(back.predict(np.hstack([s2, a2]))[0], mu)
+
+
+def test_command_history_lets_the_transformer_ground_an_actuation_latency():
+    """A real world that executes every command two steps late (Δs_t = a_{t-2} Mᵀ) and a sim without
+    delay (Δs_t = a_t Mᵀ): with the two previous commands as input (``commands=2``) the grounded
+    action is the delayed command a_{t-2}; the paper's one-step model cannot see it and does not."""
+    from sgat.grounding import GroundingConfig, fit_grounding, stack_past
+
+    rng = np.random.default_rng(21)
+    spec = _spec()
+
+    def walk(n, delay):
+        s = np.zeros((n, 3))
+        a = rng.uniform(-0.7, 0.7, (n, 2))
+        for t in range(n - 1):
+            s[t + 1] = s[t] + a[max(t - delay, 0)] @ M.T
+        return s, a
+
+    real = [trajectory_transitions(*walk(600, 2), spec, past=2) for _ in range(4)]
+    sim = [trajectory_transitions(*walk(600, 0), spec, past=2) for _ in range(4)]
+    from sgat.grounding import Transitions
+    real, sim = Transitions.concat(real), Transitions.concat(sim)
+    assert real.past_commands == 2 and real.P.shape == (len(real), 4)
+    assert np.array_equal(stack_past(np.arange(8.0).reshape(4, 2), 2),
+                          [[0, 1, 0, 1], [0, 1, 0, 1], [0, 1, 2, 3], [2, 3, 4, 5]])
+    fit = fit_grounding(real, sim, spec, GroundingConfig(alpha=1.0, method="gat", hidden=(), command_history=2,
+                                                         max_epochs=300))
+    one_step = fit_grounding(Transitions(real.H, real.A, real.dS), Transitions(sim.H, sim.A, sim.dS), spec,
+                             GroundingConfig(alpha=1.0, method="gat", hidden=(), max_epochs=300))
+    tr = fit.transformer
+    assert tr.commands == 2
+    err, err1 = [], []
+    for _ in range(30):
+        past, a, s = rng.uniform(-0.7, 0.7, 4), rng.uniform(-0.7, 0.7, 2), rng.normal(0, 1, 3)
+        err.append(np.abs(tr.transform(s, a, past) - past[:2]).max())
+        err1.append(np.abs(one_step.transformer.transform(s, a) - past[:2]).max())
+    assert max(err) < 0.06, max(err)
+    assert np.median(err1) > 0.2  # the one-step model cannot know a_{t-2}
+    with pytest.raises(ValueError, match="previous commands"):
+        tr.transform(s, a)
+    with pytest.raises(ValueError, match="shape"):
+        tr.transform(s, a, past[:2])
+    with pytest.raises(ValueError, match="command_history"):  # transitions built without the past actions
+        fit_grounding(Transitions(real.H, real.A, real.dS), sim, spec,
+                      GroundingConfig(alpha=1.0, method="gat", hidden=(), command_history=2))
