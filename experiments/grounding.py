@@ -36,11 +36,14 @@ EXPLORATION_NOISE = 0.02
 #: the states of the gaits CMA-ES tries; a linear map extrapolates predictably.
 DEFAULT_GROUNDING = GroundingConfig(alpha=0.5, method="sgat", ensemble=5, hidden=())
 #: Frames of state history the forward and inverse models see (``s_{t-5}, ..., s_t`` at the 100 Hz
-#: control rate: 50 ms). The paper's models see s_t alone. A model of one state cannot tell where a
-#: joint is headed; six frames show it. Chosen on the development panel (``sgatwalk fidelity --seed 101``:
-#: SGAT's median/worst Spearman rho 0.59/0.53 with one frame, 0.69/0.66 with six; three and ten
-#: frames were worse) and scored once on the held-out panel (0.33/0.09 -> 0.39/0.28). The previous
-#: commands as extra inputs (``command_history``) did not help. See README "sgatwalk fidelity", third round.
+#: control rate: 50 ms). The paper's models see s_t alone, which cannot tell where a joint is headed.
+#: Measured with ``sgatwalk fidelity`` against one frame on three panels (README "sgatwalk fidelity",
+#: third round: the held-out panel walked on two machines, the development panel on one): SGAT's
+#: median Spearman rho 0.33 -> 0.39, 0.59 -> 0.58, 0.25 -> 0.27 and its worst draw better on all three
+#: (0.09 -> 0.28, 0.48 -> 0.51, 0.12 -> 0.13); GAT ranked better on two of the three, and SGAT's fall
+#: forecast (Brier score) improved on two. The previous commands as extra inputs
+#: (``GroundingConfig.command_history = 3``) on top of six frames did better still on both panels of
+#: one machine; they await a Table I run before they become the default.
 DEFAULT_HISTORY = 6
 #: Hybrid grounding (SGAT on top of the identified sim): the same models, blended at α = 0.1. The
 #: identified sim already ranks gaits well; every larger α tried made the ranking worse.
