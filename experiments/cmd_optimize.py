@@ -49,6 +49,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--grounding-state", choices=["legs", "legs+imu"], help="grounding state (default legs)")
     p.add_argument("--history", type=A.count(1, 10), help="frames of state history the forward and inverse models see "
                    f"(default {d.history}; 1: the paper's one frame)")
+    p.add_argument("--command-history", type=A.count(0, 10), help="previous commands the forward model also sees "
+                   f"(default {d.command_history}: the paper's one-step model; 3: 30 ms, room for an actuation latency)")
     p.add_argument("--alpha", type=A.fraction, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
                    "1 = the paper's formula)")
     p.add_argument("--hybrid-alpha", type=A.fraction, help=f"blend of the hybrid method (default {d.hybrid_alpha})")

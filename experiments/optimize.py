@@ -104,6 +104,7 @@ class OptimizeConfig:
     profile: str = "real"
     grounding_state: str = "legs"
     history: int = DEFAULT_HISTORY
+    command_history: int = DEFAULT_GROUNDING.command_history
     alpha: float = DEFAULT_GROUNDING.alpha
     hybrid_alpha: float = HYBRID_GROUNDING.alpha
     ensemble: int = DEFAULT_GROUNDING.ensemble
@@ -131,6 +132,8 @@ class OptimizeConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if any(int(h) < 1 for h in self.hidden):
             raise ValueError(f"hidden layer sizes must be >= 1 (an empty list: linear models), got {list(self.hidden)}")
+        if int(self.command_history) < 0:
+            raise ValueError(f"command_history must be >= 0 (0: the paper's one-step forward model), got {self.command_history}")
         if int(self.eval_trials) < 0:
             raise ValueError(f"eval_trials must be >= 0 (0: no real evaluation), got {self.eval_trials}")
         if self.popsize < 2:
@@ -282,7 +285,8 @@ class Optimizer:
         alpha = cfg.hybrid_alpha if method == "hybrid" else cfg.alpha
         return GroundingConfig(alpha=alpha, method="sgat" if method == "hybrid" else method, hidden=tuple(cfg.hidden),
                                ensemble=cfg.ensemble,
-                               inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs)
+                               inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs,
+                               command_history=int(cfg.command_history))
 
     def _fit(self, method: str, step: int, theta) -> str:
         cfg = self.cfg

@@ -63,11 +63,29 @@ def test_resume_after_sigkill_matches_uninterrupted(tmp_path):
     assert ra == rb
 
 
+def test_command_history_grounds_the_optimization(tmp_path, capsys):
+    """``--command-history 2``: SGAT's forward models see the two previous commands, and CMA-ES runs in
+    the grounded sim that feeds them (the lock-step batch keeps each episode's past commands)."""
+    from sgat.transformer import ActionTransformer
+
+    out = tmp_path / "run"
+    assert main(["optimize", *TINY, "--methods", "sgat", "--history", "2", "--command-history", "2",
+                 "--out", str(out), "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("sgat", 1)]
+    tr = ActionTransformer.load(out / "models" / "sgat_step1")
+    assert tr.commands == 2 and tr.spec.history == 2
+    assert tr.forward.n_in == 2 * tr.spec.state_dim + 3 * tr.spec.action_dim
+    assert np.isfinite(res["rows"][1]["select_scores"]["mean"])
+
+
 def test_bad_input(tmp_path, capsys):
     assert main(["optimize", "--methods", "sgat,magic", "--out", str(tmp_path / "x")]) == 2
     assert "unknown method(s) ['magic']" in capsys.readouterr().err
     assert main(["optimize", "--popsize", "1", "--out", str(tmp_path / "x")]) == 2
     assert "popsize" in capsys.readouterr().err
+    assert main(["optimize", "--command-history", "-1", "--out", str(tmp_path / "x")]) == 2
+    assert "--command-history" in capsys.readouterr().err
     assert main(["optimize", "--resume", str(tmp_path / "nothing")]) == 2
     assert "argument --resume: no such file or directory" in capsys.readouterr().err
     bad = tmp_path / "corrupt"
