@@ -43,7 +43,8 @@ DEFAULT_GROUNDING = GroundingConfig(alpha=0.5, method="sgat", ensemble=5, hidden
 #: (0.09 -> 0.28, 0.48 -> 0.51, 0.12 -> 0.13); GAT ranked better on two of the three, and SGAT's fall
 #: forecast (Brier score) improved on two. The previous commands as extra inputs
 #: (``GroundingConfig.command_history = 3``) on top of six frames did better still on both panels of
-#: one machine; they await a Table I run before they become the default.
+#: one machine, but CMA-ES in that world found no better real gaits (SGAT-only Table I, paired with
+#: the six-frame run: +0.3 and -1.9 fitness points at the two grounding steps, p = 0.84 and 0.29).
 DEFAULT_HISTORY = 6
 #: Hybrid grounding (SGAT on top of the identified sim): the same models, blended at α = 0.1. The
 #: identified sim already ranks gaits well; every larger α tried made the ranking worse.
