@@ -35,7 +35,11 @@ The values of the "real" profile are plausible for a NAO (real output torque 20-
 effort: gearbox losses on the motor ratings x reduction ratios of the Aldebaran NAO6 datasheet; a
 10-12 ms DCM cycle: Aldebaran NAOqi DCM documentation, 12 ms on NAO6; friction and backlash are
 estimates). ``"none"`` draws the identity for every effect and flat ground: a real world that
-should agree with the sim up to the engine gap.
+should agree with the sim up to the engine gap. Two profiles split ``"real"`` in two, to find which
+part of the gap a training world misses (``sgatwalk fidelity --profile``): ``"real-flat"`` is
+``"real"`` on flat ground (every actuator, sensor and mass effect), ``"real-ground"`` only its uneven
+ground. A seed draws the same values of the effects a profile keeps as ``"real"`` draws (every
+profile draws every effect, in the same order), so trials on the same seeds pair across profiles.
 """
 
 from __future__ import annotations
@@ -185,6 +189,10 @@ PROFILES: dict[str, RealProfile] = {
         encoder_noise_rad=(0.001, 0.001), gyro_bias=(-0.01, 0.01), gyro_noise=(0.01, 0.01),
         accel_noise=(0.1, 0.1), angle_noise_rad=(0.005, 0.005), terrain_amplitude=(0.005, 0.015)),
 }
+#: ``"real"`` split in two (module docstring): its effects on flat ground, and its ground alone.
+PROFILES["real-flat"] = dataclasses.replace(PROFILES["real"], name="real-flat", terrain_amplitude=_fixed(0.0))
+PROFILES["real-ground"] = dataclasses.replace(PROFILES["none"], name="real-ground",
+                                              terrain_amplitude=PROFILES["real"].terrain_amplitude)
 
 
 #: The "real" profile per actuator class, for the robots other than the NAO (estimates, not
@@ -219,10 +227,11 @@ def real_profile_for(robot) -> RealProfile:
 
 
 def get_profile(profile: str | dict | RealProfile, robot=None) -> RealProfile:
-    """A profile by name (``"none"``, ``"real"``), from a dict of ranges, or passed through.
+    """A profile by name (``"none"``, ``"real"``, ``"real-flat"``, ``"real-ground"``), from a dict of
+    ranges, or passed through.
 
     Args:
-        robot: the ``robots.RobotModel`` the profile is for; ``"real"`` is then scaled to its
+        robot: the ``robots.RobotModel`` the profile is for; ``"real"`` and ``"real-flat"`` are then scaled to its
             actuators (:func:`real_profile_for`). None: the NAO's.
 
     Raises:
@@ -234,6 +243,9 @@ def get_profile(profile: str | dict | RealProfile, robot=None) -> RealProfile:
         return RealProfile.from_dict(profile)
     if profile not in PROFILES:
         raise ValueError(f"unknown profile {profile!r}; known profiles: {', '.join(PROFILES)}")
-    if profile == "real" and robot is not None:
-        return real_profile_for(robot)
+    if profile in ("real", "real-flat") and robot is not None:
+        scaled = real_profile_for(robot)
+        if profile == "real-flat":
+            scaled = dataclasses.replace(scaled, name="real-flat", terrain_amplitude=_fixed(0.0))
+        return scaled
     return PROFILES[profile]

@@ -25,7 +25,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--world", default="real", choices=("real", "sim"), help="world to record in (default real)")
     A.add_robot(p)
     p.add_argument("--profile", default="real", help="real-world effect profile: real (default; scaled to the "
-                   "robot's actuators) or none")
+                   "robot's actuators), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                    help="override one profile effect with a fixed value, e.g. latency_s=0.02 (repeatable)")
     p.add_argument("--fixed-base", action="store_true", help="hang the robot in the air (actuator tests; recommended first)")

@@ -45,7 +45,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--select-episodes", type=A.count(1, 1000), help=f"episodes on which the CMA-ES mean, best candidate and θ_i "
                    f"are compared to pick θ_i+1 (default {d.select_episodes})")
     p.add_argument("--eval-trials", type=A.count(0, 10000), help=f"real trials per evaluation (default {d.eval_trials}; 0: none)")
-    p.add_argument("--profile", help=f"real-world effect profile (default {d.profile})")
+    p.add_argument("--profile", help=f"real-world effect profile: real, none, real-flat (real on flat ground) or real-ground (its uneven ground alone); default {d.profile}")
     p.add_argument("--grounding-state", choices=["legs", "legs+imu"], help="grounding state (default legs)")
     p.add_argument("--history", type=A.count(1, 10), help="frames of state history the forward and inverse models see "
                    f"(default {d.history}; 1: the paper's one frame)")

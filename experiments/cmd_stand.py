@@ -24,7 +24,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--pose", default="crouch", help="robot pose to hold (zero, stand, crouch; the NAO also deep_crouch)")
     p.add_argument("--seconds", type=A.seconds, default=10.0, help="duration [s] (default 10)")
     p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
-    p.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
+    p.add_argument("--profile", default="real", help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain for both worlds (default: flat sim, the profile's random lumpy field in real)")
     p.add_argument("--amplitude", type=A.real(0.0, 1.0), default=None,

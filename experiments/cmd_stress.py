@@ -37,7 +37,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--trials", type=A.count(1, 100000), default=20, help="episodes per policy and level (default 20)")
     p.add_argument("--seed", type=A.seed, default=0, help="run seed: terrain and episode seeds of the trials")
     p.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
-    p.add_argument("--profile", default=None, help="real-world effect profile: real (default) or none")
+    p.add_argument("--profile", default=None, help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
     p.add_argument("--sweep", default=None, metavar="EFFECT=lo:hi:n",
                    help="sweep one real-world effect instead of the terrain (real world only)")
     p.add_argument("--out", type=A.out_dir, default=None, metavar="DIR", help="run directory (default runs/stress-...)")

@@ -51,7 +51,7 @@ def register(sub) -> argparse.ArgumentParser:
                       help="hold this pose instead of walking (zero, stand, crouch; the NAO also deep_crouch)")
     live.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise; default 0)")
     live.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help=f"rollout duration [s] (default {EPISODE_SECONDS:g})")
-    live.add_argument("--profile", default="real", help="real-world effect profile: real (default) or none")
+    live.add_argument("--profile", default="real", help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
     live.add_argument("--transformer", type=A.in_path, metavar="PATH", default=None,
                       help="action transformer for the grounded world (sgat), when available")
     live.add_argument("--record", type=A.out_file, metavar="PATH", default=None,

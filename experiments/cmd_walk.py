@@ -28,7 +28,7 @@ def register(sub) -> argparse.ArgumentParser:
                    help="with --world identified: report.json file(s) or folders of sgatwalk diagnose")
     p.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
     p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
-    p.add_argument("--profile", default=None, help="real-world effect profile: real (default) or none")
+    p.add_argument("--profile", default=None, help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain (default: flat in the sim, the profile's random lumpy field in the real world)")
     p.add_argument("--amplitude", type=A.real(0.0, 1.0), default=None,

@@ -350,10 +350,13 @@ class Fidelity:
         paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
         todo = [(j, s, p) for j, (s, p) in enumerate(zip(seeds, paths)) if not os.path.exists(p)]
         if todo:
+            t0 = time.perf_counter()
+            self._say(f"recording {len(todo)} grounding walks in the {world} world ({tag})")
             tasks = [{"world": world, "theta": thetas[j % len(thetas)], "seed": s, "seconds": self.cfg.seconds,
                       "profile": self.cfg.profile, "record": True, **self.cfg.task_robot(), **kw} for j, s, _ in todo]
             for (_, s, p), r in zip(todo, map_episodes(self.ex, tasks)):
                 Recording(*r["recording"]).to_parquet(p)
+            self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
         return paths
 
     def _identify(self, draw: int) -> dict:

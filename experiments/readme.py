@@ -360,8 +360,9 @@ def render(text: str, results_dir: str = RESULTS) -> str:
         if mach:
             body += (f"\n<sub>Saved by a run on {mach['cpus']} cores; 1-minute load average {mach['load_before']:.1f} at "
                      f"its start, {mach['load_after']:.1f} at its end (for a resumed run: of its last invocation).</sub>\n")
-        if doc.get("relabelled"):
-            body += f"\n<sub>{doc['relabelled']}</sub>\n"
+        for key in ("relabelled", "note"):  # a later relabelling; how the run was made (a shared run directory)
+            if doc.get(key):
+                body += f"\n<sub>{doc[key]}</sub>\n"
         return m.group(1) + body + m.group(4)
 
     return _BLOCK.sub(block, text)

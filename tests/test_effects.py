@@ -96,3 +96,28 @@ def test_profile_validation():
     with pytest.raises(ValueError, match="unknown effect"):
         PROFILES["none"].with_effect("warp_drive", 1.0)
     assert RealProfile.from_dict(PROFILES["real"].to_dict()) == PROFILES["real"]
+
+
+def test_real_splits_into_flat_and_ground():
+    """"real-flat" draws "real"'s effects on the same seed on flat ground; "real-ground" only its ground."""
+    n_j, n_l = len(ROBOT.joint_names), len(ROBOT.links)
+    draw = {name: get_profile(name, ROBOT).draw(np.random.default_rng(7), n_j, n_l)
+            for name in ("real", "real-flat", "real-ground", "none")}
+    assert draw["real"].terrain_amplitude > 0.0
+    assert draw["real-flat"].terrain_amplitude == 0.0
+    assert draw["real-ground"].terrain_amplitude == draw["real"].terrain_amplitude
+    for f in EFFECTS:
+        if f != "terrain_amplitude":
+            np.testing.assert_array_equal(getattr(draw["real-flat"], f), getattr(draw["real"], f), err_msg=f)
+            np.testing.assert_array_equal(getattr(draw["real-ground"], f), getattr(draw["none"], f), err_msg=f)
+    # the flat profile walks on a plane, the ground profile on a heightfield
+    env = NaoRealEnv(profile="real-flat")
+    env.reset(seed=3)
+    assert env._terrain is None
+    env.close()
+    env = NaoRealEnv(profile="real-ground")
+    env.reset(seed=3)
+    assert env._terrain is not None and float(np.ptp(env._terrain.heights)) > 0.0
+    env.close()
+    with pytest.raises(ValueError, match="real-flat"):
+        get_profile("real-flatt")
