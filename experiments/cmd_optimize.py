@@ -51,6 +51,9 @@ def register(sub) -> argparse.ArgumentParser:
                    f"(default {d.history}; 1: the paper's one frame)")
     p.add_argument("--command-history", type=A.count(0, 10), help="previous commands the forward model also sees "
                    f"(default {d.command_history}: the paper's one-step model; 3: 30 ms, room for an actuation latency)")
+    p.add_argument("--matched", action="store_true", default=None,
+                   help="the matched transformer: a + f_sim^-1(s, ŝ_real) - f_sim^-1(s, ŝ_sim), with a forward model of "
+                   "the sim (default off: the paper's f_sim^-1(s, ŝ_real))")
     p.add_argument("--alpha", type=A.fraction, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
                    "1 = the paper's formula)")
     p.add_argument("--hybrid-alpha", type=A.fraction, help=f"blend of the hybrid method (default {d.hybrid_alpha})")

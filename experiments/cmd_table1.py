@@ -40,6 +40,8 @@ def register(sub) -> argparse.ArgumentParser:
                    "(default: optimize's)")
     p.add_argument("--command-history", type=A.count(0, 10), help="previous commands the forward model also sees "
                    "(default: optimize's)")
+    p.add_argument("--matched", action="store_true", default=None,
+                   help="ground with the matched transformer (default: optimize's)")
     p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
                    "pair every row with it (e.g. another grounding setting)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
@@ -52,7 +54,8 @@ def run(args) -> dict:
     opt = {k: v for k, v in (("popsize", args.popsize), ("generations", args.generations),
                              ("grounding_steps", args.grounding_steps), ("seconds", args.seconds),
                              ("hidden", None if args.hidden is None else list(args.hidden)),
-                             ("history", args.history), ("command_history", args.command_history)) if v is not None}
+                             ("history", args.history), ("command_history", args.command_history),
+                             ("matched", args.matched)) if v is not None}
     cfg = Table1Config(methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()), seeds=args.seeds,
                        trials=args.trials, seed=args.seed, optimize=opt, baseline=args.baseline)
     cfg.validate()

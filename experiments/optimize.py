@@ -105,6 +105,7 @@ class OptimizeConfig:
     grounding_state: str = "legs"
     history: int = DEFAULT_HISTORY
     command_history: int = DEFAULT_GROUNDING.command_history
+    matched: bool = DEFAULT_GROUNDING.matched
     alpha: float = DEFAULT_GROUNDING.alpha
     hybrid_alpha: float = HYBRID_GROUNDING.alpha
     ensemble: int = DEFAULT_GROUNDING.ensemble
@@ -286,7 +287,7 @@ class Optimizer:
         return GroundingConfig(alpha=alpha, method="sgat" if method == "hybrid" else method, hidden=tuple(cfg.hidden),
                                ensemble=cfg.ensemble,
                                inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs,
-                               command_history=int(cfg.command_history))
+                               command_history=int(cfg.command_history), matched=bool(cfg.matched))
 
     def _fit(self, method: str, step: int, theta) -> str:
         cfg = self.cfg

@@ -135,6 +135,15 @@ class GroundingConfig:
         residual_noise: SGAT on a stochastic sim: also fit a stochastic forward model of the sim and
             sample the real forward model with the variance the sim does not already have
             (:class:`sgat.transformer.ActionTransformer` ``sim_forward``).
+        matched: a matched transformer: also fit a deterministic forward model of the sim on the sim
+            transitions and ground with the difference of the inverse model's answers to the two
+            forward models, g(s, a) = a + f_sim^-1(s, ŝ_real) − f_sim^-1(s, ŝ_sim)
+            (:class:`sgat.transformer.ActionTransformer` ``sim_mean``). Where the real and the sim
+            forward models agree, the grounded action is ``a`` itself, at any state; the inverse
+            model's own error, which grows at states away from the data it was fitted on (other
+            gaits), cancels (exactly, for linear models).
+        zero_init: linear models start from zero weights (:meth:`sgat.models._Model.fit`
+            ``zero_init``), not PyTorch's random ones.
         max_epochs, lr, patience, batch_size: training of each model (Adam, mini-batches, early
             stopping after ``patience`` epochs without a better validation loss).
     """
@@ -148,6 +157,8 @@ class GroundingConfig:
     components: int = 1
     noise_memory: float = 0.0
     command_history: int = 0
+    matched: bool = False
+    zero_init: bool = False
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -171,7 +182,8 @@ class GroundingConfig:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
-        for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0)):  # added later: left out at their
+        for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0),  # added later: left out at
+                           ("matched", False), ("zero_init", False)):                                                  # their
             if d[k] == default:                                            # defaults, so saved configs and
                 d.pop(k)                                                   # caches still match
         return d
@@ -213,15 +225,16 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     """
     S, A, k = spec.state_dim, spec.action_dim, spec.history
     c = int(cfg.command_history)
-    if real.past_commands != c or (cfg.residual_noise and sim.past_commands != c):
+    if real.past_commands != c or ((cfg.residual_noise or cfg.matched) and sim.past_commands != c):
         raise ValueError(f"the config's command_history is {c} but the transitions hold {real.past_commands} "
                          f"past actions (real) and {sim.past_commands} (sim): build them with past={c}")
-    kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size}
+    kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size,
+          **({"zero_init": True} if cfg.zero_init else {})}
     Xf, Yf = real.forward_input(), real.dS
     inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
     Xs = sim.forward_input()  # the sim's own forward model: applied actions in, its spread out
-    fwds, invs, sims, rf, ri = [], [], [], [], []
+    fwds, invs, sims, means, rf, ri = [], [], [], [], [], []
     for i in range(int(cfg.ensemble)):
         s = seed + 7919 * i
         fi = np.arange(len(Xf)) if i == 0 else np.random.default_rng([s, 1]).integers(0, len(Xf), len(Xf))
@@ -238,8 +251,12 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
             fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden, commands=c)
             fs.fit(Xs[ii], sim.dS[ii], seed=s + 2, **kw)
             sims.append(fs)
+        if cfg.matched:  # the sim's own mean transition, fitted like f_real on the inverse model's rows
+            fm = ForwardModel(S, A, history=k, stochastic=False, hidden=cfg.hidden, commands=c)
+            fm.fit(Xs[ii], sim.dS[ii], seed=s + 3, **kw)
+            means.append(fm)
     tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None,
-                           noise_memory=cfg.noise_memory)
+                           noise_memory=cfg.noise_memory, sim_mean=means or None)
     return GroundingFit(tr, rf, ri, {"n_real": len(real), "n_sim": len(sim)})
 
 

@@ -97,11 +97,17 @@ class _Model(nn.Module):
     # -- training --------------------------------------------------------------------------
     def fit(self, X: np.ndarray, Y: np.ndarray, *, val_fraction: float = 0.2, batch_size: int = 128,
             lr: float = 1e-3, weight_decay: float = 0.0, max_epochs: int = 300, patience: int = 15,
-            seed: int = 0, progress=None) -> FitReport:
+            seed: int = 0, progress=None, zero_init: bool = False) -> FitReport:
         """Train on inputs ``X`` (N, n_in) and targets ``Y`` (N, n_out) (unnormalised).
 
         A random ``val_fraction`` of the rows (seeded) is held out; training stops after
         ``patience`` epochs without a better validation loss and restores the best weights.
+        ``zero_init`` (linear models, ``hidden=()``): start from zero weights instead of PyTorch's
+        random ones, so input directions the data hardly excite (collinear inputs, such as the
+        frames of a state history) keep near-zero weights instead of random ones. Gradient descent
+        from zero stays in the span of the data and tends to the minimum-norm least-squares fit
+        (exactly so for plain gradient descent on the squared error; Adam and early stopping keep it
+        close), which then extrapolates to states unlike the data without arbitrary slopes.
 
         Raises:
             ValueError: wrong shapes, non-finite data, fewer than 10 rows.
@@ -120,6 +126,10 @@ class _Model(nn.Module):
             if isinstance(m, nn.Linear):
                 m.reset_parameters()
         nn.init.zeros_(self.net.skip.weight)
+        if zero_init and not self.hidden:
+            for m in self.net.body:
+                nn.init.zeros_(m.weight)
+                nn.init.zeros_(m.bias)
         perm = np.random.default_rng(seed).permutation(len(X))
         n_val = max(1, int(round(val_fraction * len(X))))
         vi, ti = perm[:n_val], perm[n_val:]

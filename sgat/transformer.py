@@ -146,13 +146,23 @@ class ActionTransformer:
     random ground would then get its spread twice. With ``sim_forward`` the sample is drawn with the
     residual variance only, Δŝ ~ N(μ_real, max(σ²_real − σ²_sim, 0)), and the sim adds its own.
 
+    ``sim_mean`` (a *matched* transformer): a deterministic forward model of the sim per member.
+    The grounded action is then g(s, a) = a + f_sim^-1(s, ŝ_real) − f_sim^-1(s, ŝ_sim) with ŝ_sim the
+    sim model's prediction: the transformer corrects by the inverse model's answer to the gap
+    between the two forward models, so it is the identity wherever they agree, and the inverse
+    model's error at states unlike its training data (another gait's) cancels instead of becoming a
+    systematic offset of the commands (exactly so for linear models: then g − a = B (Δŝ_real − Δŝ_sim)
+    with B the inverse model's weights on Δs). It is the control-variate form of the paper's
+    f_sim^-1(s, ŝ_real), which equals it when f_sim^-1(s, ŝ_sim) = a.
+
     Raises:
         ValueError: unknown method, α missing or outside [0, 1], only one kind of model given,
             ensembles of different sizes, or models whose sizes do not match the spec.
     """
 
     def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
-                 alpha: float | None = None, seed: int = 0, sim_forward=None, noise_memory: float = 0.0):
+                 alpha: float | None = None, seed: int = 0, sim_forward=None, noise_memory: float = 0.0,
+                 sim_mean=None):
         if not (math.isfinite(float(noise_memory)) and float(noise_memory) >= 0.0):
             raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {noise_memory}")
         if method not in METHODS:
@@ -176,9 +186,13 @@ class ActionTransformer:
         sims = _members(sim_forward)
         if sims and (len(sims) != len(fwds) or not all(m.stochastic for m in sims)):
             raise ValueError("give one stochastic sim forward model per ensemble member, or none")
-        if len({f.commands for f in fwds + sims}) > 1:
+        means = _members(sim_mean)
+        if means and (len(means) != len(fwds) or any(m.stochastic for m in means)):
+            raise ValueError("give one deterministic sim forward model per ensemble member (sim_mean), or none")
+        if len({f.commands for f in fwds + sims + means}) > 1:
             raise ValueError("forward models disagree on the number of past commands they see")
         self.spec, self.forwards, self.inverses, self.sim_forwards = spec, fwds, invs, sims
+        self.sim_means = means
         self.method, self.alpha, self.seed = method, float(alpha), seed
         self.member = 0
         self.rng = np.random.default_rng(seed)
@@ -249,7 +263,12 @@ class ActionTransformer:
         else:
             ds = fwd.predict(x)[0]
         z = [hist, ds, a] if inv.command_input else [hist, ds]
-        return inv.predict(np.concatenate(z, axis=-1))
+        g = inv.predict(np.concatenate(z, axis=-1))
+        if self.sim_means:  # matched: subtract the inverse model's answer to the sim's own prediction
+            ds_sim = self.sim_means[k].predict(x)[0]
+            z = [hist, ds_sim, a] if inv.command_input else [hist, ds_sim]
+            g = a + g - inv.predict(np.concatenate(z, axis=-1))
+        return g
 
     def transform(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
         """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A);
@@ -358,8 +377,12 @@ class ActionTransformer:
             i.save(os.path.join(directory, fi))
         for (ff, _), m in zip(self._files(self.n_members), self.sim_forwards):
             m.save(os.path.join(directory, "sim_" + ff))
+        for (ff, _), m in zip(self._files(self.n_members), self.sim_means):
+            m.save(os.path.join(directory, "simmean_" + ff))
         meta = {"method": self.method, "alpha": self.alpha, "seed": self.seed, "identity": self.is_identity,
                 "members": self.n_members, "sim_forward": bool(self.sim_forwards), "spec": self.spec.to_dict()}
+        if self.sim_means:
+            meta["matched"] = True
         if self.noise_memory > 0:
             meta["noise_memory"] = self.noise_memory
         atomic_write_text(os.path.join(directory, "transformer.json"), json.dumps(meta, indent=1))
@@ -379,11 +402,12 @@ class ActionTransformer:
         with open(path) as f:
             meta = json.load(f)
         spec = GroundingSpec.from_dict(meta["spec"])
-        fwds, invs, sims = [], [], []
+        fwds, invs, sims, means = [], [], [], []
         if not meta["identity"]:
             S, A, k = spec.state_dim, spec.action_dim, spec.history
             for ff, fi in cls._files(int(meta.get("members", 1))):
-                for name, into in [(ff, fwds)] + ([("sim_" + ff, sims)] if meta.get("sim_forward") else []):
+                for name, into in [(ff, fwds)] + ([("sim_" + ff, sims)] if meta.get("sim_forward") else []) \
+                        + ([("simmean_" + ff, means)] if meta.get("matched") else []):
                     fwd = ForwardModel.load(os.path.join(directory, name), expect_out=S)
                     if fwd.n_in != k * S + (fwd.commands + 1) * A:
                         raise ModelFileError(f"{os.path.join(directory, name)!r}: model has {fwd.n_in} inputs, "
@@ -396,7 +420,8 @@ class ActionTransformer:
                                          f"this setting needs {want}")
                 invs.append(inv)
         return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"],
-                   sim_forward=sims or None, noise_memory=float(meta.get("noise_memory", 0.0)))
+                   sim_forward=sims or None, noise_memory=float(meta.get("noise_memory", 0.0)),
+                   sim_mean=means or None)
 
 
 class GroundedEnv(gym.Wrapper):

@@ -368,3 +368,78 @@ def test_command_history_lets_the_transformer_ground_an_actuation_latency():
     with pytest.raises(ValueError, match="command_history"):  # transitions built without the past actions
         fit_grounding(Transitions(real.H, real.A, real.dS), sim, spec,
                       GroundingConfig(alpha=1.0, method="gat", hidden=(), command_history=2))
+
+
+def _gait(n, seed, P, gain=(1.0, 1.0), explore=0.05, process=0.05):
+    """Walk-like transitions: the commands follow a policy of the state, a = P s + exploration noise
+    (a gait commands what its phase asks for), Δs = (gain ⊙ a) Mᵀ + process noise."""
+    from sgat.grounding import Transitions
+
+    rng = np.random.default_rng(seed)
+    s = rng.uniform(-1, 1, (n, 3))
+    a = s @ P.T + rng.normal(0, explore, (n, 2))
+    return Transitions(s, a, (a * np.asarray(gain)) @ M.T + rng.normal(0, process, (n, 3)))
+
+
+def test_matched_transformer_does_not_pull_another_gait_toward_the_data_gait(tmp_path):
+    """Grounding data from one gait (commands a = P s + a little exploration): the inverse model
+    f_sim⁻¹(s, Δs) then learns much of a from s alone, the data gait's policy, because Δs is noisy.
+    For a real world with the sim's physics, the paper's transformer f_sim⁻¹(s, f_real(s, a)) pulls
+    another gait's commands (a = Q s) toward P s; the matched transformer
+    a + f_sim⁻¹(s, ŝ_real) − f_sim⁻¹(s, ŝ_sim) keeps them. With a known actuator gain in the real
+    world and walks explored widely enough for the inverse model to see Δs, it grounds gain ⊙ a
+    on the data gait as the paper's transformer does. It saves and loads."""
+    from sgat.grounding import GroundingConfig, fit_grounding
+
+    spec = _spec()
+    P = np.array([[0.6, -0.3, 0.2], [-0.2, 0.5, 0.4]])
+    Q = -P  # another gait
+    sim = _gait(4000, 1, P)
+    cfg = dict(alpha=1.0, method="gat", hidden=(), max_epochs=300)
+    same = _gait(4000, 2, P)  # real walks of the data gait, the sim's physics
+    plain = fit_grounding(same, sim, spec, GroundingConfig(**cfg)).transformer
+    matched = fit_grounding(same, sim, spec, GroundingConfig(**cfg, matched=True)).transformer
+    assert matched.sim_means and not plain.sim_means
+    rng = np.random.default_rng(5)
+    other = [(s, Q @ s) for s in rng.uniform(-1, 1, (30, 3))]
+    err_plain = np.median([np.abs(plain.transform(s, a) - a).max() for s, a in other])
+    err_matched = np.median([np.abs(matched.transform(s, a) - a).max() for s, a in other])
+    assert err_plain > 0.05, err_plain
+    assert err_matched < 0.3 * err_plain, (err_matched, err_plain)
+
+    gain = np.array([0.7, 1.3])
+    real, sim = _gait(4000, 3, P, gain=gain, explore=0.2), _gait(4000, 1, P, explore=0.2)
+    tr = fit_grounding(real, sim, spec, GroundingConfig(**cfg, matched=True)).transformer
+    paper = fit_grounding(real, sim, spec, GroundingConfig(**cfg)).transformer
+    near = [(s, P @ s) for s in rng.uniform(-1, 1, (30, 3))]
+    err = [np.abs(tr.transform(s, a) - gain * a).max() for s, a in near]
+    assert max(err) < 0.1, max(err)
+    assert abs(np.median(err) - np.median([np.abs(paper.transform(s, a) - gain * a).max() for s, a in near])) < 0.02
+
+    back = ActionTransformer.load(tr.save(tmp_path / "matched"))
+    assert back.sim_means
+    s, a = near[0]
+    assert np.array_equal(back.transform(s, a), tr.transform(s, a))
+    with pytest.raises(ValueError, match="deterministic sim forward model"):
+        ActionTransformer(spec, tr.forward, tr.inverse, method="gat", alpha=1.0,
+                          sim_mean=ForwardModel(3, 2, stochastic=True))
+
+def test_zero_init_keeps_unexcited_directions_of_a_linear_model_at_zero():
+    """Two frames of nearly the same state (a state history at 10 ms) leave the frames' difference
+    unexcited. Started from PyTorch's random weights, a linear model keeps random weights along it and
+    predicts wrongly where the frames disagree (another gait's states); started from zero it keeps
+    them at zero: the minimum-norm least-squares fit. Both fit the data alike."""
+    rng = np.random.default_rng(0)
+    s, a = rng.uniform(-1, 1, (3000, 3)), rng.uniform(-1, 1, (3000, 2))
+    X = np.hstack([s, s + rng.normal(0, 1e-3, s.shape), a])
+    ds = a @ M.T + 0.3 * s
+    st, at = rng.uniform(-1, 1, (200, 3)), rng.uniform(-1, 1, (200, 2))
+    off = np.hstack([st, -st, at])  # frames that disagree: the min-norm fit predicts a Mᵀ
+    errs = {}
+    for zero in (False, True):
+        f = ForwardModel(3, 2, history=2, stochastic=False, hidden=())
+        f.fit(X, ds, seed=1, lr=3e-3, max_epochs=150, zero_init=zero)
+        assert np.abs(f.predict(X[:200])[0] - ds[:200]).max() < 0.01
+        errs[zero] = np.abs(f.predict(off)[0] - at @ M.T).max()
+    assert errs[True] < 0.02, errs
+    assert errs[False] > 0.1, errs  # the random start's slopes survive where the data do not reach
