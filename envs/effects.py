@@ -189,8 +189,15 @@ PROFILES: dict[str, RealProfile] = {
         encoder_noise_rad=(0.001, 0.001), gyro_bias=(-0.01, 0.01), gyro_noise=(0.01, 0.01),
         accel_noise=(0.1, 0.1), angle_noise_rad=(0.005, 0.005), terrain_amplitude=(0.005, 0.015)),
 }
+
+
+def _on_flat_ground(profile: RealProfile) -> RealProfile:
+    """``profile``'s effects on flat ground, named ``"real-flat"``."""
+    return dataclasses.replace(profile, name="real-flat", terrain_amplitude=_fixed(0.0))
+
+
 #: ``"real"`` split in two (module docstring): its effects on flat ground, and its ground alone.
-PROFILES["real-flat"] = dataclasses.replace(PROFILES["real"], name="real-flat", terrain_amplitude=_fixed(0.0))
+PROFILES["real-flat"] = _on_flat_ground(PROFILES["real"])
 PROFILES["real-ground"] = dataclasses.replace(PROFILES["none"], name="real-ground",
                                               terrain_amplitude=PROFILES["real"].terrain_amplitude)
 
@@ -245,7 +252,5 @@ def get_profile(profile: str | dict | RealProfile, robot=None) -> RealProfile:
         raise ValueError(f"unknown profile {profile!r}; known profiles: {', '.join(PROFILES)}")
     if profile in ("real", "real-flat") and robot is not None:
         scaled = real_profile_for(robot)
-        if profile == "real-flat":
-            scaled = dataclasses.replace(scaled, name="real-flat", terrain_amplitude=_fixed(0.0))
-        return scaled
+        return scaled if profile == "real" else _on_flat_ground(scaled)
     return PROFILES[profile]

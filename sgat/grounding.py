@@ -182,10 +182,11 @@ class GroundingConfig:
     def to_dict(self) -> dict:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
-        for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0),  # added later: left out at
-                           ("matched", False), ("zero_init", False)):                                                  # their
-            if d[k] == default:                                            # defaults, so saved configs and
-                d.pop(k)                                                   # caches still match
+        # settings added later are left out at their defaults, so saved configs and caches still match
+        for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0),
+                           ("matched", False), ("zero_init", False)):
+            if d[k] == default:
+                d.pop(k)
         return d
 
 
@@ -229,7 +230,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
         raise ValueError(f"the config's command_history is {c} but the transitions hold {real.past_commands} "
                          f"past actions (real) and {sim.past_commands} (sim): build them with past={c}")
     kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size,
-          **({"zero_init": True} if cfg.zero_init else {})}
+          "zero_init": cfg.zero_init}
     Xf, Yf = real.forward_input(), real.dS
     inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
