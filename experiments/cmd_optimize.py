@@ -54,6 +54,11 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--matched", action="store_true", default=None,
                    help="the matched transformer: a + f_sim^-1(s, ŝ_real) - f_sim^-1(s, ŝ_sim), with a forward model of "
                    "the sim (default off: the paper's f_sim^-1(s, ŝ_real))")
+    p.add_argument("--local-inverse", dest="local_inverse", action="store_true", default=None,
+                   help="a joint-local inverse model: each joint's command from its own angle and velocity only "
+                   "(linear models; best with --matched; default off: the paper's inverse model of the whole state)")
+    p.add_argument("--zero-init", dest="zero_init", action="store_true", default=None,
+                   help="linear grounding models fitted from zero weights, not PyTorch's random ones (default off)")
     p.add_argument("--alpha", type=A.fraction, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
                    "1 = the paper's formula)")
     p.add_argument("--hybrid-alpha", type=A.fraction, help=f"blend of the hybrid method (default {d.hybrid_alpha})")

@@ -42,6 +42,10 @@ def register(sub) -> argparse.ArgumentParser:
                    "(default: optimize's)")
     p.add_argument("--matched", action="store_true", default=None,
                    help="ground with the matched transformer (default: optimize's)")
+    p.add_argument("--local-inverse", dest="local_inverse", action="store_true", default=None,
+                   help="ground with a joint-local inverse model (default: optimize's)")
+    p.add_argument("--zero-init", dest="zero_init", action="store_true", default=None,
+                   help="fit the linear grounding models from zero weights (default: optimize's)")
     p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
                    "pair every row with it (e.g. another grounding setting)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
@@ -55,7 +59,8 @@ def run(args) -> dict:
                              ("grounding_steps", args.grounding_steps), ("seconds", args.seconds),
                              ("hidden", None if args.hidden is None else list(args.hidden)),
                              ("history", args.history), ("command_history", args.command_history),
-                             ("matched", args.matched)) if v is not None}
+                             ("matched", args.matched), ("local_inverse", args.local_inverse),
+                             ("zero_init", args.zero_init)) if v is not None}
     cfg = Table1Config(methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()), seeds=args.seeds,
                        trials=args.trials, seed=args.seed, optimize=opt, baseline=args.baseline)
     cfg.validate()

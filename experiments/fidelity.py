@@ -29,6 +29,7 @@ Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ens
 ``inverse_command`` (0/1), ``residual`` (0/1: sample only the variance the sim does not have),
 ``matched`` (0/1: a matched transformer, g = a + f_sim^-1(s, ŝ_real) − f_sim^-1(s, ŝ_sim), with a forward
 model of the sim fitted on the sim walks), ``zero`` (0/1: linear models fitted from zero weights),
+``local`` (0/1: a joint-local inverse model, each joint's command from its own state entries only),
 ``mixture`` (K: SGAT's forward model a mixture of K Gaussians, a mixture density network),
 ``memory`` (τ [s]: SGAT's sampling noise correlated over τ, an AR(1) process; 0: white),
 ``hidden`` (e.g. ``128x128``; ``0``: linear models), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
@@ -159,7 +160,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory",
                                                               "gaits", "state", "history", "commands", "matched",
-                                                              "zero"):
+                                                              "zero", "local"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
                 elif k == "method":
@@ -184,6 +185,8 @@ def parse_world(text: str) -> WorldSpec:
                     gkw["matched"] = bool(int(v))
                 elif k == "zero":
                     gkw["zero_init"] = bool(int(v))
+                elif k == "local":
+                    gkw["local_inverse"] = bool(int(v))
                 elif k == "alpha":
                     gkw["alpha"] = float(v)
                 elif k == "ensemble":

@@ -106,6 +106,8 @@ class OptimizeConfig:
     history: int = DEFAULT_HISTORY
     command_history: int = DEFAULT_GROUNDING.command_history
     matched: bool = DEFAULT_GROUNDING.matched
+    local_inverse: bool = DEFAULT_GROUNDING.local_inverse
+    zero_init: bool = DEFAULT_GROUNDING.zero_init
     alpha: float = DEFAULT_GROUNDING.alpha
     hybrid_alpha: float = HYBRID_GROUNDING.alpha
     ensemble: int = DEFAULT_GROUNDING.ensemble
@@ -287,7 +289,8 @@ class Optimizer:
         return GroundingConfig(alpha=alpha, method="sgat" if method == "hybrid" else method, hidden=tuple(cfg.hidden),
                                ensemble=cfg.ensemble,
                                inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs,
-                               command_history=int(cfg.command_history), matched=bool(cfg.matched))
+                               command_history=int(cfg.command_history), matched=bool(cfg.matched),
+                               local_inverse=bool(cfg.local_inverse), zero_init=bool(cfg.zero_init))
 
     def _fit(self, method: str, step: int, theta) -> str:
         cfg = self.cfg

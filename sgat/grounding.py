@@ -142,6 +142,11 @@ class GroundingConfig:
             forward models agree, the grounded action is ``a`` itself, at any state; the inverse
             model's own error, which grows at states away from the data it was fitted on (other
             gaits), cancels (exactly, for linear models).
+        local_inverse: a joint-local inverse model (linear models only): the command of joint j is
+            regressed on joint j's own state entries only (its angle and velocity over the history and
+            their change; :func:`local_inverse_mask`). A position-servoed joint's command is explained
+            by its own response; an inverse model that sees every joint also learns the data gait's
+            policy (the command from the whole body's phase) and pulls other gaits toward it.
         zero_init: linear models start from zero weights (:meth:`sgat.models._Model.fit`
             ``zero_init``), not PyTorch's random ones.
         max_epochs, lr, patience, batch_size: training of each model (Adam, mini-batches, early
@@ -159,6 +164,7 @@ class GroundingConfig:
     command_history: int = 0
     matched: bool = False
     zero_init: bool = False
+    local_inverse: bool = False
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -178,13 +184,15 @@ class GroundingConfig:
         if int(self.command_history) < 0:
             raise ValueError(f"command_history must be >= 0, got {self.command_history}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
+        if self.local_inverse and self.hidden:
+            raise ValueError(f"local_inverse needs linear models (hidden=()), got hidden={self.hidden}")
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
         # settings added later are left out at their defaults, so saved configs and caches still match
         for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0),
-                           ("matched", False), ("zero_init", False)):
+                           ("matched", False), ("zero_init", False), ("local_inverse", False)):
             if d[k] == default:
                 d.pop(k)
         return d
@@ -206,6 +214,48 @@ class GroundingFit:
     @property
     def inverse_report(self) -> FitReport:
         return self.inverse_reports[0]
+
+
+def _joint(name: str) -> str:
+    return name.split(".", 1)[1] if "." in name else name
+
+
+def local_inverse_mask(spec: GroundingSpec, *, command_input: bool = False) -> np.ndarray:
+    """Which inputs of the inverse model each grounded action may use in a joint-local inverse model.
+
+    Input layout (:class:`sgat.models.InverseModel`): ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` (+ ``a_t``).
+    Action j (named after its joint, e.g. ``LKneePitch``) may use the state entries of the same joint
+    (``q.LKneePitch``, ``dq.LKneePitch``) in every frame and in the change, and (``command_input``)
+    its own command. A state joint that no action is named after is given to the action whose name
+    matches it without its side letter, if exactly one does: the NAO's ``RHipYawPitch`` is driven by
+    the ``LHipYawPitch`` command (one motor).
+
+    Returns:
+        A boolean array (A, (k + 1) S [+ A]).
+
+    Raises:
+        ValueError: the spec has no state or action names, or an action has no state entry of its joint.
+    """
+    if not spec.state_names or not spec.action_names:
+        raise ValueError("a joint-local inverse model needs a grounding spec with state and action names")
+    actions = list(spec.action_names)
+    owner = []
+    for n in spec.state_names:
+        j = _joint(n)
+        if j in actions:
+            owner.append(actions.index(j))
+            continue
+        side = [i for i, a in enumerate(actions) if j[:1] in "LR" and a[:1] in "LR" and a[1:] == j[1:]]
+        owner.append(side[0] if len(side) == 1 else -1)
+    owner = np.array(owner)
+    per_frame = owner[None, :] == np.arange(len(actions))[:, None]  # (A, S)
+    lonely = [a for i, a in enumerate(actions) if not per_frame[i].any()]
+    if lonely:
+        raise ValueError(f"a joint-local inverse model: no state entry of joint(s) {', '.join(lonely)}")
+    mask = np.tile(per_frame, (1, spec.history + 1))
+    if command_input:
+        mask = np.concatenate([mask, np.eye(len(actions), dtype=bool)], axis=1)
+    return mask
 
 
 def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg: GroundingConfig, *,
@@ -235,6 +285,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
     Xs = sim.forward_input()  # the sim's own forward model: applied actions in, its spread out
+    mask = local_inverse_mask(spec, command_input=cfg.inverse_command) if cfg.local_inverse else None
     fwds, invs, sims, means, rf, ri = [], [], [], [], [], []
     for i in range(int(cfg.ensemble)):
         s = seed + 7919 * i
@@ -245,7 +296,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
                            components=int(cfg.components) if sgat else 1, commands=c)
         rf.append(fwd.fit(Xf[fi], Yf[fi], seed=s, **kw))
         inv = InverseModel(S, A, history=k, hidden=cfg.hidden, command_input=cfg.inverse_command)
-        ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, **kw))
+        ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, input_mask=mask, **kw))
         fwds.append(fwd)
         invs.append(inv)
         if cfg.residual_noise and cfg.method == "sgat":

@@ -97,7 +97,7 @@ class _Model(nn.Module):
     # -- training --------------------------------------------------------------------------
     def fit(self, X: np.ndarray, Y: np.ndarray, *, val_fraction: float = 0.2, batch_size: int = 128,
             lr: float = 1e-3, weight_decay: float = 0.0, max_epochs: int = 300, patience: int = 15,
-            seed: int = 0, progress=None, zero_init: bool = False) -> FitReport:
+            seed: int = 0, progress=None, zero_init: bool = False, input_mask=None) -> FitReport:
         """Train on inputs ``X`` (N, n_in) and targets ``Y`` (N, n_out) (unnormalised).
 
         A random ``val_fraction`` of the rows (seeded) is held out; training stops after
@@ -108,9 +108,14 @@ class _Model(nn.Module):
         from zero stays in the span of the data and tends to the minimum-norm least-squares fit
         (exactly so for plain gradient descent on the squared error; Adam and early stopping keep it
         close), which then extrapolates to states unlike the data without arbitrary slopes.
+        ``input_mask`` (linear models): a boolean (n_out, n_in) array; output i may use input j only
+        where it is True. The other weights start at zero and get zero gradients (so Adam never
+        moves them), and the fitted model is a plain linear model with structural zeros: saving,
+        loading and inference need no mask.
 
         Raises:
-            ValueError: wrong shapes, non-finite data, fewer than 10 rows.
+            ValueError: wrong shapes, non-finite data, fewer than 10 rows; an ``input_mask`` of the
+                wrong shape, or one given to a model with hidden layers.
         """
         X = np.asarray(X, dtype=np.float64)
         Y = np.asarray(Y, dtype=np.float64)
@@ -130,6 +135,18 @@ class _Model(nn.Module):
             for m in self.net.body:
                 nn.init.zeros_(m.weight)
                 nn.init.zeros_(m.bias)
+        hooks = []
+        if input_mask is not None:
+            mask = np.asarray(input_mask, dtype=bool)
+            if self.hidden:
+                raise ValueError(f"{self.kind}: an input mask needs a linear model (hidden=()), got hidden={self.hidden}")
+            if mask.shape != (self.n_out, self.n_in):
+                raise ValueError(f"{self.kind}: input mask must be ({self.n_out}, {self.n_in}), got {mask.shape}")
+            keep = torch.as_tensor(mask, dtype=torch.float64)
+            for w in (self.net.body[0].weight, self.net.skip.weight):
+                with torch.no_grad():
+                    w.mul_(keep)
+                hooks.append(w.register_hook(lambda grad: grad * keep))
         perm = np.random.default_rng(seed).permutation(len(X))
         n_val = max(1, int(round(val_fraction * len(X))))
         vi, ti = perm[:n_val], perm[n_val:]
@@ -163,6 +180,8 @@ class _Model(nn.Module):
                 bad += 1
                 if bad >= patience:
                     break
+        for h in hooks:
+            h.remove()
         self.net.load_state_dict(best_state)
         self.fitted = torch.ones((), dtype=torch.bool)
         self._np = None

@@ -34,11 +34,15 @@ def test_parse_world_options():
     assert (m.grounding.components, m.grounding.noise_memory) == (3, pytest.approx(50.0))  # 0.5 s at 100 Hz
     assert len({parse_world(w).key for w in ("sgat", "sgat:mixture=3", "sgat:memory=0.5", "sgat:mixture=3:memory=0.5")}) == 4
     assert parse_world("sgat:hidden=0").grounding.hidden == () and parse_world("gat:hidden=16x8").grounding.hidden == (16, 8)
+    lm = parse_world("sgat:local=1:matched=1:zero=1").grounding
+    assert lm.local_inverse and lm.matched and lm.zero_init and not parse_world("sgat").grounding.local_inverse
+    assert parse_world("sgat:local=0").key == parse_world("sgat").key != parse_world("sgat:local=1").key
     for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
                        ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
                        ("sgat:real=0", "real_walks"), ("sgat:state=arms", "state"), ("hybrid:method=ane", "method"),
                        ("identified:alpha=1", "unknown option"), ("sgat:mixture=0", "components"),
-                       ("sgat:memory=-1", "noise_memory"), ("ane:mixture=2", "unknown option"), ("sgat:hidden=0x16", "hidden")]:
+                       ("sgat:memory=-1", "noise_memory"), ("ane:mixture=2", "unknown option"), ("sgat:hidden=0x16", "hidden"),
+                       ("sgat:local=1:hidden=64x64", "linear models")]:
         with pytest.raises(ValueError, match=words):
             parse_world(bad)
     with pytest.raises(ValueError, match="repeats"):

@@ -64,20 +64,25 @@ def test_resume_after_sigkill_matches_uninterrupted(tmp_path):
 
 
 def test_command_history_grounds_the_optimization(tmp_path, capsys):
-    """``--command-history 2 --matched``: SGAT's forward models (the real one and, for the matched
-    transformer, the sim's own) see the two previous commands, and CMA-ES runs in the grounded sim
-    that feeds them (the lock-step batch keeps each episode's past commands)."""
+    """``--command-history 2 --matched --local-inverse``: SGAT's forward models (the real one and, for
+    the matched transformer, the sim's own) see the two previous commands, the inverse model gives each
+    joint's command from that joint's state alone, and CMA-ES runs in the grounded sim that feeds them
+    (the lock-step batch keeps each episode's past commands)."""
     from sgat.transformer import ActionTransformer
 
     out = tmp_path / "run"
     assert main(["optimize", *TINY, "--methods", "sgat", "--history", "2", "--command-history", "2",
-                 "--matched", "--out", str(out), "--json"]) == 0
+                 "--matched", "--local-inverse", "--out", str(out), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("sgat", 1)]
     tr = ActionTransformer.load(out / "models" / "sgat_step1")
     assert tr.commands == 2 and tr.spec.history == 2
     assert tr.forward.n_in == 2 * tr.spec.state_dim + 3 * tr.spec.action_dim
     assert len(tr.sim_means) == tr.n_members and all(m.commands == 2 and not m.stochastic for m in tr.sim_means)
+    W = tr.inverse.numpy_params()["W"][0]  # --local-inverse: the left knee's command sees no other joint
+    knee = tr.spec.action_names.index("LKneePitch")
+    others = [i for i, n in enumerate(tr.spec.state_names) if not n.endswith(".LKneePitch")]
+    assert not np.any(W[others, knee]) and np.any(W[tr.spec.state_names.index("q.LKneePitch"), knee])
     assert np.isfinite(res["rows"][1]["select_scores"]["mean"])
 
 

@@ -443,3 +443,65 @@ def test_zero_init_keeps_unexcited_directions_of_a_linear_model_at_zero():
         errs[zero] = np.abs(f.predict(off)[0] - at @ M.T).max()
     assert errs[True] < 0.02, errs
     assert errs[False] > 0.1, errs  # the random start's slopes survive where the data do not reach
+
+
+def _servo_walk(n, seed, P, gain=(1.0, 1.0), explore=0.05, process=0.05):
+    """Two position-servoed joints: Δq = K (gain ⊙ a − q) + process noise, commands from a gait's
+    policy of the whole state, a = P q + exploration noise (each joint's command follows the *other*
+    joint's angle, as a gait's phase couples the legs)."""
+    from sgat.grounding import Transitions
+
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-1, 1, (n, 2))
+    a = q @ P.T + rng.normal(0, explore, (n, 2))
+    return Transitions(q, a, (np.asarray(gain) * a - q) * np.array([0.5, 0.8]) + rng.normal(0, process, (n, 2)))
+
+
+def test_local_inverse_model_grounds_another_gait_like_the_data_gait():
+    """Grounding data from one gait whose commands follow the other joint (a = P q). An inverse model
+    that sees both joints learns that policy and pulls another gait (a = -P q) toward it; the
+    joint-local inverse model (each command from its own joint's angle and change) cannot, and with a
+    known actuator gain in the real world it grounds gain ⊙ a on the other gait as on the data gait."""
+    from sgat.grounding import GroundingConfig, fit_grounding, local_inverse_mask
+    from sgat.transformer import GroundingSpec
+
+    spec = GroundingSpec(np.arange(2), np.arange(2), -5 * np.ones(2), 5 * np.ones(2), 1, ("q.J1", "q.J2"), ("J1", "J2"))
+    assert np.array_equal(local_inverse_mask(spec), [[1, 0, 1, 0], [0, 1, 0, 1]])
+    P = np.array([[0.0, 0.8], [-0.8, 0.0]])
+    cfg = dict(alpha=1.0, method="gat", hidden=(), max_epochs=300)
+    sim, same = _servo_walk(4000, 1, P), _servo_walk(4000, 2, P)
+    plain = fit_grounding(same, sim, spec, GroundingConfig(**cfg)).transformer
+    local = fit_grounding(same, sim, spec, GroundingConfig(**cfg, local_inverse=True)).transformer
+    W = local.inverse.numpy_params()["W"][0] + local.inverse.numpy_params()["S"]  # (inputs, actions)
+    assert W[1, 0] == 0 and W[3, 0] == 0 and W[0, 1] == 0 and W[2, 1] == 0  # structural zeros
+    rng = np.random.default_rng(5)
+    other = [(q, -P @ q) for q in rng.uniform(-1, 1, (30, 2))]
+    err_plain = np.median([np.abs(plain.transform(q, a) - a).max() for q, a in other])
+    err_local = np.median([np.abs(local.transform(q, a) - a).max() for q, a in other])
+    assert err_plain > 0.1, err_plain
+    assert err_local < 0.3 * err_plain, (err_local, err_plain)
+
+    gain = np.array([0.7, 1.3])
+    real = _servo_walk(4000, 3, P, gain=gain)
+    tr = fit_grounding(real, sim, spec, GroundingConfig(**cfg, local_inverse=True)).transformer
+    for gait in (P, -P):
+        err = [np.abs(tr.transform(q, gait @ q) - gain * (gait @ q)).max() for q in rng.uniform(-1, 1, (30, 2))]
+        assert np.median(err) < 0.1, (gait, np.median(err))
+    paper = fit_grounding(real, sim, spec, GroundingConfig(**cfg)).transformer
+    assert np.median([np.abs(paper.transform(q, -P @ q) + gain * (P @ q)).max() for q in rng.uniform(-1, 1, (30, 2))]) > 0.3
+
+
+def test_local_inverse_model_refuses_what_it_cannot_build():
+    from sgat.grounding import GroundingConfig, local_inverse_mask
+    from sgat.transformer import GroundingSpec
+
+    with pytest.raises(ValueError, match="linear models"):
+        GroundingConfig(alpha=0.5, hidden=(64, 64), local_inverse=True)
+    spec = GroundingSpec(np.arange(2), np.arange(2), -np.ones(2), np.ones(2), 2, ("q.J1", "q.J2"), ("J1", "J3"))
+    with pytest.raises(ValueError, match="J3"):
+        local_inverse_mask(spec)
+    spec = GroundingSpec(np.arange(2), np.arange(2), -np.ones(2), np.ones(2), 2, ("q.J1", "q.RHip"), ("J1", "LHip"))
+    m = local_inverse_mask(spec, command_input=True)  # RHip's state goes to the LHip command (one motor)
+    assert m.shape == (2, 3 * 2 + 2) and m[1].tolist() == [0, 1, 0, 1, 0, 1, 0, 1]
+    with pytest.raises(ValueError, match="input mask"):
+        InverseModel(2, 2, hidden=(8,)).fit(np.zeros((20, 4)), np.zeros((20, 2)), input_mask=np.ones((2, 4)))
