@@ -216,10 +216,6 @@ class GroundingFit:
         return self.inverse_reports[0]
 
 
-def _joint(name: str) -> str:
-    return name.split(".", 1)[1] if "." in name else name
-
-
 def local_inverse_mask(spec: GroundingSpec, *, command_input: bool = False) -> np.ndarray:
     """Which inputs of the inverse model each grounded action may use in a joint-local inverse model.
 
@@ -241,7 +237,7 @@ def local_inverse_mask(spec: GroundingSpec, *, command_input: bool = False) -> n
     actions = list(spec.action_names)
     owner = []
     for n in spec.state_names:
-        j = _joint(n)
+        j = n.split(".", 1)[-1]  # q.LKneePitch -> LKneePitch
         if j in actions:
             owner.append(actions.index(j))
             continue

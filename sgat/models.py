@@ -125,6 +125,11 @@ class _Model(nn.Module):
             raise ValueError(f"{self.kind}: need at least 10 samples, got {len(X)}")
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Y))):
             raise ValueError(f"{self.kind}: training data contain NaN or infinite values")
+        mask = None if input_mask is None else np.asarray(input_mask, dtype=bool)
+        if mask is not None and self.hidden:
+            raise ValueError(f"{self.kind}: an input mask needs a linear model (hidden=()), got hidden={self.hidden}")
+        if mask is not None and mask.shape != (self.n_out, self.n_in):
+            raise ValueError(f"{self.kind}: input mask must be ({self.n_out}, {self.n_in}), got {mask.shape}")
         g = torch.Generator().manual_seed(int(seed))
         torch.manual_seed(int(seed))
         for m in self.net.modules():  # initial weights from the seed, not from earlier torch use
@@ -136,12 +141,7 @@ class _Model(nn.Module):
                 nn.init.zeros_(m.weight)
                 nn.init.zeros_(m.bias)
         hooks = []
-        if input_mask is not None:
-            mask = np.asarray(input_mask, dtype=bool)
-            if self.hidden:
-                raise ValueError(f"{self.kind}: an input mask needs a linear model (hidden=()), got hidden={self.hidden}")
-            if mask.shape != (self.n_out, self.n_in):
-                raise ValueError(f"{self.kind}: input mask must be ({self.n_out}, {self.n_in}), got {mask.shape}")
+        if mask is not None:  # structural zeros: zero start, zero gradients
             keep = torch.as_tensor(mask, dtype=torch.float64)
             for w in (self.net.body[0].weight, self.net.skip.weight):
                 with torch.no_grad():
