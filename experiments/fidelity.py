@@ -42,8 +42,9 @@ effects), to see which part of the identified physics carries its fidelity.
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
-and the Brier score of the world's fall frequency per gait against the real falls; and the spread
-of each over the draws. The ceiling that the real trials' own noise allows is the square root of
+the Brier score of the world's fall frequency per gait against the real falls, and the regret of
+its pick (the real fitness lost by choosing the gait the world rates best, ``stats.pick_regret``:
+what optimizing in the world over this panel would cost); and the spread of each over the draws. The ceiling that the real trials' own noise allows is the square root of
 their split-half reliability (``experiments.stats``). Everything random is keyed by (seed, purpose,
 ...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
 """
@@ -66,7 +67,7 @@ from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
 from experiments.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
 from experiments.identify import calibrate_engines, identify_real
-from experiments.stats import bootstrap_spearman, brier_score, spearman, split_half_reliability
+from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
 from experiments.tasks import fit_grounding_task
 from sgat.grounding import GroundingConfig
 from robots import ROBOT_NAMES, get_robot
@@ -219,6 +220,32 @@ def parse_world(text: str) -> WorldSpec:
 
 
 # ------------------------------------------------------------------------------------------ config
+def param_gait_names(paths) -> list[str]:
+    """Panel names of the θ files ``paths``: each file's name without its extension, or, where two
+    files share it (``table1/opt_seed0/thetas/sgat_step1.json`` and ``.../opt_seed1/...``), the
+    shortest trailing part of their paths that tells them apart (``opt_seed0/thetas/sgat_step1``).
+    Names key the cached trials, so two gaits must never share one.
+
+    Raises:
+        ValueError: the same file given twice, or a name that clashes with ``theta0``/``boxNN``.
+    """
+    parts = [os.path.normpath(os.path.splitext(p)[0]).split(os.sep) for p in paths]
+    real = [os.path.realpath(p) for p in paths]
+    if len(set(real)) != len(real):
+        raise ValueError(f"params: the same θ file is given twice: {sorted({p for p in paths if real.count(os.path.realpath(p)) > 1})}")
+    names = []
+    for i, ps in enumerate(parts):
+        for k in range(1, len(ps) + 1):
+            name = "/".join(ps[-k:])
+            if all("/".join(q[-k:]) != name for j, q in enumerate(parts) if j != i):
+                break
+        names.append(name)
+    for name in names:
+        if name == "theta0" or (name.startswith("box") and name[3:].isdigit()):
+            raise ValueError(f"params: the gait name {name!r} clashes with the panel's own gaits; rename the file")
+    return names
+
+
 @dataclass
 class FidelityConfig:
     """Settings of a fidelity run (written to ``config.json``)."""
@@ -251,6 +278,7 @@ class FidelityConfig:
             raise ValueError("real_trials must be >= 2 (the ceiling needs a split-half reliability)")
         if self.gaits < 0:
             raise ValueError(f"gaits must be >= 0, got {self.gaits}")
+        param_gait_names(self.params)  # raises on a repeated file or a clashing name
         if 1 + self.gaits + len(self.params) < 3:
             raise ValueError("the panel needs at least 3 gaits for a rank correlation")
         if not (0 < self.box <= 1):
@@ -336,8 +364,8 @@ class Fidelity:
         for i in range(cfg.gaits):
             u = np.clip(u0 + rng.uniform(-cfg.box, cfg.box, len(u0)), 0.0, 1.0)
             gaits.append({"name": f"box{i:02d}", "theta": P.from_vector(u).to_array().tolist()})
-        for p in cfg.params:
-            gaits.append({"name": os.path.splitext(os.path.basename(p))[0], "theta": P.load(p).to_array().tolist()})
+        for name, p in zip(param_gait_names(cfg.params), cfg.params):
+            gaits.append({"name": name, "theta": P.load(p).to_array().tolist()})
         atomic_write_text(path, json.dumps({"gaits": gaits}, indent=1))
         return gaits
 
@@ -519,7 +547,7 @@ class Fidelity:
                     "rho": spearman(wf, real_fit),
                     "rho_ci90": list(bootstrap_spearman(wf, R, n_boot=cfg.bootstrap, seed=cfg.seed + d)),
                     "mae": float(np.mean(np.abs(wf - real_fit))), "bias": float(np.mean(wf - real_fit)),
-                    "brier": brier_score(wp, F),
+                    "brier": brier_score(wp, F), "pick_regret": pick_regret(wf, real_fit),
                     "real_walks": info["real_walks"], "real_seconds": info["real_seconds"],
                     "excitation_logs": info["excitation_logs"], "excitation_seconds": info["excitation_seconds"],
                     **({"effects": info.get("effects"), "terrain_rms_height": info.get("terrain_rms_height")}
@@ -551,6 +579,8 @@ def _summary(draws: list[dict]) -> dict:
         return {"median": float(np.median(ok)), "min": float(ok.min()), "max": float(ok.max()),
                 "spread": float(ok.max() - ok.min())}
     s = {k: agg(k) for k in ("rho", "mae", "bias", "brier")}
+    if all("pick_regret" in d for d in draws):  # runs saved before it have none
+        s["pick_regret"] = agg("pick_regret")
     s["abs_bias_median"] = float(np.median(np.abs([d["bias"] for d in draws])))
     s["draws"] = len(draws)
     return s
@@ -566,8 +596,8 @@ def format_table(res: dict) -> str:
              f"real frequency {r['brier_own_frequency']:.3f}",
              "",
              f"{'world':28s} {'draws':>5s} {'Spearman rho':>22s} {'worst 90% CI':>14s} {'MAE':>14s} "
-             f"{'bias (world-real)':>24s} {'Brier':>22s}",
-             "-" * 136]
+             f"{'bias (world-real)':>24s} {'Brier':>22s} {'pick regret':>20s}",
+             "-" * 157]
 
     def rng3(s, fmt="{:.2f}"):
         return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
@@ -578,7 +608,8 @@ def format_table(res: dict) -> str:
         ci = worst["rho_ci90"]
         ci_txt = "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:.2f}, {ci[1]:.2f}]"
         lines.append(f"{name:28s} {s['draws']:>5d} {rng3(s['rho']):>22s} {ci_txt:>14s} {s['mae']['median']:>14.1f} "
-                     f"{s['bias']['median']:>+8.1f} (spread {s['bias']['spread']:4.1f}) {rng3(s['brier'], '{:.3f}'):>22s}")
+                     f"{s['bias']['median']:>+8.1f} (spread {s['bias']['spread']:4.1f}) {rng3(s['brier'], '{:.3f}'):>22s} "
+                     f"{rng3(s['pick_regret'], '{:.1f}') if 'pick_regret' in s else '-':>20s}")
     return "\n".join(lines)
 
 

@@ -23,6 +23,7 @@ import json
 import math
 import os
 import re
+import statistics
 import sys
 
 from common.files import atomic_write_text
@@ -69,8 +70,8 @@ def _fidelity(res: dict) -> str:
              f"score of a constant base rate {_f(r['brier_base_rate'], '{:.3f}')}, of each gait's own real fall "
              f"frequency {_f(r['brier_own_frequency'], '{:.3f}')} (the floor).", "",
              "| world | draws | Spearman ρ: median [worst, best] | worst draw's 90 % CI | MAE | bias (world − real): "
-             "median, spread | Brier: median [min, max] | real data per draw |",
-             "|---|---|---|---|---|---|---|---|"]
+             "median, spread | Brier: median [min, max] | regret of its pick: median [worst] | real data per draw |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for name, w in res["worlds"].items():
         s = w["summary"]
         worst = min(w["draws"], key=lambda d: math.inf if d["rho"] is None else d["rho"])
@@ -85,7 +86,7 @@ def _fidelity(res: dict) -> str:
                      f"| [{_f(ci[0])}, {_f(ci[1])}] | {_f(s['mae']['median'], '{:.1f}')} | "
                      f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "
                      f"{_f(s['brier']['median'], '{:.3f}')} [{_f(s['brier']['min'], '{:.3f}')}, "
-                     f"{_f(s['brier']['max'], '{:.3f}')}] | {', '.join(data) or 'none'} |")
+                     f"{_f(s['brier']['max'], '{:.3f}')}] | {_pick(res, w)} | {', '.join(data) or 'none'} |")
     ref = _first_world(res, "sgat")
     targets = fidelity_targets(res, ref) if ref else []
     if targets:
@@ -103,6 +104,15 @@ def _fidelity(res: dict) -> str:
     if res.get("wall_s") is not None:
         lines += ["", f"The run took {res['wall_s'] / 60:.1f} min."]
     return "\n".join(lines)
+
+
+def _pick(res: dict, w: dict) -> str:
+    """The regret of a world's pick, median [worst] over its draws (computed from the saved fitness
+    for runs saved before the figure existed)."""
+    from experiments.stats import pick_regret  # lazy: scipy
+
+    v = [pick_regret(d["fitness"], res["real"]["fitness"]) for d in w["draws"]]
+    return f"{_f(float(statistics.median(v)), '{:.1f}')} [{_f(max(v), '{:.1f}')}]"
 
 
 def _optimize(res: dict) -> str:

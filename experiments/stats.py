@@ -101,6 +101,30 @@ def brier_score(p, outcomes) -> float:
     return float(np.mean((p[:, None] - y) ** 2))
 
 
+def pick_regret(world, real) -> float:
+    """What choosing by a training world costs in the real world: the real fitness of the panel's
+    best gait minus that of the gait the world rates best (the mean real fitness of the gaits the
+    world ties at the top). 0 when the world picks the real best; ``max - min`` of ``real`` at
+    worst. A world can rank a panel well and still pick badly where it is most wrong in its own
+    favour, which is where an optimizer in that world goes.
+
+    Args:
+        world: the world's fitness per gait (G,).
+        real: the real fitness per gait (G,), e.g. the mean over paired trials.
+
+    Raises:
+        ValueError: shapes that differ, fewer than 2 gaits, or a non-finite value.
+    """
+    w = np.asarray(world, dtype=float)
+    r = np.asarray(real, dtype=float)
+    if w.shape != r.shape or w.ndim != 1 or len(w) < 2:
+        raise ValueError(f"world and real must be two vectors of one length >= 2, got {w.shape} and {r.shape}")
+    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(r))):
+        raise ValueError("pick_regret needs finite fitness values")
+    top = w >= w.max() - 1e-12
+    return float(r.max() - r[top].mean())
+
+
 def split_half_reliability(trials, *, n_splits: int = 200, seed: int = 0) -> dict:
     """Reliability of per-case means over paired trials (G, M), M >= 2.
 

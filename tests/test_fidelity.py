@@ -76,6 +76,32 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert "other settings" in capsys.readouterr().err
 
 
+def test_params_with_one_file_name_stay_apart(tmp_path, capsys):
+    """Table I writes ``thetas/sgat_step1.json`` in every seed's directory: given together, each is
+    its own gait (its own name and real trials), not the first one's cached results again."""
+    from experiments.fidelity import param_gait_names
+    from walk_engine import GaitParams
+
+    th0 = GaitParams.initial()
+    (tmp_path / "s0").mkdir(), (tmp_path / "s1").mkdir()
+    a = th0.save(tmp_path / "s0" / "step1.json")
+    b = GaitParams.from_vector(np.clip(th0.to_vector() + 0.3, 0, 1)).save(tmp_path / "s1" / "step1.json")
+    assert param_gait_names([a, b]) == ["s0/step1", "s1/step1"]
+    assert param_gait_names([a, str(tmp_path / "other.json")]) == ["step1", "other"]
+    with pytest.raises(ValueError, match="twice"):
+        param_gait_names([a, a])
+    with pytest.raises(ValueError, match="clashes"):
+        param_gait_names([str(tmp_path / "theta0.json")])
+    out = tmp_path / "fid"
+    assert main(["fidelity", "--gaits", "0", *TINY[2:], "--worlds", "sim", "--params", a, b, "--out", str(out),
+                 "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["gaits"] == ["theta0", "s0/step1", "s1/step1"]
+    real = [(f, p) for f, p in zip(res["real"]["fitness"], res["real"]["speed_cm_s"])]
+    assert real[1] == real[0]  # the same gait on the same paired seeds
+    assert real[2] != real[1]  # another gait: walked, not read back from the first file's cache
+
+
 def test_fidelity_bad_input(tmp_path, capsys):
     assert main(["fidelity", "--worlds", "sgat:nope=1", "--out", str(tmp_path / "x")]) == 2
     assert "unknown option" in capsys.readouterr().err

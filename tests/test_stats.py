@@ -76,3 +76,15 @@ def test_noisy_trials_lower_the_ceiling():
     _, noisy = _panel(noise=30.0)
     assert S.split_half_reliability(noisy)["ceiling"] < S.split_half_reliability(clean)["ceiling"] - 0.2
     assert math.isnan(S.spearman([1, 1, 1], [1, 2, 3]))
+
+
+def test_pick_regret():
+    real = [3.0, -2.0, 10.0, 1.0]
+    assert S.pick_regret(real, real) == 0.0  # the real world picks the real best
+    assert S.pick_regret([-x for x in real], real) == pytest.approx(12.0)  # picks the worst: max - min
+    assert S.pick_regret([5, 5, 0, 0], real) == pytest.approx(10.0 - 0.5)  # a tie at the top: their mean
+    # an optimistic world that ranks well except for one gait it overrates is charged for that gait
+    assert S.pick_regret([3, -2, 9, 20], real) == pytest.approx(9.0)
+    for bad in (([1.0], [1.0]), ([1, 2], [1, 2, 3]), ([1, float("nan")], [1, 2])):
+        with pytest.raises(ValueError):
+            S.pick_regret(*bad)
