@@ -92,9 +92,12 @@ def _fidelity(res: dict) -> str:
     if targets:
         lines += ["", f"SGAT (`{ref}`) against the targets of the grounding issue:", ""]
         lines += [f"* {'met' if ok else '**not met**'}: {t} — {v}" for t, ok, v in targets]
-    variants = [n for n, w in res["worlds"].items() if w.get("kind") == "sgat" and n != ref]
+    variants = [n for n, w in res["worlds"].items() if n != ref and (w.get("kind") == "sgat" or (
+        w.get("kind") == "hybrid" and (w.get("grounding") or {}).get("method") == "sgat"))]
     if targets and variants:
-        lines += ["", "The SGAT variants against the same targets (✓ met, ✗ not met):", "",
+        hybrid = any(res["worlds"][n]["kind"] == "hybrid" for n in variants)
+        lines += ["", "The SGAT variants" + (" (hybrid: SGAT grounding on the identified sim)" if hybrid else "")
+                  + " against the same targets (✓ met, ✗ not met):", "",
                   "| world | " + " | ".join(t.replace("|", "\\|") for t, _, _ in targets) + " |",
                   "|---|" + "---|" * len(targets)]
         for n in variants:
