@@ -195,7 +195,8 @@ def _table1(res: dict) -> str:
                   "|---|---|---|---|"]
         for t in b["tests"]:
             f, x = t["fitness"], t["falls"]
-            lines.append(f"| {t['step']} | {t['method'].upper()} | {f['mean_diff']:+.2f} ± {f['se_diff']:.2f} "
+            vs = f" vs the baseline's {t['baseline_method'].upper()}" if t.get("baseline_method") else ""
+            lines.append(f"| {t['step']} | {t['method'].upper()}{vs} | {f['mean_diff']:+.2f} ± {f['se_diff']:.2f} "
                          f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |")
     if res["verdict"]:
         lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]

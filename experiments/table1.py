@@ -17,7 +17,8 @@ every resulting gait scored on the same paired real trials, and paired tests bet
 The result keeps every gait's real trials (``trials``: fitness and falls per trial seed), so a later
 run on the same trial seeds can be paired with it trial by trial: with ``baseline`` (an earlier
 run's ``table1.json``, e.g. another grounding setting) every (method, step) both runs have is tested
-against the baseline's gait of the same optimization seed on the same trials (:func:`compare_runs`). Everything resumes: the
+against the baseline's gait of the same optimization seed on the same trials, and a method the
+baseline lacks against each of the baseline's methods (:func:`compare_runs`). Everything resumes: the
 optimization runs from their checkpoints, the evaluation from ``episodes.jsonl``.
 """
 
@@ -218,11 +219,14 @@ def load_baseline(path: str, cfg: Table1Config) -> dict:
 def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
     """Paired tests of this run's rows against a baseline run's (:func:`load_baseline`): for every
     (method, step) both runs have, the gaits of the optimization seeds both ran, each walked on the
-    same real trial seeds; pairs = (seed, trial). ``mean_diff`` > 0: this run's gaits are fitter.
+    same real trial seeds; pairs = (seed, trial). A method of this run that the baseline lacks (a
+    hybrid-only run against an SGAT-only one) is compared with each of the baseline's methods at the
+    same step and seed instead (``baseline_method``). ``mean_diff`` > 0: this run's gaits are fitter.
 
     Returns:
-        ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar}]``; θ0 is
-        checked, not tested: the same gait on the same trials must give the same results.
+        ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar}]``, with
+        ``"baseline_method"`` where the baseline's method differs; θ0 is checked, not tested: the
+        same gait on the same trials must give the same results.
 
     Raises:
         ValueError: θ0's real trials differ between the runs (not the same trials after all).
@@ -230,19 +234,26 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
     a, b = res["trials"], base["trials"]
     if a["theta0"] != b["theta0"]:
         raise ValueError("θ0's real trials differ from the baseline's: the runs did not walk the same trials")
-    keys = sorted((k for k in a if k != "theta0" and k in b), key=lambda k: (k.split("|")[0], int(k.split("|")[1]),
-                                                                             int(k.split("|")[2])))
-    groups: dict[tuple, list[str]] = {}
-    for k in keys:
-        m, st, _ = k.split("|")
-        groups.setdefault((m, int(st)), []).append(k)
+
+    def parse(k: str) -> tuple[str, int, int]:
+        m, st, s = k.split("|")
+        return m, int(st), int(s)
+
+    b_methods = sorted({parse(k)[0] for k in b if k != "theta0"})
+    groups: dict[tuple, list[tuple[str, str]]] = {}
+    for k in sorted((k for k in a if k != "theta0"), key=parse):
+        m, st, s = parse(k)
+        for mb in ([m] if m in b_methods else b_methods):
+            if f"{mb}|{st}|{s}" in b:
+                groups.setdefault((m, mb, st), []).append((k, f"{mb}|{st}|{s}"))
     out = []
-    for (m, st), ks in groups.items():
-        fa = np.concatenate([a[k]["fitness"] for k in ks])
-        fb = np.concatenate([b[k]["fitness"] for k in ks])
-        xa = np.concatenate([a[k]["fell"] for k in ks])
-        xb = np.concatenate([b[k]["fell"] for k in ks])
-        out.append({"method": m, "step": st, "seeds": [int(k.split("|")[2]) for k in ks],
+    for (m, mb, st), pairs in groups.items():
+        fa = np.concatenate([a[ka]["fitness"] for ka, _ in pairs])
+        fb = np.concatenate([b[kb]["fitness"] for _, kb in pairs])
+        xa = np.concatenate([a[ka]["fell"] for ka, _ in pairs])
+        xb = np.concatenate([b[kb]["fell"] for _, kb in pairs])
+        out.append({"method": m, "step": st, "seeds": [parse(ka)[2] for ka, _ in pairs],
+                    **({"baseline_method": mb} if mb != m else {}),
                     "fitness": paired_permutation_test(fa, fb, seed=seed), "falls": mcnemar_test(xa, xb)})
     return out
 
@@ -253,12 +264,13 @@ def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:
     for t in tests:
         f, x = t["fitness"], t["falls"]
         name = f"step {t['step']}: {t['method'].upper()} of this run"
+        theirs = f"the baseline's {t['baseline_method'].upper()}" if t.get("baseline_method") else "the baseline's"
         if f["p_value"] < alpha:
-            out.append(f"{name} {'beats' if f['mean_diff'] > 0 else 'is worse than'} the baseline's on fitness by "
+            out.append(f"{name} {'beats' if f['mean_diff'] > 0 else 'is worse than'} {theirs} on fitness by "
                        f"{f['mean_diff']:+.1f} (paired permutation p = {f['p_value']:.3g}; falls {x['only_a']} vs "
                        f"{x['only_b']} discordant, McNemar p = {x['p_value']:.3g})")
         else:
-            out.append(f"{name}: no significant difference from the baseline's (fitness {f['mean_diff']:+.1f} ± "
+            out.append(f"{name}: no significant difference from {theirs} (fitness {f['mean_diff']:+.1f} ± "
                        f"{f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g})")
     return out
 
@@ -307,7 +319,8 @@ def format_table(res: dict) -> str:
         lines += ["", f"against the baseline {res['baseline']['path']} (same gait seeds and trials; a = this run):"]
         for t in res["baseline"]["tests"]:
             f, x = t["fitness"], t["falls"]
-            lines.append(f"  step {t['step']}: {t['method']:>8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
+            vs = f"{t['method']} vs {t['baseline_method']}" if t.get("baseline_method") else t["method"]
+            lines.append(f"  step {t['step']}: {vs:>8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
                          f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})")
     lines.append("")
     lines += [f"verdict: {v}" for v in res["verdict"]]

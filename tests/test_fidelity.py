@@ -164,9 +164,15 @@ def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
         base[f"sgat|1|{s}"] = {"fitness": rng.normal(0, 3, 10).tolist(), "fell": [1] * 10}
     run = {k: {"fitness": [x + (k != "theta0") for x in v["fitness"]], "fell": list(v["fell"])} for k, v in base.items()}
     run["sgat|1|0"]["fell"][4] = 0
-    run["gat|1|0"] = {"fitness": [0.0] * 10, "fell": [0] * 10}  # not in the baseline: not compared
-    (t,) = compare_runs({"trials": run}, {"trials": base})
-    assert (t["method"], t["step"], t["seeds"]) == ("sgat", 1, [0, 1])
+    run["gat|1|0"] = {"fitness": [0.0] * 10, "fell": [0] * 10}  # not in the baseline: against its SGAT
+    run["gat|2|0"] = {"fitness": [0.0] * 10, "fell": [0] * 10}  # no step 2 in the baseline: not compared
+    g, t = compare_runs({"trials": run}, {"trials": base})
+    assert (t["method"], t["step"], t["seeds"]) == ("sgat", 1, [0, 1]) and "baseline_method" not in t
+    assert (g["method"], g["baseline_method"], g["step"], g["seeds"]) == ("gat", "sgat", 1, [0])
+    assert g["fitness"]["mean_diff"] == pytest.approx(-np.mean(base["sgat|1|0"]["fitness"]))
+    assert (g["falls"]["only_a"], g["falls"]["only_b"]) == (0, 10)  # GAT never fell, the baseline's SGAT always
+    from experiments.table1 import baseline_verdict
+    assert baseline_verdict([g])[0].startswith("step 1: GAT of this run") and "the baseline's SGAT" in baseline_verdict([g])[0]
     assert t["fitness"]["mean_diff"] == pytest.approx(1.0) and t["fitness"]["p_value"] < 1e-3
     assert (t["falls"]["only_a"], t["falls"]["only_b"]) == (0, 1)
     with pytest.raises(ValueError, match="θ0"):
