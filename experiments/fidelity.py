@@ -44,8 +44,9 @@ Per world and draw: Spearman ρ between world and real fitness over the gaits (w
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
 the Brier score of the world's fall frequency per gait against the real falls, and the regret of
 its pick (the real fitness lost by choosing the gait the world rates best, ``stats.pick_regret``:
-what optimizing in the world over this panel would cost); and the spread of each over the draws. The ceiling that the real trials' own noise allows is the square root of
-their split-half reliability (``experiments.stats``). Everything random is keyed by (seed, purpose,
+what optimizing in the world over this panel would cost); and the spread of each over the draws.
+The ceiling that the real trials' own noise allows is the square root of their split-half
+reliability (``experiments.stats``). Everything random is keyed by (seed, purpose,
 ...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
 """
 
