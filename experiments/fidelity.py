@@ -233,7 +233,7 @@ def param_gait_names(paths) -> list[str]:
     parts = [os.path.normpath(os.path.splitext(p)[0]).split(os.sep) for p in paths]
     real = [os.path.realpath(p) for p in paths]
     if len(set(real)) != len(real):
-        raise ValueError(f"params: the same θ file is given twice: {sorted({p for p in paths if real.count(os.path.realpath(p)) > 1})}")
+        raise ValueError(f"params: the same θ file is given twice: {sorted({p for p, r in zip(paths, real) if real.count(r) > 1})}")
     names = []
     for i, ps in enumerate(parts):
         for k in range(1, len(ps) + 1):
