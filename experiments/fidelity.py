@@ -38,7 +38,9 @@ model of the sim fitted on the sim walks), ``zero`` (0/1: linear models fitted f
 ``history`` (frames of state the models see), ``commands`` (c: the forward model also sees the c
 previous commands, so the transformer can represent an actuation latency); ``method`` (sgat/gat) for ``hybrid``; of ``ane``: ``sigma``;
 of ``identified``: ``terms=0`` (only the identified ground) or ``ground=0`` (only the deterministic
-effects), to see which part of the identified physics carries its fidelity.
+effects), to see which part of the identified physics carries its fidelity; of ``identified`` and
+``hybrid``: ``stepping`` (stepping logs per identification, default the run's 3; the fixed-base
+logs stay the draw's), for fidelity against the amount of excitation data.
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
@@ -87,7 +89,8 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 
 # ------------------------------------------------------------------------------------------ worlds
 #: WorldSpec fields added after the first release, with their defaults (left out of the cache key).
-_LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1}
+_LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
+                  "stepping_logs": None}
 
 
 @dataclass(frozen=True)
@@ -106,6 +109,7 @@ class WorldSpec:
     history: int | None = None  # frames of state history the models see (None: DEFAULT_HISTORY if grounded, else 1)
     identified_terms: bool = True  # identified: the deterministic effects (ablation switch)
     identified_ground: bool = True  # identified: the uneven ground (ablation switch)
+    stepping_logs: int | None = None  # identified / hybrid: stepping logs per identification (None: the run's)
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -159,6 +163,8 @@ def parse_world(text: str) -> WorldSpec:
                 kw["sigma"] = float(v)
             elif kind == "identified" and k in ("terms", "ground"):
                 kw[f"identified_{k}"] = bool(int(v))
+            elif kind in ("identified", "hybrid") and k == "stepping":
+                kw["stepping_logs"] = int(v)
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory",
                                                               "gaits", "state", "history", "commands", "matched",
@@ -214,6 +220,8 @@ def parse_world(text: str) -> WorldSpec:
     for k in ("real_walks", "sim_walks", "data_gaits", "history"):
         if kw.get(k, 1) < 1:
             raise ValueError(f"world {text!r}: {k} must be >= 1")
+    if kw.get("stepping_logs", 0) < 0:
+        raise ValueError(f"world {text!r}: stepping must be >= 0 (stepping logs per identification)")
     if kw.get("exploration_noise", 0) < 0 or kw.get("sigma", 0) < 0:
         raise ValueError(f"world {text!r}: noise levels must be >= 0")
     grounding = GroundingConfig(**{**dataclasses.asdict(g), **gkw}) if g is not None else None
@@ -398,13 +406,20 @@ class Fidelity:
             self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
         return paths
 
-    def _identify(self, draw: int) -> dict:
+    def _stepping(self, spec: WorldSpec) -> int:
+        """Stepping logs of ``spec``'s identifications (its ``stepping`` option or the run's)."""
+        return self.cfg.identify_floating_logs if spec.stepping_logs is None else spec.stepping_logs
+
+    def _identify(self, draw: int, stepping: int) -> dict:
+        """Draw ``draw``'s identification from ``stepping`` stepping logs; every count shares the
+        draw's fixed-base stage (the same logs in the air), so only the stepping stage differs."""
         cfg = self.cfg
-        return identify_real(os.path.join(self.run_dir, "identified", f"d{draw}"),
-                             seed=_seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, profile=cfg.profile,
-                             calibration=self._calibration, n_fixed=cfg.identify_fixed_logs,
-                             n_floating=cfg.identify_floating_logs, seconds=cfg.identify_seconds,
-                             time_budget_s=cfg.identify_budget_s, progress=None)
+        root = os.path.join(self.run_dir, "identified", f"d{draw}")
+        out = root if stepping == cfg.identify_floating_logs else f"{root}_stepping{stepping}"
+        return identify_real(out, seed=_seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, profile=cfg.profile,
+                             calibration=self._calibration, n_fixed=cfg.identify_fixed_logs, n_floating=stepping,
+                             seconds=cfg.identify_seconds, time_budget_s=cfg.identify_budget_s,
+                             fixed_dir=os.path.join(root, "fixed"), progress=None)
 
     def _model_dir(self, spec: WorldSpec, draw: int) -> str:
         return os.path.join(self.run_dir, "models", f"{spec.key}_d{draw}")
@@ -418,20 +433,21 @@ class Fidelity:
         """
         cfg = self.cfg
         out: dict = {s.name: {} for s in self.specs}
-        need_id = any(s.needs_identification for s in self.specs)
-        idents: dict[int, dict] = {}
+        counts = sorted({self._stepping(s) for s in self.specs if s.needs_identification})
+        idents: dict[tuple[int, int], dict] = {}
         self._calibration = None
-        if need_id:
+        if counts:
             t0 = time.perf_counter()
             self._calibration = calibrate_engines(os.path.join(self.run_dir, "identified", "calibration"),
                                                   seed=_seeds(cfg.seed, _CAL, n=1)[0] % 1_000_000,
-                                                  floating=cfg.identify_floating_logs > 0)
+                                                  floating=max(counts) > 0)
             self._say(f"engine-gap calibration ready ({time.perf_counter() - t0:.0f} s)")
             t0 = time.perf_counter()
             for d in range(cfg.data_seeds):  # the diagnosis runs its replays on every core itself
-                idents[d] = r = self._identify(d)
-                self._say(f"identified draw {d}: {len(r['effects'])} terms, ground Sq "
-                          f"{1000 * r['terrain_rms_height']:.2f} mm, {r['logs']} logs ({r['wall_s']:.0f} s)")
+                for n in counts:
+                    idents[d, n] = r = self._identify(d, n)
+                    self._say(f"identified draw {d} ({n} stepping logs): {len(r['effects'])} terms, ground Sq "
+                              f"{1000 * r['terrain_rms_height']:.2f} mm, {r['logs']} logs ({r['wall_s']:.0f} s)")
             self._say(f"identification done ({time.perf_counter() - t0:.0f} s)")
         fits = []
         for d in range(cfg.data_seeds):
@@ -439,9 +455,10 @@ class Fidelity:
                 info: dict = {"transformer": None, "identified": None, "real_walks": 0, "real_seconds": 0.0,
                               "excitation_logs": 0, "excitation_seconds": 0.0}
                 if s.needs_identification:
-                    info.update(identified=idents[d]["reports"], excitation_logs=idents[d]["logs"],
-                                excitation_seconds=idents[d]["seconds"], effects=idents[d]["effects"],
-                                terrain_rms_height=idents[d]["terrain_rms_height"])
+                    idn = idents[d, self._stepping(s)]
+                    info.update(identified=idn["reports"], excitation_logs=idn["logs"],
+                                excitation_seconds=idn["seconds"], effects=idn["effects"],
+                                terrain_rms_height=idn["terrain_rms_height"])
                 if s.grounded:
                     thetas = self._data_gaits(s.data_gaits, d)
                     g = "" if s.data_gaits == 1 else f"_g{s.data_gaits}"
@@ -450,6 +467,8 @@ class Fidelity:
                     if s.kind == "hybrid":
                         sim_kw["identified"] = info["identified"]
                     base = "ident" if s.kind == "hybrid" else "sim"
+                    if s.kind == "hybrid" and self._stepping(s) != cfg.identify_floating_logs:
+                        base += f"{self._stepping(s)}"  # walks on another identified world
                     sim = self._walks("identified" if s.kind == "hybrid" else "sim",
                                       _seeds(cfg.seed, _GROUND_SIM, d, n=s.sim_walks),
                                       f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)

@@ -104,7 +104,7 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
                   n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 60.0, rounds: int = 2,
-                  progress=None) -> dict:
+                  fixed_dir: str | None = None, progress=None) -> dict:
     """Excite the real world and diagnose it: the reports the identified sim is built from.
 
     Args:
@@ -136,8 +136,9 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
     for kind, n in (("fixed", n_fixed), ("floating", n_floating)):
         if n <= 0:
             continue
-        rep_path = os.path.join(out_dir, kind, "report.json")
-        logs_dir = os.path.join(out_dir, kind, "logs")
+        stage = fixed_dir if kind == "fixed" and fixed_dir else os.path.join(out_dir, kind)
+        rep_path = os.path.join(stage, "report.json")
+        logs_dir = os.path.join(stage, "logs")
         if not os.path.exists(rep_path):
             paths = _record(logs_dir, fixed_base=(kind == "fixed"), profile=profile, n_logs=n, seconds=seconds,
                             seed=seed + (0 if kind == "fixed" else 50), lumpy=(kind == "floating"))
@@ -150,7 +151,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=time_budget_s,
                            families=fams,
                            progress=lambda s, k=kind: say(f"identify {kind}: {s}"), use_ground_truth=USE_GROUND_TRUTH)
-            write_report(rep, logs, os.path.join(out_dir, kind), plots=False)
+            write_report(rep, logs, stage, plots=False)
         logs = load_logs(logs_dir)
         n_logs += len(logs)
         secs += sum(lg.seconds for lg in logs)

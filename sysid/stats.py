@@ -138,7 +138,9 @@ def localisation(logs: list[Log], wins: list[Window], y_sim: list[np.ndarray], f
     """Per-channel statistics of the nominal replay residual (descriptive; see the module docstring).
 
     Args:
-        logs, wins: the replayed windows.  y_sim: per window, (L, k) nominal predictions.
+        logs: the recordings.  wins: the replayed windows, each naming its log by index into
+            ``logs`` (a log cut into several windows has several).  y_sim: per window, (L, k)
+            nominal predictions.
         floor: (k,) noise floor per channel (σ, with the engine gap where calibrated).
         names: k channel names (the robot's n joints, then IMU channels if any; n = the logs'
             joint count, ``Log.q.shape[1]``).
@@ -149,12 +151,19 @@ def localisation(logs: list[Log], wins: list[Window], y_sim: list[np.ndarray], f
         corr_acc, corr_tracking, corr_gravity, whiteness), ``groups`` (encoders / imu ->
         rms_over_floor) and ``phases`` (label -> residual energy / floor² per sample, samples,
         and touchdown/other ratio).
+
+    Raises:
+        ValueError: a different number of windows and predictions.
     """
     k = len(names)
     nj = logs[0].q.shape[1]  # joint channels come first
     E, S, Y, C, G, P = [], [], [], [], [], []
-    for lg, w, ys in zip(logs, wins, y_sim):
-        from sysid.replay import measured
+    from sysid.replay import measured
+
+    if len(wins) != len(y_sim):
+        raise ValueError(f"{len(wins)} windows but {len(y_sim)} predictions")
+    for w, ys in zip(wins, y_sim):
+        lg = logs[w.log]  # windows name their log: a log cut into several windows has one per window
         ym = measured(lg, w, with_imu=k > nj)
         E.append((ym - ys)[1:])
         S.append(ys[1:])

@@ -37,18 +37,51 @@ def test_parse_world_options():
     lm = parse_world("sgat:local=1:matched=1:zero=1").grounding
     assert lm.local_inverse and lm.matched and lm.zero_init and not parse_world("sgat").grounding.local_inverse
     assert parse_world("sgat:local=0").key == parse_world("sgat").key != parse_world("sgat:local=1").key
+    assert parse_world("identified:stepping=9").stepping_logs == 9 and parse_world("hybrid:stepping=6").stepping_logs == 6
+    assert parse_world("identified").key != parse_world("identified:stepping=9").key != parse_world("identified:stepping=6").key
     for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
                        ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
                        ("sgat:real=0", "real_walks"), ("sgat:state=arms", "state"), ("hybrid:method=ane", "method"),
                        ("identified:alpha=1", "unknown option"), ("sgat:mixture=0", "components"),
                        ("sgat:memory=-1", "noise_memory"), ("ane:mixture=2", "unknown option"), ("sgat:hidden=0x16", "hidden"),
-                       ("sgat:local=1:hidden=64x64", "linear models")]:
+                       ("sgat:local=1:hidden=64x64", "linear models"), ("identified:stepping=-1", "stepping"),
+                       ("sgat:stepping=9", "unknown option"), ("identified:stepping=x", "bad value")]:
         with pytest.raises(ValueError, match=words):
             parse_world(bad)
     with pytest.raises(ValueError, match="repeats"):
         FidelityConfig(worlds=("sgat", "sgat")).validate()
     with pytest.raises(ValueError, match="real_trials"):
         FidelityConfig(real_trials=1).validate()
+
+
+def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_path, monkeypatch):
+    """``identified:stepping=N`` identifies each draw again from N stepping logs (another folder, the
+    same seed) on the draw's own fixed-base stage, and reports the excitation data it used."""
+    import experiments.fidelity as fid
+
+    calls = []
+
+    def fake_identify(out_dir, *, n_fixed, n_floating, fixed_dir, seed, **kw):
+        calls.append((os.path.relpath(out_dir, tmp_path), n_floating, os.path.relpath(fixed_dir, tmp_path), seed))
+        return {"reports": [os.path.join(fixed_dir, "report.json")], "logs": n_fixed + n_floating,
+                "seconds": 6.0 * (n_fixed + n_floating), "effects": {"latency": 0.02},
+                "terrain_rms_height": 0.002 + 0.0001 * n_floating, "wall_s": 0.0}
+
+    monkeypatch.setattr(fid, "identify_real", fake_identify)
+    monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
+    run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9"), data_seeds=2), str(tmp_path),
+                       executor=None)
+    prep = run.prepare()
+    by_dir = {c[0]: c for c in calls}
+    assert sorted(by_dir) == ["identified/d0", "identified/d0_stepping9", "identified/d1", "identified/d1_stepping9"]
+    for d in (0, 1):
+        plain, more = by_dir[f"identified/d{d}"], by_dir[f"identified/d{d}_stepping9"]
+        assert (plain[1], more[1]) == (3, 9)
+        assert plain[2] == more[2] == f"identified/d{d}/fixed" and plain[3] == more[3]  # one fixed stage, one seed
+        assert prep["identified"][d]["excitation_logs"] == 6 and prep["identified:stepping=9"][d]["excitation_logs"] == 12
+        assert prep["identified:stepping=9"][d]["terrain_rms_height"] == pytest.approx(0.0029)
+    assert by_dir["identified/d0"][3] != by_dir["identified/d1"][3]  # draws are independent
+    assert prep["sim"][0]["identified"] is None
 
 
 def test_tiny_fidelity_run_and_resume(tmp_path, capsys):

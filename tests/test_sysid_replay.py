@@ -140,3 +140,30 @@ def test_floating_base_state_estimate_without_ground_truth(robot):
     wins = windows([lg], [0], 0.5)
     out = predict([lg], wins, [{}], with_imu=True)
     assert np.abs(out[0][0, :, :24] - lg.q[:50]).max() < 5e-3
+
+
+def test_localisation_pairs_each_window_with_its_own_log():
+    """Logs cut into several windows (the diagnosis's 0.5 s windows) of logs of different lengths:
+    every window's residual is its own log's (here a known offset per log), none is dropped."""
+    from sysid.data import Log
+    from sysid.replay import windows
+    from sysid.stats import localisation
+
+    rng = np.random.default_rng(3)
+    n, dt, offsets = 3, 0.01, (0.01, -0.03)
+    logs = []
+    for i, N in enumerate((150, 149)):  # one sample short, as a log cut at a fall
+        q = rng.normal(0, 0.1, (N, n))
+        logs.append(Log(name=f"log{i}", t=np.arange(N) * dt, cmd=q.copy(), q=q, dq=None, control_dt=dt,
+                        physics_dt=0.002, fixed_base=True))
+    wins = windows(logs, [0, 1], 0.5)
+    assert len(wins) == 6 and {w.log for w in wins} == {0, 1}
+    y_sim = [logs[w.log].q[w.k0:w.k1] - offsets[w.log] for w in wins]
+    loc = localisation(logs, wins, y_sim, np.full(n, 0.01), ["a", "b", "c"])
+    rows = [w.length - 1 for w in wins]  # the first row of each window is its initial state
+    want = sum(r * offsets[w.log] for r, w in zip(rows, wins)) / sum(rows)
+    for name in "abc":
+        assert loc["channels"][name]["bias"] == pytest.approx(want)
+        assert loc["channels"][name]["rms"] == pytest.approx(np.sqrt(sum(r * offsets[w.log] ** 2 for r, w in zip(rows, wins)) / sum(rows)))
+    with pytest.raises(ValueError, match="windows"):
+        localisation(logs, wins, y_sim[:-1], np.full(n, 0.01), ["a", "b", "c"])
