@@ -412,13 +412,17 @@ class Fidelity:
 
     def _identify(self, draw: int, stepping: int) -> dict:
         """Draw ``draw``'s identification from ``stepping`` stepping logs; every count shares the
-        draw's fixed-base stage (the same logs in the air), so only the stepping stage differs."""
+        draw's fixed-base stage (the same logs in the air), so only the stepping stage differs. The
+        stepping diagnosis's time budget grows with its logs (``--identify-budget`` per 3 logs):
+        with the budget of 3 logs, 2 of 3 diagnoses of 9 logs ran out before the uneven-ground stage
+        and left the ground out."""
         cfg = self.cfg
         root = os.path.join(self.run_dir, "identified", f"d{draw}")
         out = root if stepping == cfg.identify_floating_logs else f"{root}_stepping{stepping}"
         return identify_real(out, seed=_seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, profile=cfg.profile,
                              calibration=self._calibration, n_fixed=cfg.identify_fixed_logs, n_floating=stepping,
                              seconds=cfg.identify_seconds, time_budget_s=cfg.identify_budget_s,
+                             stepping_budget_s=cfg.identify_budget_s * max(1.0, stepping / max(1, cfg.identify_floating_logs)),
                              fixed_dir=os.path.join(root, "fixed"), progress=None)
 
     def _model_dir(self, spec: WorldSpec, draw: int) -> str:
@@ -447,7 +451,9 @@ class Fidelity:
                 for n in counts:
                     idents[d, n] = r = self._identify(d, n)
                     self._say(f"identified draw {d} ({n} stepping logs): {len(r['effects'])} terms, ground Sq "
-                              f"{1000 * r['terrain_rms_height']:.2f} mm, {r['logs']} logs ({r['wall_s']:.0f} s)")
+                              f"{1000 * r['terrain_rms_height']:.2f} mm, {r['logs']} logs ({r['wall_s']:.0f} s)"
+                              + "".join(f"; WARNING: the {k} diagnosis ran out of time (raise --identify-budget)"
+                                        for k in r.get("time_budget_reached", [])))
             self._say(f"identification done ({time.perf_counter() - t0:.0f} s)")
         fits = []
         for d in range(cfg.data_seeds):

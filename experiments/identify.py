@@ -104,7 +104,7 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
                   n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 60.0, rounds: int = 2,
-                  fixed_dir: str | None = None, progress=None) -> dict:
+                  fixed_dir: str | None = None, stepping_budget_s: float | None = None, progress=None) -> dict:
     """Excite the real world and diagnose it: the reports the identified sim is built from.
 
     Args:
@@ -119,10 +119,16 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             rounds: the first finds what walking feels most (latency in the air, uneven ground on the
             floor); later rounds mostly add friction of the light arm joints, which the walk does not
             feel, for another minute per diagnosis.
+        fixed_dir: folder of the fixed-base stage (default ``out_dir/fixed``): identifications that
+            differ only in their stepping logs share one (its logs and report are reused).
+        stepping_budget_s: time budget of the stepping-log diagnosis (default ``time_budget_s``): more
+            logs take longer to screen, and a diagnosis whose budget runs out before its
+            uneven-ground stage leaves the ground out (its report says so).
 
     Returns:
         ``{"reports": [report.json paths, fixed first], "logs": n, "seconds": recorded seconds,
-        "effects": {label: value}, "terrain_rms_height": m, "wall_s": s}``; the diagnoses are reused
+        "effects": {label: value}, "terrain_rms_height": m, "time_budget_reached": [stages whose
+        diagnosis the time budget stopped early], "wall_s": s}``; the diagnoses are reused
         when their reports exist.
     """
     from sysid.data import load_logs  # lazy: loads the engines
@@ -131,7 +137,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
 
     t0 = time.perf_counter()
     say = progress or (lambda s: None)
-    reports, n_logs, secs = [], 0, 0.0
+    reports, n_logs, secs, budget_hit = [], 0, 0.0, []
     base = None
     for kind, n in (("fixed", n_fixed), ("floating", n_floating)):
         if n <= 0:
@@ -148,7 +154,8 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
                 with open(calibration[kind]) as f:
                     cal = json.load(f)
             fams = IDENTIFY_FIXED_FAMILIES if kind == "fixed" else None
-            rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=time_budget_s,
+            budget = stepping_budget_s if kind == "floating" and stepping_budget_s is not None else time_budget_s
+            rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=budget,
                            families=fams,
                            progress=lambda s, k=kind: say(f"identify {kind}: {s}"), use_ground_truth=USE_GROUND_TRUTH)
             write_report(rep, logs, stage, plots=False)
@@ -159,9 +166,11 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             rep = json.load(f)
         base = terms_from_labels({**rep.get("base_model", {}), **rep["model"]})
         reports.append(rep_path)
+        if rep.get("time_budget_reached"):
+            budget_hit.append(kind)
     from sysid.identified import load_identified  # lazy: loads the engines
 
     terms, rms = load_identified(reports)
     return {"reports": reports, "logs": n_logs, "seconds": secs,
             "effects": {t.label(): v for t, v in sorted(terms.items())}, "terrain_rms_height": rms,
-            "wall_s": time.perf_counter() - t0}
+            "time_budget_reached": budget_hit, "wall_s": time.perf_counter() - t0}

@@ -410,7 +410,8 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     rough_rejected = _check_roughness(rough.fit, problem, iv.model, say)
     effects, indist = _roughness_effect(rough.fit, iv.model, found, indist)
     after = _after(logs, problem, setup, base, before, iv.model)
-    verdict = _verdict(before, after, effects, uncertain, base, rough.fit, calibration, source)
+    verdict = _verdict(before, after, effects, uncertain, base, rough.fit, calibration, source,
+                       roughness_skipped=rough.budget_hit)
     rejected = sel.rejected + final.rejected + rough.rejected + rough_rejected
     report = _report(logs, setup, base, loc, problem, before, sel, iv, effects, uncertain, indist, rejected, rough,
                      after, verdict, calibration, robot, clock, source)
@@ -1080,10 +1081,12 @@ def _after(logs: list[Log], problem: Problem, setup: _Setup, base: _Baseline, be
 
 
 def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: list[dict], base: _Baseline,
-             rough: RoughnessFit | None, calibration: dict | None, source: str) -> _Verdict:
+             rough: RoughnessFit | None, calibration: dict | None, source: str, *,
+             roughness_skipped: bool = False) -> _Verdict:
     """The one-paragraph verdict (nothing to explain / nothing explains it / what was found), the
-    roughness note, the caution for noise-free recordings without an engine-gap calibration, and a
-    warning (not in the verdict) when the calibration replayed its base state differently
+    roughness note, the caution for noise-free recordings without an engine-gap calibration, the
+    caution that the time budget ran out before uneven ground was tested (``roughness_skipped``), and
+    a warning (not in the verdict) when the calibration replayed its base state differently
     (``source``: this diagnosis's :func:`sysid.data.base_state_source`)."""
     noise_floor = base.noise_floor
     rms_before, rms_after = before.rms, after.rms
@@ -1123,6 +1126,12 @@ def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: lis
                         "calibration was given: every difference between the recording's simulator (or robot) and "
                         "this sim counts as missing physics; record logs without injected effects, run "
                         "'sgatwalk diagnose --calibrate' on them and pass --calibration")
+        verdict += ". CAUTION: " + warnings[-1]
+    if roughness_skipped:
+        # more logs take longer to screen: a budget that suits three stepping logs may end before the
+        # roughness stage on nine, and the ground the robot walks on would silently go unmodelled
+        warnings.append("the time budget ran out before the uneven-ground stage: terrain roughness was not tested "
+                        "(raise --time-budget)")
         verdict += ". CAUTION: " + warnings[-1]
     cal_source = (calibration or {}).get("base_state")
     if cal_source and cal_source != source:

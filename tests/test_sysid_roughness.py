@@ -139,3 +139,13 @@ def test_a_deterministic_contact_effect_is_not_left_to_uneven_ground():
     assert rough.declared, rough.reason  # the friction's excess, read as ground
     left, _ = excess_left(rough, problem, {Term("foot_friction"): 0.2})
     assert left < MIN_RMS_HEIGHT and left < 0.5 * rough.rms_height
+
+
+def test_a_diagnosis_out_of_time_before_the_ground_says_so():
+    """A time budget spent before the uneven-ground stage leaves the ground untested: the report
+    says so in its verdict and warnings (it read "none passes the tests" before)."""
+    from sysid.diagnose import diagnose
+
+    rep = diagnose(_stepping_logs(0.012, [30, 31], seconds=3.0), time_budget_s=0.0, max_rounds=1)
+    assert rep["time_budget_reached"] and rep["terrain_roughness"] is None
+    assert any("uneven-ground stage" in w for w in rep["warnings"]) and "terrain roughness was not tested" in rep["verdict"]
