@@ -16,7 +16,7 @@ World options after ':' (e.g. ``--worlds sgat sgat:ensemble=5 sgat:real=8``): ``
 per draw), ``noise`` (exploration noise [rad]), ``gaits`` (walks spread over this many gaits),
 ``residual`` (0/1), ``matched`` (0/1: the matched transformer, a + f_sim^-1(s, ŝ_real) - f_sim^-1(s, ŝ_sim)), ``zero`` (0/1: linear models from zero weights), ``local`` (0/1: a joint-local inverse model, each joint's command from its own state only), ``mixture`` (K Gaussians in SGAT's forward model), ``memory`` (correlation time of SGAT's noise [s]), ``state`` (legs, legs+imu), ``history`` (frames of state the models see; default 6; 1: the paper's
 one frame), ``commands`` (c: the forward model also sees the c previous commands) for gat, sgat and hybrid, ``method`` (sgat/gat) for hybrid; ``sigma`` for ane;
-``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification) for identified and hybrid.
+``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification) and ``confounded`` (0: without the contact terms that only stand in for the identified uneven ground) for identified and hybrid.
 """
 
 from __future__ import annotations

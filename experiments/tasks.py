@@ -2,28 +2,30 @@
 
 A task is a plain dict (so it pickles cheaply and travels to process-pool or Ray workers):
 
-====================  =====================================================================
-key                   meaning
-====================  =====================================================================
-``world``             ``"sim"`` (MuJoCo), ``"real"`` (PyBullet), ``"identified"`` (MuJoCo with
-                      the effects of the diagnosis reports in ``identified``), ``"grounded"``
-                      (the sim, or the identified sim if ``identified`` is given, wrapped in
-                      ``sgat.GroundedEnv`` with the transformer saved in ``transformer``)
-``theta``             the 16 gait parameters in SI units (list)
-``seed``              the episode seed (terrain, effects, noise, SGAT sampling)
-``seconds``           episode length [s] (the paper: 7.5)
-``profile``           real-world effect profile name (real world only)
-``action_noise``      std [rad] of Gaussian noise on the applied leg targets (sim data
-                      collection with exploration noise, or the ANE baseline)
-``transformer``       directory of a saved ``sgat.ActionTransformer`` (grounded world)
-``identified``        list of ``report.json`` paths of ``sgatwalk diagnose`` (identified world,
-                      or the base of a grounded one: hybrid grounding)
-``identified_terms``  False: leave the deterministic effects out (ablation; default True)
-``identified_ground`` False: leave the identified uneven ground out (ablation; default True)
-``robot``             ``robots.get_robot`` name (default ``"nao"``; the identified worlds are the NAO's)
-``record``            return the recording too (columns + metadata)
-``meta``              extra metadata for the recording
-====================  =====================================================================
+========================  =====================================================================
+key                       meaning
+========================  =====================================================================
+``world``                 ``"sim"`` (MuJoCo), ``"real"`` (PyBullet), ``"identified"`` (MuJoCo with
+                          the effects of the diagnosis reports in ``identified``), ``"grounded"``
+                          (the sim, or the identified sim if ``identified`` is given, wrapped in
+                          ``sgat.GroundedEnv`` with the transformer saved in ``transformer``)
+``theta``                 the 16 gait parameters in SI units (list)
+``seed``                  the episode seed (terrain, effects, noise, SGAT sampling)
+``seconds``               episode length [s] (the paper: 7.5)
+``profile``               real-world effect profile name (real world only)
+``action_noise``          std [rad] of Gaussian noise on the applied leg targets (sim data
+                          collection with exploration noise, or the ANE baseline)
+``transformer``           directory of a saved ``sgat.ActionTransformer`` (grounded world)
+``identified``            list of ``report.json`` paths of ``sgatwalk diagnose`` (identified world,
+                          or the base of a grounded one: hybrid grounding)
+``identified_terms``      False: leave the deterministic effects out (ablation; default True)
+``identified_ground``     False: leave the identified uneven ground out (ablation; default True)
+``identified_confounded`` False: leave out the contact terms that only stand in for the identified
+                          uneven ground (``sysid.identified.confounded_with_ground``; default True)
+``robot``                 ``robots.get_robot`` name (default ``"nao"``; the identified worlds are the NAO's)
+``record``                return the recording too (columns + metadata)
+``meta``                  extra metadata for the recording
+========================  =====================================================================
 
 Workers cache worlds and transformers per process, so a generation of CMA-ES builds each once.
 Torch is kept to one thread in workers (``experiments.executors``).
@@ -65,7 +67,8 @@ def _world(task: dict):
     reports = tuple(task.get("identified") or ())
     if world == "identified" and not reports:
         raise ValueError("the identified world needs the diagnosis reports (task['identified'])")
-    parts = (bool(task.get("identified_terms", True)), bool(task.get("identified_ground", True)))
+    parts = (bool(task.get("identified_terms", True)), bool(task.get("identified_ground", True)),
+             bool(task.get("identified_confounded", True)))
     robot_name = task.get("robot", "nao")
     if reports and robot_name != "nao":
         raise ValueError("the identified worlds model the NAO only")
@@ -81,7 +84,7 @@ def _world(task: dict):
         elif reports:
             from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
 
-            terms, rms = load_identified(list(reports))
+            terms, rms = load_identified(list(reports), confounded=parts[2])
             _WORLDS[key] = IdentifiedSimEnv(terms if parts[0] else {}, rms if parts[1] else 0.0)
         else:
             _WORLDS[key] = NaoSimEnv(robot)

@@ -36,13 +36,29 @@ from sysid.roughness import CORRELATION_RADIUS
 from terrain import gaussian
 
 
-def load_identified(paths) -> tuple[dict[Term, float], float]:
+def confounded_with_ground(rep: dict) -> set[str]:
+    """Labels of a report's model terms that only stand in for its uneven ground: a contact term the
+    diagnosis kept as uncertain (not a finding) and reported indistinguishable from a declared
+    terrain roughness. The roughness is fitted on the residual before the contact terms
+    (``sysid.diagnose``) and the contact term is then fitted to the same residual, so a world with
+    both counts the ground's signature twice."""
+    if not any(e.get("family") == "terrain_roughness" for e in rep.get("effects", [])):
+        return set()
+    found = {e.get("family") for e in rep.get("effects", [])}
+    unsure = {e.get("family") for e in rep.get("uncertain", [])} - found
+    pairs = {p.get("a") for p in rep.get("indistinguishable", []) if p.get("b") == "terrain_roughness"}
+    return {lab for lab in rep.get("model", {}) if lab in pairs and lab.split("[")[0] in unsure}
+
+
+def load_identified(paths, confounded: bool = True) -> tuple[dict[Term, float], float]:
     """The identified physics of one or more diagnosis reports.
 
     Args:
         paths: ``report.json`` files (or folders holding one) of ``sgatwalk diagnose``; later reports
             override earlier ones term by term (a stepping-log diagnosis with ``--base-report`` already
             carries the fixed-base terms as its ``base_model``).
+        confounded: False leaves out the contact terms that only stand in for the identified uneven
+            ground (:func:`confounded_with_ground`); True (the default) builds in every model term.
 
     Returns:
         (terms: Term -> value in SI units, the RMS height [m] of the identified uneven ground or 0).
@@ -63,7 +79,9 @@ def load_identified(paths) -> tuple[dict[Term, float], float]:
         try:
             with open(p) as f:
                 rep = json.load(f)
-            terms.update(terms_from_labels({**rep.get("base_model", {}), **rep["model"]}))
+            drop = set() if confounded else confounded_with_ground(rep)  # the base model's own value stays
+            terms.update(terms_from_labels({**rep.get("base_model", {}),
+                                            **{k: v for k, v in rep["model"].items() if k not in drop}}))
         except (json.JSONDecodeError, KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{p}: not a report.json of sgatwalk diagnose ({exc})") from None
         for e in rep.get("effects", []):
@@ -99,9 +117,9 @@ class IdentifiedSimEnv(NaoSimEnv):
         super().__init__(**kwargs)
 
     @classmethod
-    def from_reports(cls, paths, **kwargs) -> "IdentifiedSimEnv":
-        """The world of :func:`load_identified` ``(paths)``."""
-        terms, rms = load_identified(paths)
+    def from_reports(cls, paths, confounded: bool = True, **kwargs) -> "IdentifiedSimEnv":
+        """The world of :func:`load_identified` ``(paths, confounded)``."""
+        terms, rms = load_identified(paths, confounded)
         return cls(terms, rms, **kwargs)
 
     def describe(self) -> dict:

@@ -39,6 +39,8 @@ def test_parse_world_options():
     assert parse_world("sgat:local=0").key == parse_world("sgat").key != parse_world("sgat:local=1").key
     assert parse_world("identified:stepping=9").stepping_logs == 9 and parse_world("hybrid:stepping=6").stepping_logs == 6
     assert parse_world("identified").key != parse_world("identified:stepping=9").key != parse_world("identified:stepping=6").key
+    assert not parse_world("hybrid:confounded=0").identified_confounded and parse_world("identified").identified_confounded
+    assert parse_world("identified:confounded=1").key == parse_world("identified").key != parse_world("identified:confounded=0").key
     for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
                        ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
                        ("sgat:real=0", "real_walks"), ("sgat:state=arms", "state"), ("hybrid:method=ane", "method"),

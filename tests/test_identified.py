@@ -87,3 +87,38 @@ def test_identified_ground_is_random_per_episode_with_the_fitted_rms_height():
     assert h1[far].std() == pytest.approx(0.003, rel=0.15)
     with pytest.raises(ValueError, match="deterministic"):
         IdentifiedSimEnv({Term("terrain_roughness"): 0.003})
+
+
+def _stepping_report(compliance_found: bool = False, ground: bool = True) -> dict:
+    """A stepping-log report as the diagnosis writes one when a contact term competes with uneven
+    ground: the ground declared, the contact term fitted after it (kept uncertain unless found)."""
+    comp = {"family": "ground_compliance", "joints": [], "links": [], "value": 0.03, "unit": "s"}
+    rough = {"family": "terrain_roughness", "joints": [], "links": [], "value": 0.0025, "unit": "m", "stochastic": True}
+    return {"model": {"ground_compliance": 0.03}, "base_model": {"latency": 0.02, "ground_compliance": 0.0025},
+            "effects": ([rough] if ground else []) + ([comp] if compliance_found else []),
+            "uncertain": [] if compliance_found else [comp],
+            "indistinguishable": [{"a": "ground_compliance", "b": "terrain_roughness", "corr": None}] if ground else []}
+
+
+def test_contact_terms_that_only_stand_in_for_the_ground_can_be_left_out(tmp_path):
+    """``confounded=False`` drops an uncertain contact term the report cannot tell apart from its
+    declared uneven ground (it would count the ground twice), and nothing else: a found contact
+    term, one without a declared ground, and the fixed-base terms stay."""
+    import json
+
+    from experiments.tasks import _world
+    from sysid.identified import confounded_with_ground
+
+    assert confounded_with_ground(_stepping_report()) == {"ground_compliance"}
+    assert confounded_with_ground(_stepping_report(compliance_found=True)) == set()
+    assert confounded_with_ground(_stepping_report(ground=False)) == set()
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps(_stepping_report()))
+    every, rms = load_identified(path)
+    without, rms2 = load_identified(path, confounded=False)
+    assert every == {Term("latency"): 0.02, Term("ground_compliance"): 0.03} and rms == rms2 == 0.0025
+    assert without == {Term("latency"): 0.02, Term("ground_compliance"): 0.0025}  # the calibrated engine gap's
+    # the rollout tasks build the same worlds (and keep them apart in their cache)
+    task = {"world": "identified", "identified": [str(path)]}
+    assert _world(task).terms[Term("ground_compliance")] == 0.03
+    assert _world({**task, "identified_confounded": False}).terms[Term("ground_compliance")] == 0.0025
