@@ -467,8 +467,13 @@ class Fidelity:
                               "excitation_logs": 0, "excitation_seconds": 0.0}
                 if s.needs_identification:
                     idn = idents[d, self._stepping(s)]
+                    effects = idn["effects"]
+                    if not s.identified_confounded:  # the terms this world builds in
+                        from sysid.identified import load_identified  # lazy: loads the engines
+
+                        effects = {t.label(): v for t, v in sorted(load_identified(idn["reports"], False)[0].items())}
                     info.update(identified=idn["reports"], excitation_logs=idn["logs"],
-                                excitation_seconds=idn["seconds"], effects=idn["effects"],
+                                excitation_seconds=idn["seconds"], effects=effects,
                                 terrain_rms_height=idn["terrain_rms_height"])
                 if s.grounded:
                     thetas = self._data_gaits(s.data_gaits, d)

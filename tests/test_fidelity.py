@@ -65,14 +65,21 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
 
     def fake_identify(out_dir, *, n_fixed, n_floating, fixed_dir, seed, **kw):
         calls.append((os.path.relpath(out_dir, tmp_path), n_floating, os.path.relpath(fixed_dir, tmp_path), seed))
-        return {"reports": [os.path.join(fixed_dir, "report.json")], "logs": n_fixed + n_floating,
-                "seconds": 6.0 * (n_fixed + n_floating), "effects": {"latency": 0.02},
+        rep = os.path.join(out_dir, "floating", "report.json")  # a ground compliance standing in for the ground
+        os.makedirs(os.path.dirname(rep), exist_ok=True)
+        comp = {"family": "ground_compliance", "joints": [], "links": [], "value": 0.03}
+        with open(rep, "w") as f:
+            json.dump({"model": {"ground_compliance": 0.03}, "base_model": {"latency": 0.02}, "uncertain": [comp],
+                       "effects": [{"family": "terrain_roughness", "value": 0.002}],
+                       "indistinguishable": [{"a": "ground_compliance", "b": "terrain_roughness"}]}, f)
+        return {"reports": [rep], "logs": n_fixed + n_floating,
+                "seconds": 6.0 * (n_fixed + n_floating), "effects": {"ground_compliance": 0.03, "latency": 0.02},
                 "terrain_rms_height": 0.002 + 0.0001 * n_floating, "wall_s": 0.0}
 
     monkeypatch.setattr(fid, "identify_real", fake_identify)
     monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
-    run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9"), data_seeds=2), str(tmp_path),
-                       executor=None)
+    run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9", "identified:confounded=0"),
+                                      data_seeds=2), str(tmp_path), executor=None)
     prep = run.prepare()
     by_dir = {c[0]: c for c in calls}
     assert sorted(by_dir) == ["identified/d0", "identified/d0_stepping9", "identified/d1", "identified/d1_stepping9"]
@@ -84,6 +91,9 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
         assert prep["identified:stepping=9"][d]["terrain_rms_height"] == pytest.approx(0.0029)
     assert by_dir["identified/d0"][3] != by_dir["identified/d1"][3]  # draws are independent
     assert prep["sim"][0]["identified"] is None
+    # a world without the confounded contact terms lists the terms it builds in
+    assert prep["identified"][0]["effects"] == {"ground_compliance": 0.03, "latency": 0.02}
+    assert prep["identified:confounded=0"][0]["effects"] == {"latency": 0.02}
 
 
 def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
