@@ -88,4 +88,3 @@ def test_pick_regret():
     for bad in (([1.0], [1.0]), ([1, 2], [1, 2, 3]), ([1, float("nan")], [1, 2])):
         with pytest.raises(ValueError):
             S.pick_regret(*bad)
-
