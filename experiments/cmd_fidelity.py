@@ -17,6 +17,8 @@ per draw), ``noise`` (exploration noise [rad]), ``gaits`` (walks spread over thi
 ``residual`` (0/1), ``matched`` (0/1: the matched transformer, a + f_sim^-1(s, ŝ_real) - f_sim^-1(s, ŝ_sim)), ``zero`` (0/1: linear models from zero weights), ``local`` (0/1: a joint-local inverse model, each joint's command from its own state only), ``mixture`` (K Gaussians in SGAT's forward model), ``memory`` (correlation time of SGAT's noise [s]), ``state`` (legs, legs+imu), ``history`` (frames of state the models see; default 6; 1: the paper's
 one frame), ``commands`` (c: the forward model also sees the c previous commands) for gat, sgat and hybrid, ``method`` (sgat/gat) for hybrid; ``sigma`` for ane;
 ``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification) and ``confounded`` (0: without the contact terms that only stand in for the identified uneven ground) for identified and hybrid.
+The world ``oracle`` (not a default) is the real world itself on fresh seeds: the ρ a world that is
+exactly right gets with the same number of episodes per gait.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ def register(sub) -> argparse.ArgumentParser:
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = FidelityConfig()
     p.add_argument("--worlds", nargs="+", default=None, metavar="WORLD",
-                   help=f"training worlds (default: {' '.join(DEFAULT_WORLDS)}; other robots than the NAO: without identified, hybrid)")
+                   help=f"training worlds (default: {' '.join(DEFAULT_WORLDS)}; other robots than the NAO: without identified, hybrid; "
+                        "also: oracle, the real world itself on fresh seeds)")
     p.add_argument("--gaits", type=A.count(0, 1000), default=d.gaits, help=f"gaits drawn around θ0 besides θ0 (default {d.gaits})")
     p.add_argument("--box", type=A.real(0.0, 1.0, open_lo=True), default=d.box,
                    help=f"half-width of the box the gaits are drawn in, normalized (default {d.box}: optimize's trust region)")

@@ -23,6 +23,9 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
               of the real world (``sysid.identified.IdentifiedSimEnv``)
 ``hybrid``    SGAT grounding on top of the identified sim: the transformer learns only what
               the physics library could not name
+``oracle``    the real world itself, on fresh seeds per draw and as many episodes per gait as
+              the other stochastic worlds: what a training world that is exactly right gets
+              with that many episodes (not a default world; it costs real trials)
 ============  ==========================================================================
 
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
@@ -50,7 +53,9 @@ the Brier score of the world's fall frequency per gait against the real falls, a
 its pick (the real fitness lost by choosing the gait the world rates best, ``stats.pick_regret``:
 what optimizing in the world over this panel would cost); and the spread of each over the draws.
 The ceiling that the real trials' own noise allows is the square root of their split-half
-reliability (``experiments.stats``). Everything random is keyed by (seed, purpose,
+reliability (``experiments.stats``); the same figure over a stochastic world's episodes
+(``world_ceiling``, per draw) is the ceiling its own episode noise puts on ρ: when it is near 1,
+more episodes per gait cannot lift ρ and what is left is the world's model error. Everything random is keyed by (seed, purpose,
 ...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
 """
 
@@ -79,10 +84,10 @@ from robots import ROBOT_NAMES, get_robot
 from walk_engine import params_for
 
 #: World kinds (see the module docstring).
-KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid")
-DEFAULT_WORLDS = KINDS
+KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
+DEFAULT_WORLDS = KINDS[:-1]
 #: Purposes of the seed streams (the first key after the run seed).
-_PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS = range(11, 20)
+_PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS, _ORACLE = range(11, 21)
 
 
 def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
@@ -139,8 +144,9 @@ class WorldSpec:
 
     @property
     def per_draw(self) -> bool:
-        """Fitted on real data: one world per draw of that data."""
-        return self.grounded or self.needs_identification
+        """Fitted on real data: one world per draw of that data (the oracle: one set of fresh real
+        seeds per draw)."""
+        return self.grounded or self.needs_identification or self.kind == "oracle"
 
 
 def parse_world(text: str) -> WorldSpec:
@@ -496,8 +502,10 @@ class Fidelity:
                                  "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d,
                                  **cfg.task_robot()})
                     info["transformer"] = mdir
+                    walks = [_rec_summary(p) for p in real]
                     info["real_walks"] = len(real)
-                    info["real_seconds"] = float(sum(_rec_seconds(p) for p in real))
+                    info["real_seconds"] = float(sum(w[0] for w in walks))
+                    info["real_walk_falls"] = int(sum(w[1] for w in walks))
                 out[s.name][d] = info
         todo = [f for f in fits if not os.path.exists(os.path.join(f["out"], "transformer.json"))]
         if todo:
@@ -515,7 +523,10 @@ class Fidelity:
         n = 1 if spec.kind == "sim" else cfg.episodes
         seeds = _seeds(cfg.seed, _WORLD, n=n)  # the same episode seeds for every world, draw and gait
         base = {"seconds": cfg.seconds, "profile": cfg.profile, **cfg.task_robot()}
-        if spec.kind in ("sim", "ane"):
+        if spec.kind == "oracle":  # real episodes on seeds of their own, new for every draw
+            base["world"] = "real"
+            seeds = _seeds(cfg.seed, _ORACLE, draw, n=n)
+        elif spec.kind in ("sim", "ane"):
             base["world"] = "sim"
             if spec.kind == "ane":
                 base["action_noise"] = spec.sigma
@@ -580,18 +591,25 @@ class Fidelity:
                 WF = self._matrix(pre, gaits, n, "fell")
                 wf, wp = W.mean(1), WF.mean(1)
                 info = prep[spec.name][d]
+                # the world's own episode noise: how well its n-episode means would rank against themselves
+                # (a deterministic world and single episodes have none to measure)
+                own = split_half_reliability(W, seed=cfg.seed + d) if n >= 2 else None
                 draws.append({
                     "draw": d, "fitness": wf.tolist(), "fall_rate": wp.tolist(),
                     "rho": spearman(wf, real_fit),
                     "rho_ci90": list(bootstrap_spearman(wf, R, n_boot=cfg.bootstrap, seed=cfg.seed + d)),
                     "mae": float(np.mean(np.abs(wf - real_fit))), "bias": float(np.mean(wf - real_fit)),
                     "brier": brier_score(wp, F), "pick_regret": pick_regret(wf, real_fit),
+                    "world_reliability": None if own is None else own["reliability"],
+                    "world_ceiling": None if own is None else own["ceiling"],
                     "real_walks": info["real_walks"], "real_seconds": info["real_seconds"],
+                    "real_walk_falls": info.get("real_walk_falls", 0),
                     "excitation_logs": info["excitation_logs"], "excitation_seconds": info["excitation_seconds"],
                     **({"effects": info.get("effects"), "terrain_rms_height": info.get("terrain_rms_height")}
                        if spec.needs_identification else {}),
                 })
             out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
+                                        "data_gaits": spec.data_gaits if spec.grounded else None,
                                         "grounding": spec.grounding.to_dict() if spec.grounding else None}
         return out
 
@@ -601,11 +619,12 @@ class Fidelity:
         plot(res, os.path.join(self.run_dir, "fidelity.png"))
 
 
-def _rec_seconds(path: str) -> float:
+def _rec_summary(path: str) -> tuple[float, bool]:
+    """A recording's length [s] and whether the robot fell in it (``meta["fell"]``)."""
     from envs import Recording  # lazy: loads the engines
 
     rec = Recording.from_parquet(path)
-    return float(len(rec) * rec.meta["control_dt"])
+    return float(len(rec) * rec.meta["control_dt"]), bool(rec.meta.get("fell", False))
 
 
 def _summary(draws: list[dict]) -> dict:
@@ -619,6 +638,8 @@ def _summary(draws: list[dict]) -> dict:
     s = {k: agg(k) for k in ("rho", "mae", "bias", "brier")}
     if all("pick_regret" in d for d in draws):  # runs saved before it have none
         s["pick_regret"] = agg("pick_regret")
+    if all(d.get("world_ceiling") is not None for d in draws):  # stochastic worlds of runs that measured it
+        s["world_ceiling"] = agg("world_ceiling")
     s["abs_bias_median"] = float(np.median(np.abs([d["bias"] for d in draws])))
     s["draws"] = len(draws)
     return s
@@ -634,8 +655,8 @@ def format_table(res: dict) -> str:
              f"real frequency {r['brier_own_frequency']:.3f}",
              "",
              f"{'world':28s} {'draws':>5s} {'Spearman rho':>22s} {'worst 90% CI':>14s} {'MAE':>14s} "
-             f"{'bias (world-real)':>24s} {'Brier':>22s} {'pick regret':>20s}",
-             "-" * 157]
+             f"{'bias (world-real)':>24s} {'Brier':>22s} {'pick regret':>20s} {'own-noise ceiling':>18s}",
+             "-" * 176]
 
     def rng3(s, fmt="{:.2f}"):
         return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
@@ -647,8 +668,15 @@ def format_table(res: dict) -> str:
         ci_txt = "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:.2f}, {ci[1]:.2f}]"
         lines.append(f"{name:28s} {s['draws']:>5d} {rng3(s['rho']):>22s} {ci_txt:>14s} {s['mae']['median']:>14.1f} "
                      f"{s['bias']['median']:>+8.1f} (spread {s['bias']['spread']:4.1f}) {rng3(s['brier'], '{:.3f}'):>22s} "
-                     f"{rng3(s['pick_regret'], '{:.1f}') if 'pick_regret' in s else '-':>20s}")
+                     f"{rng3(s['pick_regret'], '{:.1f}') if 'pick_regret' in s else '-':>20s} "
+                     f"{_own(s):>18s}")
     return "\n".join(lines)
+
+
+def _own(summary: dict) -> str:
+    """A world's own-noise ceiling of ρ as 'median [worst]' over its draws, '-' where not measured."""
+    c = summary.get("world_ceiling")
+    return "-" if c is None else f"{c['median']:.2f} [{c['min']:.2f}]"
 
 
 def plot(res: dict, path: str) -> None:

@@ -64,14 +64,17 @@ def _f(x, fmt="{:.2f}") -> str:
 
 def _fidelity(res: dict) -> str:
     r = res["real"]
+    # runs saved before the worlds' own-noise ceiling was measured have no column for it
+    own = any("world_ceiling" in w["summary"] for w in res["worlds"].values())
     lines = [f"{len(res['gaits'])} gaits × {r['trials']} paired real trials (real fitness {min(r['fitness']):.1f} to "
              f"{max(r['fitness']):.1f}, {100 * sum(r['fall_rate']) / len(r['fall_rate']):.0f} % falls); ceiling of ρ "
              f"from the trials' own noise **{_f(r['ceiling'])}** (split-half reliability {_f(r['reliability'])}); Brier "
              f"score of a constant base rate {_f(r['brier_base_rate'], '{:.3f}')}, of each gait's own real fall "
              f"frequency {_f(r['brier_own_frequency'], '{:.3f}')} (the floor).", "",
              "| world | draws | Spearman ρ: median [worst, best] | worst draw's 90 % CI | MAE | bias (world − real): "
-             "median, spread | Brier: median [min, max] | regret of its pick: median [worst] | real data per draw |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "median, spread | Brier: median [min, max] | regret of its pick: median [worst] | real data per draw |"
+             + (" ceiling of ρ from its own episode noise: median [worst] |" if own else ""),
+             "|---|---|---|---|---|---|---|---|---|" + ("---|" if own else "")]
     for name, w in res["worlds"].items():
         s = w["summary"]
         worst = min(w["draws"], key=lambda d: math.inf if d["rho"] is None else d["rho"])
@@ -82,11 +85,15 @@ def _fidelity(res: dict) -> str:
             data.append(f"{d0['real_walks']} walks ({d0['real_seconds']:.0f} s)")
         if d0["excitation_logs"]:
             data.append(f"{d0['excitation_logs']} excitation logs ({d0['excitation_seconds']:.0f} s)")
+        if w.get("kind") == "oracle":
+            data.append(f"it is the real world ({w['episodes']} episodes per gait on fresh seeds)")
         lines.append(f"| `{name}` | {s['draws']} | {_f(s['rho']['median'])} [{_f(s['rho']['min'])}, {_f(s['rho']['max'])}] "
                      f"| [{_f(ci[0])}, {_f(ci[1])}] | {_f(s['mae']['median'], '{:.1f}')} | "
                      f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "
                      f"{_f(s['brier']['median'], '{:.3f}')} [{_f(s['brier']['min'], '{:.3f}')}, "
-                     f"{_f(s['brier']['max'], '{:.3f}')}] | {_pick(res, w)} | {', '.join(data) or 'none'} |")
+                     f"{_f(s['brier']['max'], '{:.3f}')}] | {_pick(res, w)} | {', '.join(data) or 'none'} |"
+                     + (f" {_own_ceiling(s)} |" if own else ""))
+    lines += _data_gait_falls(res)
     ref = _first_world(res, "sgat")
     targets = fidelity_targets(res, ref) if ref else []
     if targets:
@@ -107,6 +114,33 @@ def _fidelity(res: dict) -> str:
     if res.get("wall_s") is not None:
         lines += ["", f"The run took {res['wall_s'] / 60:.1f} min."]
     return "\n".join(lines)
+
+
+def _data_gait_falls(res: dict) -> list[str]:
+    """How often θ0, the gait of the grounding walks, falls: in the real trials, in the grounding walks
+    themselves and in each world fitted on them (an in-sample check; runs saved since the eighth
+    fidelity round record the walks' falls)."""
+    fitted = {n: w for n, w in res["worlds"].items()
+              if w.get("data_gaits") == 1 and all("real_walk_falls" in d for d in w["draws"])}
+    if not fitted or res["gaits"][0] != "theta0":
+        return []
+    d0 = next(iter(fitted.values()))["draws"]
+    falls = [d["real_walk_falls"] for d in d0]
+    walks = sum(d["real_walks"] for d in d0)
+
+    def rate(name, w):
+        v = [100 * d["fall_rate"][0] for d in w["draws"]]
+        return f"`{name}` {statistics.median(v):.0f} % [{min(v):.0f}, {max(v):.0f}]"
+    parts = [rate(n, w) for n, w in fitted.items()]
+    return ["", f"θ0, the gait of the grounding walks, falls in {100 * res['real']['fall_rate'][0]:.0f} % of its real "
+            f"trials and in {sum(falls)} of the {walks} grounding walks ({min(falls)}–{max(falls)} of "
+            f"{d0[0]['real_walks']} per draw); the worlds fitted on those walks fall on it in (median [min, max] over "
+            "the draws): " + ", ".join(parts) + "."]
+
+
+def _own_ceiling(s: dict) -> str:
+    c = s.get("world_ceiling")
+    return "– (deterministic)" if c is None else f"{_f(c['median'])} [{_f(c['min'])}]"
 
 
 def _pick(res: dict, w: dict) -> str:

@@ -41,7 +41,16 @@ def confounded_with_ground(rep: dict) -> set[str]:
     diagnosis kept as uncertain (not a finding) and reported indistinguishable from a declared
     terrain roughness. The roughness is fitted on the residual before the contact terms
     (``sysid.diagnose``) and the contact term is then fitted to the same residual, so a world with
-    both counts the ground's signature twice."""
+    both counts the ground's signature twice.
+
+    Args:
+        rep: a ``report.json`` of ``sgatwalk diagnose`` as a dict (``effects``, ``uncertain``,
+            ``indistinguishable``, ``model``; missing keys count as empty).
+
+    Returns:
+        The labels of ``rep["model"]`` (e.g. ``{"ground_compliance"}``) to leave out; empty when the
+        report declares no terrain roughness or every contact term is a finding.
+    """
     if not any(e.get("family") == "terrain_roughness" for e in rep.get("effects", [])):
         return set()
     found = {e.get("family") for e in rep.get("effects", [])}

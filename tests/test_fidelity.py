@@ -107,6 +107,9 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
         for d in w["draws"]:
             assert len(d["fitness"]) == 3 and all(0 <= p <= 1 for p in d["fall_rate"])
     assert res["worlds"]["sgat"]["draws"][0]["real_walks"] == 4
+    assert 0 <= res["worlds"]["sgat"]["draws"][0]["real_walk_falls"] <= 4
+    assert res["worlds"]["sgat"]["data_gaits"] == 1 and res["worlds"]["sim"]["data_gaits"] is None
+    assert res["worlds"]["sim"]["draws"][0]["world_ceiling"] is None  # one deterministic episode
     for f in ("fidelity.json", "fidelity.png", "table.txt", "panel.json", "episodes.jsonl"):
         assert (out / f).exists(), f
     n_lines = len((out / "episodes.jsonl").read_text().splitlines())
@@ -232,3 +235,59 @@ def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
         load_baseline(str(path), Table1Config())
     assert main(["table1", *T1, "--baseline", str(path), "--out", str(tmp_path / "r")]) != 0
     assert "per-trial" in capsys.readouterr().err
+
+
+def test_a_world_s_own_episode_noise_caps_its_ceiling(tmp_path):
+    """``world_ceiling``: the split-half ceiling of a stochastic world's own episodes. A world whose
+    episodes differ only by small noise around each gait's value gets a ceiling near 1; one whose
+    episode noise swamps the gaits' differences gets a low one; the deterministic sim gets none."""
+    from experiments.fidelity import Fidelity, format_table
+
+    cfg = FidelityConfig(worlds=("sim", "ane", "ane:sigma=0.1"), gaits=11, real_trials=6, episodes=8, bootstrap=50)
+    run = Fidelity(cfg, str(tmp_path), executor=None)
+    gaits = [{"name": f"g{i}"} for i in range(12)]
+    true = np.linspace(-10, 10, 12)
+    rng = np.random.default_rng(0)
+    eps = {}
+    for g, v in zip(gaits, true):
+        for j in range(6):
+            eps[f"real|{g['name']}|t{j}"] = {"fitness": v + rng.normal(0, 1), "fell": False, "speed_cm_s": 1.0}
+        eps[f"w|{run.specs[0].key}|d0|{g['name']}|e0"] = {"fitness": v, "fell": False, "speed_cm_s": 1.0}
+        for spec, noise in zip(run.specs[1:], (0.5, 40.0)):
+            for j in range(8):
+                eps[f"w|{spec.key}|d0|{g['name']}|e{j}"] = {"fitness": v + rng.normal(0, noise), "fell": j % 2 == 0,
+                                                            "speed_cm_s": 1.0}
+    run._episodes = eps
+    info = {"real_walks": 0, "real_seconds": 0.0, "excitation_logs": 0, "excitation_seconds": 0.0}
+    res = run.result(gaits, {s.name: [info] for s in run.specs})
+    quiet, loud = res["worlds"]["ane"]["draws"][0], res["worlds"]["ane:sigma=0.1"]["draws"][0]
+    assert quiet["world_ceiling"] > 0.95 and loud["world_ceiling"] < 0.7
+    assert res["worlds"]["sim"]["draws"][0]["world_ceiling"] is None
+    assert "world_ceiling" not in res["worlds"]["sim"]["summary"]
+    assert res["worlds"]["ane"]["summary"]["world_ceiling"]["min"] == quiet["world_ceiling"]
+    table = format_table(res)
+    assert "own-noise ceiling" in table and f"{quiet['world_ceiling']:.2f}" in table
+
+
+def test_the_oracle_world_walks_the_real_world_on_fresh_seeds_per_draw(tmp_path):
+    """``oracle``: real episodes, on seeds that are neither the real trials' nor another draw's, and
+    the same seeds for every gait of a draw (paired like every training world)."""
+    from experiments.fidelity import Fidelity
+
+    assert parse_world("oracle").per_draw and "oracle" not in FidelityConfig().worlds
+    with pytest.raises(ValueError, match="unknown option"):
+        parse_world("oracle:alpha=0.5")
+    cfg = FidelityConfig(worlds=("sim", "oracle"), gaits=2, real_trials=3, episodes=3, data_seeds=2)
+    run = Fidelity(cfg, str(tmp_path), executor=None)
+    oracle = run.specs[1]
+    gaits = [{"name": "a", "theta": [0.0]}, {"name": "b", "theta": [1.0]}]
+    d0, d1 = (run._world_tasks(oracle, d, {}, gaits) for d in (0, 1))
+    assert {t["world"] for t in d0 + d1} == {"real"} and len(d0) == 2 * 3
+    seeds0 = [t["seed"] for t in d0 if t["theta"] == [0.0]]
+    assert seeds0 == [t["seed"] for t in d0 if t["theta"] == [1.0]]
+    assert not set(seeds0) & {t["seed"] for t in d1}
+    sim_seeds = {t["seed"] for t in run._world_tasks(run.specs[0], 0, {}, gaits)}
+    assert not set(seeds0) & sim_seeds
+    from experiments.fidelity import _REAL, _seeds
+
+    assert not set(seeds0) & set(_seeds(cfg.seed, _REAL, n=cfg.real_trials))  # not the real trials' seeds

@@ -52,3 +52,21 @@ def test_fidelity_targets_compare_with_the_first_gat_world_listed():
     assert t["Brier below SIM's on every draw"] and not t["Brier below GAT's on every draw"]  # 0.30 vs GAT's 0.20
     assert t["ρ ≥ GAT's on every draw"]
     assert readme.fidelity_targets(res, "ane") == []
+
+
+def test_fidelity_block_compares_falls_on_the_data_gait_with_the_grounding_walks():
+    """The in-sample line: θ0's real fall rate, the grounding walks' own falls, and each fitted world's
+    fall rate on θ0 over the draws; worlds fitted on walks of several gaits and runs saved before the
+    walks' falls were recorded are left out."""
+    def draw(fall0, walk_falls):
+        return {"fall_rate": [fall0, 1.0], "real_walks": 4, "real_walk_falls": walk_falls}
+    res = {"gaits": ["theta0", "box00"], "real": {"fall_rate": [0.6, 1.0]}, "worlds": {
+        "sim": {"data_gaits": None, "draws": [{"fall_rate": [0.0, 0.0], "real_walks": 0}]},
+        "sgat": {"data_gaits": 1, "draws": [draw(0.0, 1), draw(0.25, 2), draw(0.0, 2)]},
+        "sgat:gaits=4": {"data_gaits": 4, "draws": [draw(1.0, 1), draw(1.0, 2), draw(1.0, 2)]}}}
+    line = "".join(readme._data_gait_falls(res))
+    assert "60 % of its real trials" in line and "5 of the 12 grounding walks (1–2 of 4 per draw)" in line
+    assert "`sgat` 0 % [0, 25]" in line and "gaits=4" not in line and "`sim`" not in line
+    for d in res["worlds"]["sgat"]["draws"]:
+        del d["real_walk_falls"]
+    assert readme._data_gait_falls(res) == []
