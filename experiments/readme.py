@@ -111,6 +111,12 @@ def _fidelity(res: dict) -> str:
             tv = fidelity_targets(res, n)
             lines.append(f"| `{n}` | " + " | ".join(
                 ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
+    oracle = _first_world(res, "oracle")
+    if targets and oracle:
+        parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")
+                 for t, ok, v in fidelity_targets(res, oracle)]
+        lines += ["", f"For scale, `{oracle}` (the real world itself, {res['worlds'][oracle]['episodes']} episodes per "
+                  "gait on fresh seeds) against the same targets: " + "; ".join(parts) + "."]
     if res.get("wall_s") is not None:
         lines += ["", f"The run took {res['wall_s'] / 60:.1f} min."]
     return "\n".join(lines)
