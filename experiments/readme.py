@@ -131,6 +131,9 @@ def _data_gait_falls(res: dict) -> list[str]:
     if not fitted or res["gaits"][0] != "theta0":
         return []
     d0 = next(iter(fitted.values()))["draws"]
+    walked = [(d["real_walks"], d["real_walk_falls"]) for d in d0]
+    # worlds fitted on other walks (e.g. ``real=8``) are left out of the comparison with these
+    fitted = {n: w for n, w in fitted.items() if [(d["real_walks"], d["real_walk_falls"]) for d in w["draws"]] == walked}
     falls = [d["real_walk_falls"] for d in d0]
     walks = sum(d["real_walks"] for d in d0)
 
