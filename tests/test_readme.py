@@ -64,10 +64,11 @@ def test_fidelity_block_compares_falls_on_the_data_gait_with_the_grounding_walks
         "sim": {"data_gaits": None, "draws": [{"fall_rate": [0.0, 0.0], "real_walks": 0}]},
         "sgat": {"data_gaits": 1, "draws": [draw(0.0, 1), draw(0.25, 2), draw(0.0, 2)]},
         "sgat:gaits=4": {"data_gaits": 4, "draws": [draw(1.0, 1), draw(1.0, 2), draw(1.0, 2)]},
-        "sgat:real=8": {"data_gaits": 1, "draws": [dict(draw(1.0, 3), real_walks=8)] * 3}}}
+        "sgat:real=8": {"data_gaits": 1, "draws": [dict(draw(1.0, 3), real_walks=8) for _ in range(3)]}}}
     line = "".join(readme._data_gait_falls(res))
     assert "60 % of its real trials" in line and "5 of the 12 grounding walks (1–2 of 4 per draw)" in line
     assert "`sgat` 0 % [0, 25]" in line and "gaits=4" not in line and "`sim`" not in line and "real=8" not in line
-    for d in res["worlds"]["sgat"]["draws"]:
-        del d["real_walk_falls"]
+    for w in res["worlds"].values():  # a run saved before the walks' falls were recorded
+        for d in w["draws"]:
+            d.pop("real_walk_falls", None)
     assert readme._data_gait_falls(res) == []
