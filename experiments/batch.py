@@ -126,6 +126,8 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         H = np.empty((B, spec.history, spec.state_dim))
         P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
         Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
+        Hs = np.empty_like(H) if tr.shadow_memory else None  # each episode's shadow state history
+        D = np.empty((B, spec.state_dim))  # the predicted state changes Δŝ of the step
     params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
     engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
     sim.reset(seeds, terrains)
@@ -135,6 +137,8 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         if grounded:
             eps[i].reset(seeds[i])
             H[i] = spec.states(sim.obs[i])
+            if Hs is not None:
+                Hs[i] = H[i]
             if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
                 Z[i] = eps[i].correlate(eps[i].rng.standard_normal((n, tr.noise_dim)))
     engine.reset(sim.obs)
@@ -163,8 +167,12 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
                 if k == 0:  # padded with the first command, as sgat.GroundedEnv and sgat.grounding.stack_past
                     P[idx] = cmd[:, ai][:, None]
                 past = P[idx].reshape(len(idx), -1)
+            dout = np.empty((len(idx), spec.state_dim)) if Hs is not None else None
             act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
-                                               None if Z is None else Z[idx, k], past)
+                                               None if Z is None else Z[idx, k], past,
+                                               None if Hs is None else Hs[idx].reshape(len(idx), -1), dout)
+            if Hs is not None:
+                D[idx] = Hs[idx, -1] + dout  # the targets ŝ_{t+1}
             if P is not None:
                 P[idx] = np.concatenate([P[idx, 1:], cmd[:, ai][:, None]], axis=1)
         actions[idx] = act
@@ -178,7 +186,10 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
             fall_time[i] = (k + 1) * env.control_dt
         if grounded:
             live = idx[sim.active[idx]]
-            H[live] = np.concatenate([H[live, 1:], spec.states(sim.obs[live])[:, None]], axis=1)
+            s_new = spec.states(sim.obs[live])
+            H[live] = np.concatenate([H[live, 1:], s_new[:, None]], axis=1)
+            if Hs is not None:
+                Hs[live] = np.concatenate([Hs[live, 1:], tr.relax_shadow(D[live], s_new)[:, None]], axis=1)
     out = []
     for i in range(B):
         rec = assemble_recording(env, O[i], C[i], A[i], G[i], int(rows[i]), seed=seeds[i], seconds=seconds,

@@ -46,6 +46,8 @@ def register(sub) -> argparse.ArgumentParser:
                    help="ground with a joint-local inverse model (default: optimize's)")
     p.add_argument("--zero-init", dest="zero_init", action="store_true", default=None,
                    help="fit the linear grounding models from zero weights (default: optimize's)")
+    p.add_argument("--shadow", type=A.real(0.0, 10.0, unit="s"),
+                   help="τ [s] of the transformer's shadow state (default: optimize's)")
     p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
                    "pair every row with it (e.g. another grounding setting)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
@@ -60,7 +62,7 @@ def run(args) -> dict:
                              ("hidden", None if args.hidden is None else list(args.hidden)),
                              ("history", args.history), ("command_history", args.command_history),
                              ("matched", args.matched), ("local_inverse", args.local_inverse),
-                             ("zero_init", args.zero_init)) if v is not None}
+                             ("zero_init", args.zero_init), ("shadow", args.shadow)) if v is not None}
     cfg = Table1Config(methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()), seeds=args.seeds,
                        trials=args.trials, seed=args.seed, optimize=opt, baseline=args.baseline)
     cfg.validate()

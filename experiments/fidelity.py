@@ -35,6 +35,8 @@ model of the sim fitted on the sim walks), ``zero`` (0/1: linear models fitted f
 ``local`` (0/1: a joint-local inverse model, each joint's command from its own state entries only),
 ``mixture`` (K: SGAT's forward model a mixture of K Gaussians, a mixture density network),
 ``memory`` (τ [s]: SGAT's sampling noise correlated over τ, an AR(1) process; 0: white),
+``shadow`` (τ [s]: the forward model predicts from a shadow state that relaxes toward the sim's over
+τ, so a deviation the sim did not follow persists; 0: the paper),
 ``hidden`` (e.g. ``128x128``; ``0``: linear models), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
@@ -177,7 +179,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind in ("identified", "hybrid") and k == "confounded":
                 kw["identified_confounded"] = bool(int(v))
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
-                                                              "real", "sim", "noise", "residual", "method", "mixture", "memory",
+                                                              "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
                                                               "zero", "local"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
@@ -198,6 +200,8 @@ def parse_world(text: str) -> WorldSpec:
                     gkw["command_history"] = int(v)
                 elif k == "memory":  # seconds -> control steps
                     gkw["noise_memory"] = float(v) / CONTROL_DT
+                elif k == "shadow":  # seconds -> control steps
+                    gkw["shadow_memory"] = float(v) / CONTROL_DT
                 elif k == "residual":
                     gkw["residual_noise"] = bool(int(v))
                 elif k == "matched":
@@ -502,6 +506,7 @@ class Fidelity:
                                  "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d,
                                  **cfg.task_robot()})
                     info["transformer"] = mdir
+                    info["real_paths"], info["data_gait"] = real, thetas[0]
                     walks = [_rec_summary(p) for p in real]
                     info["real_walks"] = len(real)
                     info["real_seconds"] = float(sum(w[0] for w in walks))
@@ -557,10 +562,50 @@ class Fidelity:
             for d in (range(cfg.data_seeds) if spec.per_draw else [0]):
                 tasks += self._world_tasks(spec, d, prep[spec.name][d], gaits)
         self._run(tasks, "training-world episodes")
+        self.replay(prep)
         res = self.result(gaits, prep)
         res["wall_s"] = clock.save()
         self.write(res)
         return res
+
+    def replay(self, prep: dict) -> None:
+        """Teacher-force every grounded world of the data gait alone along its draw's real grounding
+        walks (``experiments.tasks.replay_walk_task``: the real next states in place of the forward
+        model); the results go to ``replay.json`` in the draw's model directory (resumable) and into
+        ``prep`` as ``info["replay"]``."""
+        from experiments.tasks import replay_walk_task  # lazy: loads the engines
+
+        todo, first = [], {}
+        for s in self.specs:
+            if not s.grounded or s.data_gaits != 1:
+                continue
+            for d in range(self.cfg.data_seeds):
+                info = prep[s.name][d]
+                path = os.path.join(info["transformer"], "replay.json")
+                if os.path.exists(path):
+                    with open(path) as f:
+                        info["replay"] = json.load(f)
+                    continue
+                hybrid = s.kind == "hybrid"
+                tasks = [{"recording": p, "transformer": info["transformer"], "theta": info["data_gait"],
+                          "seconds": self.cfg.seconds, **self.cfg.task_robot(),
+                          **({"identified": info["identified"], "identified_confounded": s.identified_confounded}
+                             if hybrid else {})} for p in info["real_paths"]]
+                # worlds that differ only in their forward model (gat, sgat, sgat:shadow=...) replay alike
+                sig = (_inverse_signature(info["transformer"]), tuple(info["real_paths"]),
+                       tuple(info["identified"] or ()) if hybrid else (), s.identified_confounded if hybrid else True)
+                todo.append((info, path, tasks if sig not in first else None, sig))
+                first.setdefault(sig, len(todo) - 1)
+        if not todo:
+            return
+        t0 = time.perf_counter()
+        flat = [t for _, _, tasks, _ in todo if tasks for t in tasks]
+        self._say(f"teacher-forcing {len(flat)} grounding walks ({len(first)} sets of inverse models)")
+        results = iter(self.ex.map(replay_walk_task, flat))
+        for info, path, tasks, sig in todo:
+            info["replay"] = [next(results) for _ in tasks] if tasks else todo[first[sig]][0]["replay"]
+            atomic_write_text(path, json.dumps(jsonable(info["replay"]), indent=1))
+        self._say(f"  teacher-forced ({time.perf_counter() - t0:.0f} s)")
 
     # ---------------------------------------------------------------- results
     def _matrix(self, prefix: str, gaits, n: int, what: str) -> np.ndarray:
@@ -604,6 +649,7 @@ class Fidelity:
                     "world_ceiling": None if own is None else own["ceiling"],
                     "real_walks": info["real_walks"], "real_seconds": info["real_seconds"],
                     "real_walk_falls": info.get("real_walk_falls", 0),
+                    **({"replay": _replay_summary(info["replay"])} if info.get("replay") else {}),
                     "excitation_logs": info["excitation_logs"], "excitation_seconds": info["excitation_seconds"],
                     **({"effects": info.get("effects"), "terrain_rms_height": info.get("terrain_rms_height")}
                        if spec.needs_identification else {}),
@@ -625,6 +671,32 @@ def _rec_summary(path: str) -> tuple[float, bool]:
 
     rec = Recording.from_parquet(path)
     return float(len(rec) * rec.meta["control_dt"]), bool(rec.meta.get("fell", False))
+
+
+def _inverse_signature(model_dir: str) -> str:
+    """A hash of a saved transformer's inverse models (their weights) and α: what teacher forcing uses of it."""
+    from sgat.models import InverseModel  # lazy: sgat loads torch
+
+    h = hashlib.sha1()
+    with open(os.path.join(model_dir, "transformer.json")) as f:
+        h.update(str(json.load(f)["alpha"]).encode())
+    for name in sorted(os.listdir(model_dir)):
+        if name.startswith("inverse"):
+            for k, v in sorted(InverseModel.load(os.path.join(model_dir, name)).state_dict().items()):
+                h.update(k.encode() + v.detach().cpu().numpy().tobytes())
+    return h.hexdigest()
+
+
+def _replay_summary(rows: list[dict]) -> dict:
+    """Teacher-forced replays of one draw's grounding walks: counts of falls (``fell_with_real``: the
+    sim fell on a walk that fell for real; ``fell_without_real``: on one that did not) and the median
+    RMS error of the leg joint angles against the real walks [rad], forced and ungrounded."""
+    real = np.array([r["real_fell"] for r in rows], dtype=bool)
+    sim = np.array([r["fell"] for r in rows], dtype=bool)
+    return {"walks": len(rows), "real_fell": int(real.sum()), "fell": int(sim.sum()),
+            "fell_with_real": int((sim & real).sum()), "fell_without_real": int((sim & ~real).sum()),
+            "q_rms_rad": float(np.median([r["q_rms_rad"] for r in rows])),
+            "q_rms_plain_rad": float(np.median([r["q_rms_plain_rad"] for r in rows]))}
 
 
 def _summary(draws: list[dict]) -> dict:

@@ -64,7 +64,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
-from common.defaults import EPISODE_SECONDS
+from common.defaults import CONTROL_DT, EPISODE_SECONDS
 from common.files import atomic_path
 from common.files import atomic_write_bytes as _atomic_write
 from envs import Recording
@@ -108,6 +108,7 @@ class OptimizeConfig:
     matched: bool = DEFAULT_GROUNDING.matched
     local_inverse: bool = DEFAULT_GROUNDING.local_inverse
     zero_init: bool = DEFAULT_GROUNDING.zero_init
+    shadow: float = DEFAULT_GROUNDING.shadow_memory * CONTROL_DT  # τ [s] of the transformer's shadow state
     alpha: float = DEFAULT_GROUNDING.alpha
     hybrid_alpha: float = HYBRID_GROUNDING.alpha
     ensemble: int = DEFAULT_GROUNDING.ensemble
@@ -137,6 +138,10 @@ class OptimizeConfig:
             raise ValueError(f"hidden layer sizes must be >= 1 (an empty list: linear models), got {list(self.hidden)}")
         if int(self.command_history) < 0:
             raise ValueError(f"command_history must be >= 0 (0: the paper's one-step forward model), got {self.command_history}")
+        if not (np.isfinite(self.shadow) and self.shadow >= 0):
+            raise ValueError(f"shadow must be a finite time >= 0 [s] (0: the paper's transformer), got {self.shadow}")
+        if self.shadow > 0 and self.matched:
+            raise ValueError("shadow works with the paper's transformer only, not with matched")
         if int(self.eval_trials) < 0:
             raise ValueError(f"eval_trials must be >= 0 (0: no real evaluation), got {self.eval_trials}")
         if self.popsize < 2:
@@ -290,7 +295,8 @@ class Optimizer:
                                ensemble=cfg.ensemble,
                                inverse_command=cfg.inverse_command, max_epochs=cfg.model_epochs,
                                command_history=int(cfg.command_history), matched=bool(cfg.matched),
-                               local_inverse=bool(cfg.local_inverse), zero_init=bool(cfg.zero_init))
+                               local_inverse=bool(cfg.local_inverse), zero_init=bool(cfg.zero_init),
+                               shadow_memory=float(cfg.shadow) / CONTROL_DT)
 
     def _fit(self, method: str, step: int, theta) -> str:
         cfg = self.cfg

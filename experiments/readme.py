@@ -144,7 +144,32 @@ def _data_gait_falls(res: dict) -> list[str]:
     return ["", f"θ0, the gait of the grounding walks, falls in {100 * res['real']['fall_rate'][0]:.0f} % of its real "
             f"trials and in {sum(falls)} of the {walks} grounding walks ({min(falls)}–{max(falls)} of "
             f"{d0[0]['real_walks']} per draw); the worlds fitted on those walks fall on it in (median [min, max] over "
-            "the draws): " + ", ".join(parts) + "."]
+            "the draws): " + ", ".join(parts) + "." + _teacher_forcing(fitted)]
+
+
+def _teacher_forcing(fitted: dict) -> str:
+    """The teacher-forced replays of the grounding walks (runs saved since the ninth fidelity round),
+    one clause per set of inverse models (worlds that differ only in their forward model share one)."""
+    groups: dict = {}
+    for n, w in fitted.items():
+        if all("replay" in d for d in w["draws"]):
+            key = json.dumps([d["replay"] for d in w["draws"]], sort_keys=True)
+            groups.setdefault(key, []).append(n)
+    if not groups:
+        return ""
+    clauses = []
+    for key, names in groups.items():
+        rp = json.loads(key)
+        fell_real = sum(r["real_fell"] for r in rp)
+        walks = sum(r["walks"] for r in rp)
+        clauses.append(f"on {sum(r['fell_with_real'] for r in rp)} of the {fell_real} walks that fell and on "
+                       f"{sum(r['fell_without_real'] for r in rp)} of the {walks - fell_real} that did not with the "
+                       f"inverse models of {', '.join(f'`{n}`' for n in names)} (leg joints "
+                       f"{statistics.median(r['q_rms_rad'] for r in rp):.3f} rad RMS from the real walk's, ungrounded "
+                       f"{statistics.median(r['q_rms_plain_rad'] for r in rp):.3f})")
+    return (" Teacher-forced along the same walks (each walk's recorded next states in place of the forward model, "
+            "asked of the world's own inverse models at its α: a forward model exactly right for that walk; after "
+            "the walk ends the sim runs ungrounded), the sim falls " + "; ".join(clauses) + ".")
 
 
 def _own_ceiling(s: dict) -> str:

@@ -150,3 +150,44 @@ def fit_grounding_task(task: dict) -> dict:
     return {"out": task["out"], "forward_val": float(np.mean([r.val_loss for r in fit.forward_reports])),
             "inverse_val": float(np.mean([r.val_loss for r in fit.inverse_reports])), "n_real": fit.info["n_real"],
             "n_sim": fit.info["n_sim"], "wall_s": time.perf_counter() - t0}
+
+
+def replay_walk_task(task: dict) -> dict:
+    """Teacher-force the grounded sim along one recorded real walk (``sgat.TeacherForcedEnv``).
+
+    Task keys: ``recording`` (the real walk's parquet path), ``transformer`` (directory of the fitted
+    transformer), ``theta`` (the walk's gait), ``seconds``, optional ``identified`` and
+    ``identified_confounded`` (hybrid: teacher-force the identified sim) and ``robot``. The episode
+    seed is the recording's; after the recording ends the sim walks on ungrounded to ``seconds``.
+
+    Returns:
+        ``{"fell", "fall_time_s", "real_fell", "real_fall_time_s", "q_rms_rad", "q_rms_plain_rad"}``:
+        whether the teacher-forced sim fell and when, the same of the real walk, and the RMS error
+        of the 12 leg joint angles against the real walk over its length [rad], teacher-forced and
+        with the sim ungrounded (what the tracking closes).
+    """
+    from envs import ObservationLayout, Recording  # lazy: loads the engines
+    from experiments.fitness import run_walk  # lazy: loads the engines
+    from sgat.grounding import recording_observations  # lazy: sgat loads torch
+    from sgat.transformer import TeacherForcedEnv  # lazy: sgat loads torch
+    from walk_engine import params_for  # lazy: scipy
+
+    rec = Recording.from_parquet(task["recording"])
+    tr = _transformer(task["transformer"])
+    robot = get_robot(task.get("robot", "nao"))
+    layout = ObservationLayout(robot)
+    ref = tr.spec.states(recording_observations(rec, layout))
+    base = _world({**task, "world": "identified" if task.get("identified") else "sim"})
+    params = params_for(robot).from_array(np.asarray(task["theta"], dtype=float))
+    seed, seconds = int(rec.meta.get("seed", 0)), float(task.get("seconds", EPISODE_SECONDS))
+    nq = len(robot.groups["legs"])
+
+    def q_rms(r) -> float:
+        S = tr.spec.states(recording_observations(r, layout))
+        n = min(len(S), len(ref))
+        return float(np.sqrt(np.mean((S[:n, :nq] - ref[:n, :nq]) ** 2)))
+
+    forced, res = run_walk(params, seed=seed, seconds=seconds, env=TeacherForcedEnv(base, tr, ref))
+    plain, _ = run_walk(params, seed=seed, seconds=seconds, env=base)
+    return {"fell": bool(res.fell), "fall_time_s": res.fall_time_s, "real_fell": bool(rec.meta.get("fell", False)),
+            "real_fall_time_s": rec.meta.get("fall_time"), "q_rms_rad": q_rms(forced), "q_rms_plain_rad": q_rms(plain)}

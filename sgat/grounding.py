@@ -127,6 +127,9 @@ class GroundingConfig:
             Gaussian, as the paper.
         noise_memory: correlation time [control steps] of SGAT's sampling noise (0: white, as the
             paper; :class:`sgat.transformer.ActionTransformer`).
+        shadow_memory: τ [control steps] of the transformer's shadow state (0: the paper, every
+            prediction starts from the sim's state; :class:`sgat.transformer.ActionTransformer`).
+            A deployment setting: the fitted models are the same.
         command_history: c, the forward model also sees the c actions commanded before ``a_t``
             (:class:`sgat.models.ForwardModel` ``commands``). A one-step model f(s_t, a_t) cannot
             represent an actuation latency: the real joint answers a command given some steps ago,
@@ -161,6 +164,7 @@ class GroundingConfig:
     residual_noise: bool = False
     components: int = 1
     noise_memory: float = 0.0
+    shadow_memory: float = 0.0
     command_history: int = 0
     matched: bool = False
     zero_init: bool = False
@@ -181,6 +185,10 @@ class GroundingConfig:
             raise ValueError(f"components must be >= 1, got {self.components}")
         if not (np.isfinite(self.noise_memory) and self.noise_memory >= 0):
             raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {self.noise_memory}")
+        if not (np.isfinite(self.shadow_memory) and self.shadow_memory >= 0):
+            raise ValueError(f"shadow_memory must be a finite number of steps >= 0, got {self.shadow_memory}")
+        if self.shadow_memory > 0 and (self.matched or self.residual_noise):
+            raise ValueError("shadow_memory works with the paper's transformer only (not matched or residual_noise)")
         if int(self.command_history) < 0:
             raise ValueError(f"command_history must be >= 0, got {self.command_history}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
@@ -191,7 +199,7 @@ class GroundingConfig:
         d = asdict(self)
         d["hidden"] = list(self.hidden)
         # settings added later are left out at their defaults, so saved configs and caches still match
-        for k, default in (("components", 1), ("noise_memory", 0.0), ("command_history", 0),
+        for k, default in (("components", 1), ("noise_memory", 0.0), ("shadow_memory", 0.0), ("command_history", 0),
                            ("matched", False), ("zero_init", False), ("local_inverse", False)):
             if d[k] == default:
                 d.pop(k)
@@ -304,7 +312,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
             fm.fit(Xs[ii], sim.dS[ii], seed=s + 3, **kw)
             means.append(fm)
     tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None,
-                           noise_memory=cfg.noise_memory, sim_mean=means or None)
+                           noise_memory=cfg.noise_memory, sim_mean=means or None, shadow_memory=cfg.shadow_memory)
     return GroundingFit(tr, rf, ri, {"n_real": len(real), "n_sim": len(sim)})
 
 

@@ -146,6 +146,18 @@ class ActionTransformer:
     random ground would then get its spread twice. With ``sim_forward`` the sample is drawn with the
     residual variance only, Δŝ ~ N(μ_real, max(σ²_real − σ²_sim, 0)), and the sim adds its own.
 
+    ``shadow_memory`` (τ [steps]; 0: the paper): the forward model predicts from a **shadow state**
+    ŝ_t, the transformer's own estimate of where the real robot would be, instead of from the sim's
+    state s_t. The target is ŝ_{t+1} = ŝ_t + Δŝ, Δŝ ~ f_real(ŝ history, a_t), and the inverse model
+    is asked for it from the sim's state, g = f_sim^-1(s_t, ŝ_{t+1} − s_t); after the step the
+    shadow relaxes toward the sim's new state, ŝ_{t+1} ← s_{t+1} + e^{-1/τ} (ŝ_{t+1} − s_{t+1})
+    (:meth:`relax_shadow`). With τ = 0 ŝ_t = s_t: every step's prediction starts again from wherever
+    the sim got to, so a deviation from the target the sim did not follow is forgotten at once. With
+    τ > 0 it persists for about τ steps and the transformer keeps pushing toward it, as it does when
+    the targets are a real walk's recorded states (teacher forcing, :func:`sgat.replay.replay_real`):
+    the real joint trajectory drifts away from the sim's for whole strides (the ground under a
+    foot), which one-step samples anchored at the sim's state never do.
+
     ``sim_mean`` (a *matched* transformer): a deterministic forward model of the sim per member.
     The grounded action is then g(s, a) = a + f_sim^-1(s, ŝ_real) − f_sim^-1(s, ŝ_sim) with ŝ_sim the
     sim model's prediction: the transformer corrects by the inverse model's answer to the gap
@@ -162,9 +174,13 @@ class ActionTransformer:
 
     def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
                  alpha: float | None = None, seed: int = 0, sim_forward=None, noise_memory: float = 0.0,
-                 sim_mean=None):
+                 sim_mean=None, shadow_memory: float = 0.0):
         if not (math.isfinite(float(noise_memory)) and float(noise_memory) >= 0.0):
             raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {noise_memory}")
+        if not (math.isfinite(float(shadow_memory)) and float(shadow_memory) >= 0.0):
+            raise ValueError(f"shadow_memory must be a finite number of steps >= 0, got {shadow_memory}")
+        if float(shadow_memory) > 0 and (_members(sim_forward) or _members(sim_mean)):
+            raise ValueError("shadow_memory works with the paper's transformer only (no sim_forward or sim_mean models)")
         if method not in METHODS:
             raise ValueError(f"unknown grounding method {method!r}; choose from {', '.join(METHODS)}")
         fwds, invs = _members(forward), _members(inverse)
@@ -200,6 +216,10 @@ class ActionTransformer:
         self._c = math.exp(-1.0 / self.noise_memory) if self.noise_memory > 0 else 0.0
         self._s = math.sqrt(1.0 - self._c ** 2)
         self._z = None
+        self.shadow_memory = float(shadow_memory)
+        self._beta = math.exp(-1.0 / self.shadow_memory) if self.shadow_memory > 0 else 0.0
+        #: Δŝ of the last :meth:`transform` call (the shadow's predicted change), shape (S,) or (..., S).
+        self.last_delta = None
 
     @property
     def commands(self) -> int:
@@ -245,13 +265,17 @@ class ActionTransformer:
         if self.n_members > 1 and self.method == "sgat":
             self.member = int(self.rng.integers(self.n_members))
 
-    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None, past=None) -> np.ndarray:
-        """Member k's grounded action; ``normal(shape)`` draws the SGAT noise (default: ``self.rng``);
-        ``past``: the previous commands (forward models with a command history)."""
+    def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None, past=None,
+                shadow=None) -> tuple[np.ndarray, np.ndarray]:
+        """Member k's grounded action and the predicted state change Δŝ; ``normal(shape)`` draws the
+        SGAT noise (default: ``self.rng``); ``past``: the previous commands (forward models with a
+        command history); ``shadow``: the shadow state history the forward model predicts from
+        (``shadow_memory`` > 0; None: the sim's, ``hist``)."""
         fwd, inv = self.forwards[k], self.inverses[k]
         S = self.spec.state_dim
         normal = normal or self.rng.standard_normal
-        x = np.concatenate([hist, a] if past is None else [hist, past, a], axis=-1)
+        src = hist if shadow is None else shadow
+        x = np.concatenate([src, a] if past is None else [src, past, a], axis=-1)
         if not sample:
             ds = fwd.predict(x)[0]
         elif self.sim_forwards:
@@ -262,32 +286,61 @@ class ActionTransformer:
             ds = fwd.sample_with(x, normal((*x.shape[:-1], fwd.noise_dim)))
         else:
             ds = fwd.predict(x)[0]
-        z = [hist, ds, a] if inv.command_input else [hist, ds]
+        # the target ŝ_{t+1} = ŝ_t + Δŝ, asked of the inverse model from the sim's state s_t
+        step = ds if shadow is None else ds + (shadow[..., -S:] - hist[..., -S:])
+        z = [hist, step, a] if inv.command_input else [hist, step]
         g = inv.predict(np.concatenate(z, axis=-1))
         if self.sim_means:  # matched: subtract the inverse model's answer to the sim's own prediction
             ds_sim = self.sim_means[k].predict(x)[0]
             z = [hist, ds_sim, a] if inv.command_input else [hist, ds_sim]
             g = a + g - inv.predict(np.concatenate(z, axis=-1))
-        return g
+        return g, ds
 
-    def transform(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
+    def transform(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None,
+                  shadow: np.ndarray | None = None) -> np.ndarray:
         """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A);
         ``past`` (..., c*A): the c commands before ``a``, oldest first (required when
-        :attr:`commands` > 0; at an episode's first steps, pad with the first command).
+        :attr:`commands` > 0; at an episode's first steps, pad with the first command); ``shadow``
+        (..., k*S): the shadow state history (required when ``shadow_memory`` > 0; at an episode's
+        start, the sim's). The predicted change Δŝ is left in :attr:`last_delta`.
 
         Raises:
-            ValueError: ``past`` missing or of the wrong shape for a transformer with a command history.
+            ValueError: ``past`` or ``shadow`` missing or of the wrong shape.
         """
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
             return a.copy()
         hist = np.asarray(hist, dtype=np.float64)
         past = self._check_past(past, a.shape[:-1])
+        shadow = self._check_shadow(shadow, hist.shape)
         if self.method == "sgat" and self.forwards[0].stochastic:
-            g = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None, past=past)
+            g, ds = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None,
+                                 past=past, shadow=shadow)
         else:
-            g = np.mean([self._ground(k, hist, a, sample=False, past=past) for k in range(self.n_members)], axis=0)
+            g, ds = self._mean_members(hist, a, past, shadow)
+        self.last_delta = ds
         return self._blend(a, g)
+
+    def _mean_members(self, hist, a, past, shadow) -> tuple[np.ndarray, np.ndarray]:
+        """GAT (or SGAT with deterministic models): the members' grounded actions and Δŝ averaged."""
+        out = [self._ground(k, hist, a, sample=False, past=past, shadow=shadow) for k in range(self.n_members)]
+        return np.mean([g for g, _ in out], axis=0), np.mean([d for _, d in out], axis=0)
+
+    def _check_shadow(self, shadow, shape: tuple) -> np.ndarray | None:
+        if not self.shadow_memory:
+            return None
+        if shadow is None:
+            raise ValueError("the transformer keeps a shadow state (shadow_memory > 0): give its history as shadow")
+        shadow = np.asarray(shadow, dtype=np.float64)
+        if shadow.shape != shape:
+            raise ValueError(f"shadow must have the shape of the state history {shape}, got {shadow.shape}")
+        return shadow
+
+    def relax_shadow(self, target: np.ndarray, state: np.ndarray) -> np.ndarray:
+        """The shadow state after a step: the target ŝ_{t+1} = ŝ_t + Δŝ relaxed toward the sim's new
+        state s_{t+1}, s_{t+1} + e^{-1/τ} (ŝ_{t+1} − s_{t+1}) (arrays (..., S); τ = ``shadow_memory``)."""
+        state = np.asarray(state, dtype=np.float64)
+        return state + self._beta * (np.asarray(target, dtype=np.float64) - state)
 
     def _blend(self, a: np.ndarray, g: np.ndarray) -> np.ndarray:
         out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
@@ -321,7 +374,8 @@ class ActionTransformer:
         return self.forwards[0].noise_dim if self.forwards else self.spec.state_dim
 
     def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None,
-                           past: np.ndarray | None = None) -> np.ndarray:
+                           past: np.ndarray | None = None, shadow: np.ndarray | None = None,
+                           delta_out: np.ndarray | None = None) -> np.ndarray:
         """:meth:`transform` for n episodes at once, each with its own ensemble member and noise.
 
         Args:
@@ -331,6 +385,8 @@ class ActionTransformer:
                 generator (needed when :attr:`samples`; a generator's draws of (T, d) at once are its
                 next T draws of (d,), so a caller may draw a whole episode's noise at its start).
             past: (n, c*A) each episode's previous commands (needed when :attr:`commands` > 0).
+            shadow: (n, k*S) each episode's shadow state history (needed when ``shadow_memory`` > 0).
+            delta_out: (n, S), filled with each episode's predicted change Δŝ if given.
 
         Returns:
             (n, A); row i is bit-identical to :meth:`transform` ``(hist[i], a[i])`` of a transformer
@@ -343,21 +399,27 @@ class ActionTransformer:
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
             return a.copy()
-        h3, a3 = np.asarray(hist, dtype=np.float64)[:, None, :], a[:, None, :]
+        hist = np.asarray(hist, dtype=np.float64)
+        h3, a3 = hist[:, None, :], a[:, None, :]
         p3 = self._check_past(past, a.shape[:-1])
         p3 = None if p3 is None else p3[:, None, :]
+        s3 = self._check_shadow(shadow, hist.shape)
+        s3 = None if s3 is None else s3[:, None, :]
         if self.samples:
             if noise is None:
                 raise ValueError("an SGAT transformer samples: give each episode's standard normal draws (noise)")
             noise = np.asarray(noise, dtype=np.float64)[:, None, :]
             members = np.asarray(members)
             g = np.empty_like(a3)
+            ds = np.empty((len(a3), 1, self.spec.state_dim))
             for k in np.unique(members).tolist():
                 sel = np.flatnonzero(members == k)
-                g[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
-                                      past=None if p3 is None else p3[sel])
+                g[sel], ds[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
+                                               past=None if p3 is None else p3[sel], shadow=None if s3 is None else s3[sel])
         else:
-            g = np.mean([self._ground(k, h3, a3, sample=False, past=p3) for k in range(self.n_members)], axis=0)
+            g, ds = self._mean_members(h3, a3, p3, s3)
+        if delta_out is not None:
+            delta_out[...] = ds[:, 0]
         return self._blend(a3, g)[:, 0]
 
     # -- persistence ---------------------------------------------------------------------------
@@ -385,6 +447,8 @@ class ActionTransformer:
             meta["matched"] = True
         if self.noise_memory > 0:
             meta["noise_memory"] = self.noise_memory
+        if self.shadow_memory > 0:
+            meta["shadow_memory"] = self.shadow_memory
         atomic_write_text(os.path.join(directory, "transformer.json"), json.dumps(meta, indent=1))
         return directory
 
@@ -421,7 +485,7 @@ class ActionTransformer:
                 invs.append(inv)
         return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"],
                    sim_forward=sims or None, noise_memory=float(meta.get("noise_memory", 0.0)),
-                   sim_mean=means or None)
+                   sim_mean=means or None, shadow_memory=float(meta.get("shadow_memory", 0.0)))
 
 
 class GroundedEnv(gym.Wrapper):
@@ -445,6 +509,8 @@ class GroundedEnv(gym.Wrapper):
         self.ctrl_cost_weight = ctrl_cost_weight
         self._hist: deque = deque(maxlen=transformer.spec.history)
         self._past: deque = deque(maxlen=max(transformer.commands, 1))
+        self._shadow: deque = deque(maxlen=transformer.spec.history)  # shadow states (shadow_memory > 0)
+        self._target = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
@@ -459,6 +525,9 @@ class GroundedEnv(gym.Wrapper):
         self._hist.clear()
         self._hist.extend([s] * self.transformer.spec.history)
         self._past.clear()
+        self._shadow.clear()
+        self._shadow.extend([s] * self.transformer.spec.history)
+        self._target = None
 
     def ground(self, action) -> np.ndarray:
         """The action to apply for the agent's ``action`` (a new array), given the state history
@@ -484,12 +553,20 @@ class GroundedEnv(gym.Wrapper):
                     self._past.extend([ag] * self.transformer.commands)
                 past = np.concatenate(list(self._past))
                 self._past.append(ag)
-            applied[spec.action_index] = self.transformer.transform(hist, ag, past)
+            shadow = np.concatenate(list(self._shadow)) if self.transformer.shadow_memory else None
+            applied[spec.action_index] = self.transformer.transform(hist, ag, past, shadow)
+            if shadow is not None:
+                self._target = self._shadow[-1] + self.transformer.last_delta
         return applied
 
     def observe(self, obs: np.ndarray) -> None:
-        """Append the state of the new observation to the history."""
-        self._hist.append(self.transformer.spec.states(obs))
+        """Append the state of the new observation to the history (and the relaxed target to the
+        shadow history, :meth:`ActionTransformer.relax_shadow`)."""
+        s = self.transformer.spec.states(obs)
+        self._hist.append(s)
+        if self._target is not None:
+            self._shadow.append(self.transformer.relax_shadow(self._target, s))
+            self._target = None
 
     def step(self, action):
         a = np.array(action, dtype=np.float64)
@@ -504,3 +581,61 @@ class GroundedEnv(gym.Wrapper):
             info["reward_ctrl"] = agent_ctrl
         self.observe(obs)
         return obs, reward, terminated, truncated, info
+
+
+class TeacherForcedEnv(GroundedEnv):
+    """The grounded sim with the forward model replaced by a recorded real walk (teacher forcing).
+
+    At step t the target is the real walk's next state s^real_{t+1} instead of a forward model's
+    prediction, and the inverse model is asked for it from the sim's own state:
+    ``g = f_sim^-1(s_t, s^real_{t+1} − s_t)`` (the ensemble members' answers averaged), blended with
+    the agent's action at the transformer's α. It is the grounded sim with a forward model that is
+    exactly right for that walk, so it separates what the forward model gets wrong from what action
+    grounding can do at all: if the sim falls where the real walk fell when it is pulled along the
+    real joint trajectory, the action transformation can reproduce the fall and the forward model is
+    what misses it. After the recording ends (the real robot fell, or the walk was over) the
+    commands pass through ungrounded: the rest of the episode is the sim's own dynamics, so the
+    outcome depends on the inverse models, α and the sim alone, not on the forward model.
+
+    Args:
+        env: the sim the transformer grounds.
+        transformer: a fitted :class:`ActionTransformer` (its inverse models and α are used).
+        reference: the real walk's grounding states, shape (T, S) (``transformer.spec.states`` of its
+            observations; row t is s_t, observed before the t-th command).
+
+    Raises:
+        ValueError: an identity transformer, or a reference that is not (T >= 2, S) and finite.
+    """
+
+    def __init__(self, env: gym.Env, transformer: ActionTransformer, reference: np.ndarray):
+        if transformer.is_identity:
+            raise ValueError("teacher forcing needs a fitted transformer (its inverse models)")
+        ref = np.asarray(reference, dtype=np.float64)
+        S = transformer.spec.state_dim
+        if ref.ndim != 2 or ref.shape[1] != S or len(ref) < 2 or not np.all(np.isfinite(ref)):
+            raise ValueError(f"reference must be finite grounding states of shape (T >= 2, {S}), got {ref.shape}")
+        super().__init__(env, transformer)
+        self.reference = ref
+        self._t = 0
+
+    def start(self, seed: int | None, obs: np.ndarray) -> None:
+        super().start(seed, obs)
+        self._t = 0
+
+    def ground(self, action) -> np.ndarray:
+        t = self._t
+        self._t += 1
+        a = np.array(action, dtype=np.float64)
+        if a.shape != self.env.action_space.shape or not np.all(np.isfinite(a)):
+            raise ValueError(f"action must be finite with shape {self.env.action_space.shape}")
+        if t + 1 >= len(self.reference):  # the recording is over: the sim's own dynamics
+            return a
+        tr, spec = self.transformer, self.transformer.spec
+        hist = np.concatenate(list(self._hist))
+        ag = a[spec.action_index]
+        step = self.reference[t + 1] - self._hist[-1]
+        g = np.mean([inv.predict(np.concatenate([hist, step, ag] if inv.command_input else [hist, step]))
+                     for inv in tr.inverses], axis=0)
+        applied = a.copy()
+        applied[spec.action_index] = tr._blend(ag, g)
+        return applied

@@ -41,18 +41,22 @@ def _assert_same(a: list[dict], b: list[dict]) -> None:
 
 @pytest.fixture(scope="module")
 def transformers(tmp_path_factory):
-    """Saved SGAT (2-member ensemble; one Gaussian, a 3-component mixture, noise with memory) and GAT transformers
-    with random (untrained) weights: they push the legs around enough to make some walks fall."""
+    """Saved SGAT (2-member ensemble; one Gaussian, a 3-component mixture, noise with memory, a shadow
+    state) and GAT transformers (one with a shadow state) with random (untrained) weights: they push
+    the legs around enough to make some walks fall."""
     spec = grounding_spec(NaoSimEnv())
     S, A = spec.state_dim, spec.action_dim
     out = {}
-    for name, method, K, memory, c in (("sgat", "sgat", 1, 0, 0), ("gat", "gat", 1, 0, 0), ("sgat-mdn", "sgat", 3, 0, 0),
-                                       ("sgat-memory", "sgat", 1, 20.0, 0), ("gat-commands", "gat", 1, 0, 3)):
+    for name, method, K, memory, c, shadow in (
+            ("sgat", "sgat", 1, 0, 0, 0), ("gat", "gat", 1, 0, 0, 0), ("sgat-mdn", "sgat", 3, 0, 0, 0),
+            ("sgat-memory", "sgat", 1, 20.0, 0, 0), ("gat-commands", "gat", 1, 0, 3, 0),
+            ("sgat-shadow", "sgat", 1, 0, 0, 3.0), ("gat-shadow", "gat", 1, 0, 3, 3.0)):
         torch.manual_seed({"sgat": 7, "gat": 8}.get(name, 9))
         fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K, commands=c) for _ in range(2)]
         inv = [InverseModel(S, A, command_input=True) for _ in range(2)]
         path = tmp_path_factory.mktemp(name)
-        ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0, noise_memory=memory).save(path)
+        ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0, noise_memory=memory,
+                          shadow_memory=shadow).save(path)
         out[name] = str(path)
     return out
 
@@ -72,8 +76,8 @@ def report(tmp_path_factory):
     return str(path)
 
 
-@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "sgat-memory", "gat-commands", "identified",
-                                   "hybrid"])
+@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "sgat-memory", "gat-commands", "sgat-shadow",
+                                   "gat-shadow", "identified", "hybrid"])
 def test_batched_episodes_are_bit_identical_to_single_episodes(world, transformers, report):
     """Every MuJoCo world the optimizer trains in: results and recordings equal run_episode's,
     falls included."""
@@ -83,6 +87,8 @@ def test_batched_episodes_are_bit_identical_to_single_episodes(world, transforme
           "sgat-mdn": {"world": "grounded", "transformer": transformers.get("sgat-mdn")},
           "sgat-memory": {"world": "grounded", "transformer": transformers.get("sgat-memory")},
           "gat-commands": {"world": "grounded", "transformer": transformers.get("gat-commands")},
+          "sgat-shadow": {"world": "grounded", "transformer": transformers.get("sgat-shadow")},
+          "gat-shadow": {"world": "grounded", "transformer": transformers.get("gat-shadow")},
           "identified": {"world": "identified", "identified": [report]},
           "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]}}[world]
     tasks = [{**kw, "theta": th, "seed": 10 + i, "seconds": SECONDS, "record": True}

@@ -110,6 +110,14 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert 0 <= res["worlds"]["sgat"]["draws"][0]["real_walk_falls"] <= 4
     assert res["worlds"]["sgat"]["data_gaits"] == 1 and res["worlds"]["sim"]["data_gaits"] is None
     assert res["worlds"]["sim"]["draws"][0]["world_ceiling"] is None  # one deterministic episode
+    # teacher forcing along each draw's grounding walks pulls the sim's legs toward the real ones
+    for name in ("sgat", "gat"):
+        for d in res["worlds"][name]["draws"]:
+            rp = d["replay"]
+            assert rp["walks"] == 4 and rp["real_fell"] == d["real_walk_falls"]
+            assert rp["fell"] == rp["fell_with_real"] + rp["fell_without_real"] and rp["fell_with_real"] <= rp["real_fell"]
+            assert 0 < rp["q_rms_rad"] < rp["q_rms_plain_rad"], rp
+    assert "replay" not in res["worlds"]["sim"]["draws"][0]
     for f in ("fidelity.json", "fidelity.png", "table.txt", "panel.json", "episodes.jsonl"):
         assert (out / f).exists(), f
     n_lines = len((out / "episodes.jsonl").read_text().splitlines())

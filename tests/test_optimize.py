@@ -86,6 +86,21 @@ def test_command_history_grounds_the_optimization(tmp_path, capsys):
     assert np.isfinite(res["rows"][1]["select_scores"]["mean"])
 
 
+def test_shadow_state_reaches_every_grounded_method(tmp_path, capsys):
+    """``--shadow τ`` [s] becomes the transformer's shadow_memory in control steps for SGAT, GAT and
+    hybrid; a negative τ, or τ with the matched transformer, is refused with the setting named."""
+    from experiments.optimize import OptimizeConfig, Optimizer
+
+    opt = Optimizer(OptimizeConfig(shadow=0.03, methods=("sgat",)), str(tmp_path / "r"), None)
+    for m in ("sgat", "gat", "hybrid"):
+        assert opt.grounding_config(m).shadow_memory == pytest.approx(3.0)
+    assert Optimizer(OptimizeConfig(), str(tmp_path / "d"), None).grounding_config("sgat").shadow_memory == 0.0
+    assert main(["optimize", "--shadow", "-1", "--out", str(tmp_path / "x")]) == 2
+    assert "--shadow" in capsys.readouterr().err
+    assert main(["optimize", "--shadow", "0.02", "--matched", "--out", str(tmp_path / "y")]) == 2
+    assert "shadow works with the paper's transformer only" in capsys.readouterr().err
+
+
 def test_bad_input(tmp_path, capsys):
     assert main(["optimize", "--methods", "sgat,magic", "--out", str(tmp_path / "x")]) == 2
     assert "unknown method(s) ['magic']" in capsys.readouterr().err

@@ -68,6 +68,22 @@ def test_fidelity_block_compares_falls_on_the_data_gait_with_the_grounding_walks
     line = "".join(readme._data_gait_falls(res))
     assert "60 % of its real trials" in line and "5 of the 12 grounding walks (1–2 of 4 per draw)" in line
     assert "`sgat` 0 % [0, 25]" in line and "gaits=4" not in line and "`sim`" not in line and "real=8" not in line
+    assert "Teacher-forced" not in line  # runs saved before the replays have none
+    # teacher-forced replays: worlds with the same inverse models share a clause, counts add over draws
+    def rp(real_fell, with_real, without_real, q):
+        return {"walks": 4, "real_fell": real_fell, "fell": with_real + without_real, "fell_with_real": with_real,
+                "fell_without_real": without_real, "q_rms_rad": q, "q_rms_plain_rad": 0.035}
+    same = [rp(1, 1, 0, 0.020), rp(2, 1, 1, 0.024), rp(2, 2, 2, 0.022)]
+    res["worlds"]["gat"] = {"data_gaits": 1, "draws": [draw(0.0, 1), draw(0.0, 2), draw(0.0, 2)]}
+    for name, replays in (("sgat", same), ("gat", same), ("hybrid", [rp(1, 0, 0, 0.03)] * 3)):
+        if name == "hybrid":
+            res["worlds"][name] = {"data_gaits": 1, "draws": [draw(0.5, 1), draw(0.5, 2), draw(0.5, 2)]}
+        for d, r in zip(res["worlds"][name]["draws"], replays):
+            d["replay"] = r
+    line = "".join(readme._data_gait_falls(res))
+    assert ("on 4 of the 5 walks that fell and on 3 of the 7 that did not with the inverse models of `sgat`, `gat` "
+            "(leg joints 0.022 rad RMS" in line), line
+    assert "on 0 of the 3 walks that fell and on 0 of the 9 that did not with the inverse models of `hybrid` (" in line
     for w in res["worlds"].values():  # a run saved before the walks' falls were recorded
         for d in w["draws"]:
             d.pop("real_walk_falls", None)

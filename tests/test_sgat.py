@@ -1,12 +1,13 @@
 """SGAT grounding: models recover known maps, the transformer grounds a known mismatch."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 
 from sgat.grounding import trajectory_transitions
 from sgat.models import ForwardModel, InverseModel, ModelFileError
-from sgat.transformer import ActionTransformer, GroundingSpec
+from sgat.transformer import ActionTransformer, GroundedEnv, GroundingSpec, TeacherForcedEnv
 
 M = np.array([[0.5, -0.2], [0.1, 0.8], [-0.3, 0.4]])
 SIGMA = np.array([0.05, 0.10, 0.20])
@@ -505,3 +506,69 @@ def test_local_inverse_model_refuses_what_it_cannot_build():
     assert m.shape == (2, 3 * 2 + 2) and m[1].tolist() == [0, 1, 0, 1, 0, 1, 0, 1]
     with pytest.raises(ValueError, match="input mask"):
         InverseModel(2, 2, hidden=(8,)).fit(np.zeros((20, 4)), np.zeros((20, 2)), input_mask=np.ones((2, 4)))
+
+
+class _Still(gym.Env):
+    """A world whose state never moves, whatever the action: the sim never follows a target."""
+
+    observation_space = gym.spaces.Box(-10, 10, (3,))
+    action_space = gym.spaces.Box(-1, 1, (2,))
+
+    def reset(self, *, seed=None, options=None):
+        return np.zeros(3), {}
+
+    def step(self, action):
+        return np.zeros(3), 0.0, False, False, {}
+
+
+def test_shadow_state_keeps_pushing_toward_a_target_the_sim_did_not_follow(fitted, tmp_path):
+    """shadow_memory τ: the forward model predicts from a shadow state that relaxes toward the sim's
+    by e^{-1/τ} per step. In a world that never moves, the paper's transformer asks for the same step
+    every time; with a shadow the unreached targets pile up, geometrically, to Δŝ / (1 − e^{-1/τ}),
+    exactly as the recursion says; the setting survives save/load and bad values are refused."""
+    _, gat, inv = fitted
+    spec, a = _spec(), np.array([0.3, -0.2])
+    plain = GroundedEnv(_Still(), ActionTransformer(spec, gat, inv, method="gat", alpha=1.0))
+    tau = 2.0
+    shadow = GroundedEnv(_Still(), ActionTransformer(spec, gat, inv, method="gat", alpha=1.0, shadow_memory=tau))
+    for env in (plain, shadow):
+        env.reset(seed=0)
+    got_plain = np.array([plain.step(a)[4]["applied_action"] for _ in range(12)])
+    got = np.array([shadow.step(a)[4]["applied_action"] for _ in range(12)])
+    s0 = np.zeros(3)
+    beta, sh, want = np.exp(-1 / tau), np.zeros(3), []
+    for _ in range(12):
+        delta = gat.predict(np.concatenate([sh, a]))[0]  # predicted from the shadow state
+        step = sh + delta - s0
+        want.append(np.clip(inv.predict(np.concatenate([s0, step])), -1, 1))
+        sh = s0 + beta * (sh + delta - s0)
+    assert np.allclose(got, np.array(want), atol=1e-12)
+    assert np.allclose(got_plain, got_plain[0]) and np.allclose(got[0], got_plain[0])
+    assert np.linalg.norm(got[-1] - got_plain[-1]) > 0.5 * np.linalg.norm(got_plain[0])  # it kept pushing
+    shadow.transformer.save(tmp_path)
+    assert ActionTransformer.load(tmp_path).shadow_memory == tau
+    with pytest.raises(ValueError, match="shadow_memory"):
+        ActionTransformer(spec, gat, inv, method="gat", alpha=1.0, shadow_memory=-1.0)
+    with pytest.raises(ValueError, match="shadow"):
+        shadow.transformer.transform(s0, a)  # the shadow history is required
+
+
+def test_teacher_forcing_asks_the_inverse_model_for_the_recorded_next_states(fitted):
+    """TeacherForcedEnv: at step t the target is the recording's s_{t+1}, asked of the inverse model
+    from the sim's own state; after the recording ends the commands pass through ungrounded."""
+    sgat, gat, inv = fitted
+    spec, a = _spec(), np.array([0.3, -0.2])
+    ref = np.random.default_rng(0).uniform(-0.3, 0.3, (5, 3))
+    tr = ActionTransformer(spec, gat, inv, method="gat", alpha=0.5)
+    env = TeacherForcedEnv(_Still(), tr, ref)
+    env.reset(seed=0)
+    got = np.array([env.step(a)[4]["applied_action"] for _ in range(7)])
+    for t in range(4):
+        assert np.allclose(got[t], 0.5 * a + 0.5 * inv.predict(np.concatenate([np.zeros(3), ref[t + 1]])), atol=1e-12)
+    assert np.array_equal(got[4:], np.tile(a, (3, 1)))  # the sim's own dynamics from step T-1
+    with pytest.raises(ValueError, match="fitted transformer"):
+        TeacherForcedEnv(_Still(), ActionTransformer(spec), ref)
+    with pytest.raises(ValueError, match="reference"):
+        TeacherForcedEnv(_Still(), tr, ref[:, :2])
+    with pytest.raises(ValueError, match="reference"):
+        TeacherForcedEnv(_Still(), tr, np.full((4, 3), np.nan))
