@@ -742,6 +742,17 @@ def format_table(res: dict) -> str:
                      f"{s['bias']['median']:>+8.1f} (spread {s['bias']['spread']:4.1f}) {rng3(s['brier'], '{:.3f}'):>22s} "
                      f"{rng3(s['pick_regret'], '{:.1f}') if 'pick_regret' in s else '-':>20s} "
                      f"{_own(s):>18s}")
+    forced = [(n, [d["replay"] for d in w["draws"]]) for n, w in res["worlds"].items()
+              if w["draws"] and all("replay" in d for d in w["draws"])]
+    if forced:
+        lines += ["", "teacher-forced along each draw's grounding walks (their real next states in place of the forward "
+                  "model; summed over the draws):"]
+        for name, rp in forced:
+            fell = sum(r["real_fell"] for r in rp)
+            lines.append(f"  {name:26s} sim fell on {sum(r['fell_with_real'] for r in rp)}/{fell} walks that fell, "
+                         f"{sum(r['fell_without_real'] for r in rp)}/{sum(r['walks'] for r in rp) - fell} that did not; "
+                         f"leg joints {np.median([r['q_rms_rad'] for r in rp]):.3f} rad RMS from the real walk "
+                         f"(ungrounded {np.median([r['q_rms_plain_rad'] for r in rp]):.3f})")
     return "\n".join(lines)
 
 

@@ -154,7 +154,7 @@ class ActionTransformer:
     (:meth:`relax_shadow`). With τ = 0 ŝ_t = s_t: every step's prediction starts again from wherever
     the sim got to, so a deviation from the target the sim did not follow is forgotten at once. With
     τ > 0 it persists for about τ steps and the transformer keeps pushing toward it, as it does when
-    the targets are a real walk's recorded states (teacher forcing, :func:`sgat.replay.replay_real`):
+    the targets are a real walk's recorded states (teacher forcing, :class:`TeacherForcedEnv`):
     the real joint trajectory drifts away from the sim's for whole strides (the ground under a
     foot), which one-step samples anchored at the sim's state never do.
 

@@ -118,6 +118,9 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
             assert rp["fell"] == rp["fell_with_real"] + rp["fell_without_real"] and rp["fell_with_real"] <= rp["real_fell"]
             assert 0 < rp["q_rms_rad"] < rp["q_rms_plain_rad"], rp
     assert "replay" not in res["worlds"]["sim"]["draws"][0]
+    table = (out / "table.txt").read_text()
+    forced = table.split("teacher-forced")[1].splitlines()[1:]
+    assert sorted(line.split()[0] for line in forced) == ["gat", "sgat"]  # the grounded worlds only
     for f in ("fidelity.json", "fidelity.png", "table.txt", "panel.json", "episodes.jsonl"):
         assert (out / f).exists(), f
     n_lines = len((out / "episodes.jsonl").read_text().splitlines())
