@@ -61,8 +61,8 @@ def register(sub) -> argparse.ArgumentParser:
                    help="linear grounding models fitted from zero weights, not PyTorch's random ones (default off)")
     p.add_argument("--shadow", type=A.real(0.0, 10.0, unit="s"),
                    help=f"τ [s] of the transformer's shadow state: the forward model predicts from it and it relaxes "
-                   f"toward the sim's state over τ (default {d.shadow:g}: the paper, from the sim's state; README, "
-                   "sgatwalk fidelity, ninth round)")
+                   f"toward the sim's state over τ (default {d.shadow:g}: the paper, from the sim's state; 0.02 "
+                   "forecast better around θ0 but optimized worse in Table I: README, sgatwalk fidelity, ninth round)")
     p.add_argument("--alpha", type=A.fraction, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
                    "1 = the paper's formula)")
     p.add_argument("--hybrid-alpha", type=A.fraction, help=f"blend of the hybrid method (default {d.hybrid_alpha})")
