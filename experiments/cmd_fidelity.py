@@ -7,7 +7,9 @@ the plain sim, the action-noise envelope, GAT and SGAT grounded sims fitted exac
 diagnose`` identified, and SGAT on top of that (hybrid). Worlds that learn from real data are fitted
 K times on independent draws of it. Prints per world the Spearman ρ with real fitness (90 %
 bootstrap interval), the mean absolute error and bias of the fitness, the Brier score of the fall
-frequency, each over the K draws, and the ceiling the real trials' noise allows. Writes
+frequency, each over the K draws, and the ceiling the real trials' noise allows; and, for every
+grounded world, how often the sim falls where the real robot fell when it is teacher-forced along
+its own grounding walks (their real next states in place of the forward model). Writes
 ``fidelity.json``, ``fidelity.png`` (predicted vs real fitness, one colour per draw), ``table.txt``
 into the run directory; re-running the same command resumes where it stopped.
 
