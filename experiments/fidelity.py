@@ -699,6 +699,14 @@ def _replay_summary(rows: list[dict]) -> dict:
             "q_rms_plain_rad": float(np.median([r["q_rms_plain_rad"] for r in rows]))}
 
 
+def replay_totals(replays: list[dict]) -> dict:
+    """A world's teacher-forced replays (one :func:`_replay_summary` per draw) over all its draws:
+    walks, real falls, the sim's falls on walks that fell and on those that did not (sums), and the
+    median over the draws of the leg-joint RMS errors [rad], forced and ungrounded."""
+    return {k: sum(r[k] for r in replays) for k in ("walks", "real_fell", "fell_with_real", "fell_without_real")} | {
+        k: float(np.median([r[k] for r in replays])) for k in ("q_rms_rad", "q_rms_plain_rad")}
+
+
 def _summary(draws: list[dict]) -> dict:
     def agg(key):
         v = np.array([d[key] for d in draws], dtype=float)
@@ -748,11 +756,10 @@ def format_table(res: dict) -> str:
         lines += ["", "teacher-forced along each draw's grounding walks (their real next states in place of the forward "
                   "model; summed over the draws):"]
         for name, rp in forced:
-            fell = sum(r["real_fell"] for r in rp)
-            lines.append(f"  {name:26s} sim fell on {sum(r['fell_with_real'] for r in rp)}/{fell} walks that fell, "
-                         f"{sum(r['fell_without_real'] for r in rp)}/{sum(r['walks'] for r in rp) - fell} that did not; "
-                         f"leg joints {np.median([r['q_rms_rad'] for r in rp]):.3f} rad RMS from the real walk "
-                         f"(ungrounded {np.median([r['q_rms_plain_rad'] for r in rp]):.3f})")
+            t = replay_totals(rp)
+            lines.append(f"  {name:26s} sim fell on {t['fell_with_real']}/{t['real_fell']} walks that fell, "
+                         f"{t['fell_without_real']}/{t['walks'] - t['real_fell']} that did not; leg joints "
+                         f"{t['q_rms_rad']:.3f} rad RMS from the real walk (ungrounded {t['q_rms_plain_rad']:.3f})")
     return "\n".join(lines)
 
 

@@ -30,6 +30,7 @@ from common.files import atomic_write_text
 from experiments.cli import main as cli_main
 from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
+from experiments.fidelity import replay_totals
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
@@ -159,14 +160,11 @@ def _teacher_forcing(fitted: dict) -> str:
         return ""
     clauses = []
     for key, names in groups.items():
-        rp = json.loads(key)
-        fell_real = sum(r["real_fell"] for r in rp)
-        walks = sum(r["walks"] for r in rp)
-        clauses.append(f"on {sum(r['fell_with_real'] for r in rp)} of the {fell_real} walks that fell and on "
-                       f"{sum(r['fell_without_real'] for r in rp)} of the {walks - fell_real} that did not with the "
+        t = replay_totals(json.loads(key))
+        clauses.append(f"on {t['fell_with_real']} of the {t['real_fell']} walks that fell and on "
+                       f"{t['fell_without_real']} of the {t['walks'] - t['real_fell']} that did not with the "
                        f"inverse models of {', '.join(f'`{n}`' for n in names)} (leg joints "
-                       f"{statistics.median(r['q_rms_rad'] for r in rp):.3f} rad RMS from the real walk's, ungrounded "
-                       f"{statistics.median(r['q_rms_plain_rad'] for r in rp):.3f})")
+                       f"{t['q_rms_rad']:.3f} rad RMS from the real walk's, ungrounded {t['q_rms_plain_rad']:.3f})")
     return (" Teacher-forced along the same walks (each walk's recorded next states in place of the forward model, "
             "asked of the world's own inverse models at its α: a forward model exactly right for that walk; after "
             "the walk ends the sim runs ungrounded), the sim falls " + "; ".join(clauses) + ".")

@@ -342,6 +342,29 @@ class ActionTransformer:
         state = np.asarray(state, dtype=np.float64)
         return state + self._beta * (np.asarray(target, dtype=np.float64) - state)
 
+    def reach(self, hist: np.ndarray, step: np.ndarray, a: np.ndarray) -> np.ndarray:
+        """The grounded action that asks for a given state change: the members' inverse models'
+        answers to ``f_sim^-1(hist, step)`` averaged and blended with ``a`` at α (what
+        :meth:`transform` does with a forward model's Δŝ; :class:`TeacherForcedEnv` gives the
+        recorded one).
+
+        Args:
+            hist: state history (k*S,); step: the wanted change of the state from the sim's
+                current one, s_target − s_t (S,); a: the agent's grounded actions (A,).
+
+        Returns:
+            (A,), clipped to the action bounds.
+
+        Raises:
+            ValueError: an identity transformer (no inverse models).
+        """
+        if self.is_identity:
+            raise ValueError("an identity transformer has no inverse models to ask")
+        a = np.asarray(a, dtype=np.float64)
+        g = np.mean([inv.predict(np.concatenate([hist, step, a] if inv.command_input else [hist, step]))
+                     for inv in self.inverses], axis=0)
+        return self._blend(a, g)
+
     def _blend(self, a: np.ndarray, g: np.ndarray) -> np.ndarray:
         out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
         return np.clip(out, self.spec.action_low, self.spec.action_high)
@@ -630,12 +653,8 @@ class TeacherForcedEnv(GroundedEnv):
             raise ValueError(f"action must be finite with shape {self.env.action_space.shape}")
         if t + 1 >= len(self.reference):  # the recording is over: the sim's own dynamics
             return a
-        tr, spec = self.transformer, self.transformer.spec
-        hist = np.concatenate(list(self._hist))
-        ag = a[spec.action_index]
-        step = self.reference[t + 1] - self._hist[-1]
-        g = np.mean([inv.predict(np.concatenate([hist, step, ag] if inv.command_input else [hist, step]))
-                     for inv in tr.inverses], axis=0)
+        spec = self.transformer.spec
         applied = a.copy()
-        applied[spec.action_index] = tr._blend(ag, g)
+        applied[spec.action_index] = self.transformer.reach(np.concatenate(list(self._hist)), self.reference[t + 1]
+                                                            - self._hist[-1], a[spec.action_index])
         return applied
