@@ -53,8 +53,9 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--seconds", type=A.seconds, default=d.seconds, help=f"episode length [s] (default {d.seconds})")
     p.add_argument("--profile", default=d.profile, help=f"real-world effect profile: real, none, real-flat (real on flat ground) or real-ground (its uneven ground alone); default {d.profile}")
     p.add_argument("--identify-budget", type=A.real(0.0, 86400.0, unit='s'), default=d.identify_budget_s, metavar="SECONDS",
-                   help=f"time budget of each diagnosis of the identified worlds (default {d.identify_budget_s:g}; "
-                        "a world's stepping-log diagnosis gets it per 3 logs)")
+                   help=f"wall-clock time budget of each diagnosis of the identified worlds, a safety net: a budget "
+                        f"that binds makes them depend on the machine's speed (default {d.identify_budget_s:g}; a "
+                        "world's stepping-log diagnosis gets it per 3 logs)")
     p.add_argument("--seed", type=A.seed, default=d.seed, help="seed of the panel, trials and data draws (default 0)")
     p.add_argument("--out", type=A.out_dir, help="run directory (default runs/fidelity-seed<seed>)")
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")

@@ -7,10 +7,11 @@ normalized space CMA-ES searches, and any θ files given), this measures:
 * the **real fitness** of every gait over ``real_trials`` paired real trials (trial j of every gait
   runs on the same seed: the same terrain, effects and noise);
 * each **training world's** fitness for the same gaits (the mean over ``episodes`` episodes on seeds
-  shared by the gaits; one for the deterministic sim). Worlds that learn from real data are fitted
-  ``data_seeds`` times, each on an independent draw of that data, exactly as ``sgatwalk optimize``'s
-  first grounding step fits them (the same code, :func:`experiments.grounding.fit_nao_grounding`,
-  and settings: 4 real and 4 sim walks of θ0, α = 0.5, ...).
+  shared by the gaits; one for a deterministic world: the sim and GAT). Worlds that learn from real
+  data are fitted ``data_seeds`` times, each on an independent draw of that data, exactly as
+  ``sgatwalk optimize``'s first grounding step fits them (the same code,
+  :func:`experiments.grounding.fit_nao_grounding`, and settings: 4 real and 4 sim walks of θ0,
+  α = 0.5, ...).
 
 Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
 
@@ -36,7 +37,9 @@ model of the sim fitted on the sim walks), ``zero`` (0/1: linear models fitted f
 ``mixture`` (K: SGAT's forward model a mixture of K Gaussians, a mixture density network),
 ``memory`` (τ [s]: SGAT's sampling noise correlated over τ, an AR(1) process; 0: white),
 ``shadow`` (τ [s]: the forward model predicts from a shadow state that relaxes toward the sim's over
-τ, so a deviation the sim did not follow persists; 0: the paper),
+τ, so a deviation the sim did not follow persists; 0: the paper), ``dad`` (N: rounds of Data as
+Demonstrator for the forward model, fitted also on the states the grounded sim reaches when it replays
+the real walks' commands, labelled with the real next states; 0: the paper),
 ``hidden`` (e.g. ``128x128``; ``0``: linear models), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
@@ -145,6 +148,14 @@ class WorldSpec:
         return self.kind in ("identified", "hybrid")
 
     @property
+    def deterministic(self) -> bool:
+        """Whether every episode of a gait is the same whatever its seed, so one episode per gait is
+        the world's answer: the sim (MuJoCo is deterministic) and GAT on it (deterministic models, an
+        ensemble's members averaged: ``sgat.ActionTransformer.transform``). ``tests/test_fidelity.py``
+        checks it on episodes with different seeds."""
+        return self.kind in ("sim", "gat")
+
+    @property
     def per_draw(self) -> bool:
         """Fitted on real data: one world per draw of that data (the oracle: one set of fresh real
         seeds per draw)."""
@@ -181,7 +192,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
-                                                              "zero", "local"):
+                                                              "zero", "local", "dad"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
                 elif k == "method":
@@ -210,6 +221,8 @@ def parse_world(text: str) -> WorldSpec:
                     gkw["zero_init"] = bool(int(v))
                 elif k == "local":
                     gkw["local_inverse"] = bool(int(v))
+                elif k == "dad":
+                    gkw["dad_iterations"] = int(v)
                 elif k == "alpha":
                     gkw["alpha"] = float(v)
                 elif k == "ensemble":
@@ -286,7 +299,11 @@ class FidelityConfig:
     identify_fixed_logs: int = 3
     identify_floating_logs: int = 3
     identify_seconds: float = 6.0
-    identify_budget_s: float = 60.0
+    #: wall-clock time budget of each diagnosis [s], a safety net: a budget that binds makes the
+    #: identified worlds depend on the machine's speed (on a machine 1.4 times slower than the one of
+    #: the README's default run, one draw's fixed-base diagnosis ran out of 60 s). Not part of the run's
+    #: identity: a resumed run keeps the identifications it made.
+    identify_budget_s: float = 180.0
     bootstrap: int = 1000
     seed: int = 0
     robot: str = "nao"
@@ -350,6 +367,7 @@ class Fidelity:
 
     def __init__(self, cfg: FidelityConfig, run_dir: str, executor, *, log=None, progress: bool = False):
         self.cfg, self.run_dir, self.ex = cfg, run_dir, executor
+        self._queued_walks: dict[str, tuple[str, dict]] = {}  # path -> (tag, episode task) to record
         self.specs = cfg.validate()
         self.log = log or (lambda s: None)
         self.progress = progress
@@ -362,10 +380,10 @@ class Fidelity:
         self.log(f"[fidelity {time.perf_counter() - self.t0:7.1f} s] {msg}")
 
     def _check_config(self) -> None:
-        """Claim the run directory (``experiments.episodes.EpisodeLog``); more worlds or a new
-        bootstrap reuse what was measured."""
-        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "fidelity run", ignore=("worlds", "bootstrap"),
-                               say=self._say)
+        """Claim the run directory (``experiments.episodes.EpisodeLog``); more worlds, a new
+        bootstrap or another identification time budget reuse what was measured."""
+        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "fidelity run",
+                               ignore=("worlds", "bootstrap", "identify_budget_s"), say=self._say)
         self._episodes = self._log.done
 
     def _run(self, tasks: list[dict], desc: str) -> None:
@@ -404,22 +422,32 @@ class Fidelity:
         return [P.from_vector(u).to_array().tolist() for u in us]
 
     def _walks(self, world: str, seeds: list[int], tag: str, thetas: list, **kw) -> list[str]:
-        """Recordings in ``world`` on ``seeds`` under ``data/`` (cached), walk j with gait
-        ``thetas[j % len(thetas)]``; returns the paths."""
+        """The paths of the recordings in ``world`` on ``seeds`` under ``data/`` (cached), walk j
+        with gait ``thetas[j % len(thetas)]``; those not recorded yet are queued for
+        :meth:`_record_walks`, which records every queued walk in one go."""
+        paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
+        for j, (s, p) in enumerate(zip(seeds, paths)):
+            if not os.path.exists(p):
+                self._queued_walks.setdefault(p, (tag, {
+                    "world": world, "theta": thetas[j % len(thetas)], "seed": s, "seconds": self.cfg.seconds,
+                    "profile": self.cfg.profile, "record": True, **self.cfg.task_robot(), **kw}))
+        return paths
+
+    def _record_walks(self) -> None:
+        """Record the walks :meth:`_walks` queued, all worlds and draws in one map on the executor
+        (each walk carries its own seed: the same recordings as one world at a time)."""
         from envs import Recording  # lazy: loads the engines
         from experiments.batch import map_episodes  # lazy: loads the engines
 
-        paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
-        todo = [(j, s, p) for j, (s, p) in enumerate(zip(seeds, paths)) if not os.path.exists(p)]
-        if todo:
-            t0 = time.perf_counter()
-            self._say(f"recording {len(todo)} grounding walks in the {world} world ({tag})")
-            tasks = [{"world": world, "theta": thetas[j % len(thetas)], "seed": s, "seconds": self.cfg.seconds,
-                      "profile": self.cfg.profile, "record": True, **self.cfg.task_robot(), **kw} for j, s, _ in todo]
-            for (_, s, p), r in zip(todo, map_episodes(self.ex, tasks)):
-                Recording(*r["recording"]).to_parquet(p)
-            self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
-        return paths
+        todo, self._queued_walks = list(self._queued_walks.items()), {}
+        if not todo:
+            return
+        t0 = time.perf_counter()
+        tags = list(dict.fromkeys(tag for _, (tag, _) in todo))
+        self._say(f"recording {len(todo)} grounding walks ({', '.join(tags)})")
+        for (p, _), r in zip(todo, map_episodes(self.ex, [t for _, (_, t) in todo])):
+            Recording(*r["recording"]).to_parquet(p)
+        self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
 
     def _stepping(self, spec: WorldSpec) -> int:
         """Stepping logs of ``spec``'s identifications (its ``stepping`` option or the run's)."""
@@ -503,15 +531,19 @@ class Fidelity:
                     mdir = self._model_dir(s, d)
                     fits.append({"real": real, "sim": sim, "out": mdir, "config": s.grounding.to_dict(),
                                  "state": s.state, "history": s.history,
+                                 **({"identified": info["identified"], "identified_confounded": s.identified_confounded}
+                                    if s.kind == "hybrid" else {}),
                                  "seed": _seeds(cfg.seed, _FIT, d, n=1)[0] % 1_000_000, "world": s.name, "draw": d,
                                  **cfg.task_robot()})
                     info["transformer"] = mdir
                     info["real_paths"], info["data_gait"] = real, thetas[0]
-                    walks = [_rec_summary(p) for p in real]
-                    info["real_walks"] = len(real)
-                    info["real_seconds"] = float(sum(w[0] for w in walks))
-                    info["real_walk_falls"] = int(sum(w[1] for w in walks))
                 out[s.name][d] = info
+        self._record_walks()
+        for info in (i for per in out.values() for i in per.values() if i.get("real_paths")):
+            walks = [_rec_summary(p) for p in info["real_paths"]]
+            info["real_walks"] = len(walks)
+            info["real_seconds"] = float(sum(w[0] for w in walks))
+            info["real_walk_falls"] = int(sum(w[1] for w in walks))
         todo = [f for f in fits if not os.path.exists(os.path.join(f["out"], "transformer.json"))]
         if todo:
             t0 = time.perf_counter()
@@ -525,7 +557,7 @@ class Fidelity:
     # ---------------------------------------------------------------- episodes
     def _world_tasks(self, spec: WorldSpec, draw: int, info: dict, gaits: list[dict]) -> list[dict]:
         cfg = self.cfg
-        n = 1 if spec.kind == "sim" else cfg.episodes
+        n = 1 if spec.deterministic else cfg.episodes
         seeds = _seeds(cfg.seed, _WORLD, n=n)  # the same episode seeds for every world, draw and gait
         base = {"seconds": cfg.seconds, "profile": cfg.profile, **cfg.task_robot()}
         if spec.kind == "oracle":  # real episodes on seeds of their own, new for every draw
@@ -629,7 +661,7 @@ class Fidelity:
                "worlds": {}}
         for spec in self.specs:
             draws = []
-            n = 1 if spec.kind == "sim" else cfg.episodes
+            n = 1 if spec.deterministic else cfg.episodes
             for d in (range(cfg.data_seeds) if spec.per_draw else [0]):
                 pre = f"w|{spec.key}|d{d}"
                 W = self._matrix(pre, gaits, n, "fitness")

@@ -14,7 +14,8 @@ import dataclasses
 import functools
 
 from robots import get_robot
-from sgat.grounding import GroundingConfig, GroundingFit, fit_grounding, recording_transitions
+from sgat.grounding import (GroundingConfig, GroundingFit, Transitions, dad_transitions, fit_grounding,
+                           recording_transitions)
 from sgat.transformer import GroundingSpec
 
 #: Real walks of θ_i per grounding step, sim walks with exploration noise, and that noise [rad]
@@ -93,7 +94,7 @@ def nao_spec(state: str = "legs", history: int = 1, robot: str = "nao") -> Groun
 
 
 def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str = "legs", history: int = 1,
-                      seed: int = 0, robot: str = "nao") -> GroundingFit:
+                      seed: int = 0, robot: str = "nao", base_env=None) -> GroundingFit:
     """Fit the action transformer of a grounding step on NAO walk recordings.
 
     Args:
@@ -103,14 +104,35 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
         cfg: the model settings; ``state``/``history``: the grounding state (:func:`nao_spec`).
         robot: the robot the recordings are of (``robots.get_robot`` name; default the NAO).
         seed: seed of the fits.
+        base_env: the sim the transformer grounds (an ``envs`` world of ``robot``), needed when
+            ``cfg.dad_iterations`` > 0: each round the grounded sim replays every real walk's
+            commands from its seed (``envs.rollout.CommandLog``), the states it reaches become forward
+            model rows labelled with the real walk's next states
+            (:func:`sgat.grounding.dad_transitions`; Data as Demonstrator, Venkatraman et al., AAAI
+            2015), and the forward models are refitted on the real rows and every round's DAD rows.
 
     Raises:
-        KeyError: a recording lacks an observation column. ValueError: unusable data.
+        KeyError: a recording lacks an observation column. ValueError: unusable data, or DAD rounds
+            without ``base_env``.
     """
     from envs import ObservationLayout  # lazy: loads the engines
 
+    if cfg.dad_iterations and base_env is None:
+        raise ValueError("dad_iterations > 0 needs the sim the transformer grounds (base_env)")
     spec = nao_spec(state, history, robot)
     layout = ObservationLayout(get_robot(robot))
     c = int(cfg.command_history)
-    return fit_grounding(recording_transitions(real_recs, layout, spec, c), recording_transitions(sim_recs, layout, spec, c),
-                         spec, cfg, seed=seed)
+    real = recording_transitions(real_recs, layout, spec, c)
+    sim = recording_transitions(sim_recs, layout, spec, c)
+    fit = fit_grounding(real, sim, spec, cfg, seed=seed)
+    extra = []
+    for _ in range(int(cfg.dad_iterations)):
+        from envs.rollout import CommandLog, rollout  # lazy: loads the engines
+        from sgat.transformer import GroundedEnv  # lazy: sgat loads torch
+
+        env = GroundedEnv(base_env, fit.transformer)
+        replays = [rollout(env, CommandLog(r.group("cmd")), seed=int(r.meta.get("seed", 0)),
+                           seconds=len(r) * float(r.meta["control_dt"])) for r in real_recs]
+        extra.append(dad_transitions(replays, real_recs, layout, spec, c))
+        fit = fit_grounding(real, sim, spec, cfg, seed=seed, forward_extra=Transitions.concat(extra), previous=fit)
+    return fit

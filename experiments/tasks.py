@@ -130,7 +130,9 @@ def fit_grounding_task(task: dict) -> dict:
 
     Task keys: ``real``, ``sim`` (lists of recording paths), ``config`` (a
     :class:`sgat.grounding.GroundingConfig` as a dict), ``seed``, ``out`` (directory to save to),
-    optional ``state``/``history`` (the grounding state).
+    optional ``state``/``history`` (the grounding state), ``robot``, and ``identified`` /
+    ``identified_confounded`` (hybrid grounding: the identified sim is the one grounded, which DAD
+    rounds replay in).
 
     Returns:
         ``{"out", "forward_val", "inverse_val", "n_real", "n_sim", "wall_s"}``.
@@ -142,10 +144,15 @@ def fit_grounding_task(task: dict) -> dict:
     t0 = time.perf_counter()
     cfg = dict(task["config"])
     cfg["hidden"] = tuple(cfg["hidden"])
+    config = GroundingConfig(**cfg)
+    base = None
+    if config.dad_iterations:  # the sim the transformer grounds: the identified one for hybrid grounding
+        base = _world({"world": "identified" if task.get("identified") else "sim", "seed": 0,
+                       **{k: task[k] for k in ("identified", "identified_confounded", "robot") if k in task}})
     fit = fit_nao_grounding([Recording.from_parquet(p) for p in task["real"]],
-                            [Recording.from_parquet(p) for p in task["sim"]], GroundingConfig(**cfg),
+                            [Recording.from_parquet(p) for p in task["sim"]], config,
                             state=task.get("state", "legs"), history=int(task.get("history", 1)), seed=int(task["seed"]),
-                            robot=task.get("robot", "nao"))
+                            robot=task.get("robot", "nao"), base_env=base)
     fit.transformer.save(task["out"])
     return {"out": task["out"], "forward_val": float(np.mean([r.val_loss for r in fit.forward_reports])),
             "inverse_val": float(np.mean([r.val_loss for r in fit.inverse_reports])), "n_real": fit.info["n_real"],

@@ -110,6 +110,42 @@ def recording_transitions(recs, layout, spec: GroundingSpec, past: int = 0) -> T
     return Transitions.concat(parts)
 
 
+def dad_transitions(replays, real_recs, layout, spec: GroundingSpec, past: int = 0) -> Transitions:
+    """Data-as-Demonstrator transitions (Venkatraman et al., AAAI 2015, Algorithm 1) of the forward model.
+
+    ``replays[i]`` is the grounded sim driven by the commands of the real walk ``real_recs[i]`` from
+    the same start (``envs.rollout.CommandLog``). Row t pairs the grounded sim's state history at t
+    and the real walk's action at t (applied ``app``, else ``cmd``; as :func:`recording_transitions`)
+    with the change that would bring the sim's state to the real walk's next state,
+    s^real_{t+1} − s̃_t: where the grounded sim has drifted from the real walk, the target leads back
+    to it. Each pair of recordings gives min(len) − 1 rows (whichever ended first, by a fall or its
+    length, ends them); ``past``: earlier real actions per row (:func:`stack_past`).
+
+    Returns:
+        :class:`Transitions` H (N, k*S), A and C (N, A), dS (N, S), P (N, past*A) or None.
+
+    Raises:
+        ValueError: different numbers of replays and real walks, or no pair with 2 common rows.
+        KeyError: a recording lacks an observation column.
+    """
+    if len(replays) != len(real_recs):
+        raise ValueError(f"{len(replays)} replays for {len(real_recs)} real walks")
+    parts = []
+    for rep, real in zip(replays, real_recs):
+        n = min(len(rep), len(real))
+        if n < 2:
+            continue
+        S_sim = spec.states(recording_observations(rep, layout))[:n]
+        S_real = spec.states(recording_observations(real, layout))[:n]
+        A = np.asarray(real.group("app"), dtype=np.float64)[:n][:, spec.action_index]
+        C = np.asarray(real.group("cmd"), dtype=np.float64)[:n][:, spec.action_index]
+        P = stack_past(A, int(past))[:-1] if past else None
+        parts.append(Transitions(spec.stack_history(S_sim)[:-1], A[:-1], S_real[1:] - S_sim[:-1], C[:-1], P))
+    if not parts:
+        raise ValueError("no replay and real walk share 2 steps: no DAD transitions")
+    return Transitions.concat(parts)
+
+
 @dataclass(frozen=True)
 class GroundingConfig:
     """How a grounding step fits its action transformer.
@@ -155,6 +191,14 @@ class GroundingConfig:
             policy (the command from the whole body's phase) and pulls other gaits toward it.
         zero_init: linear models start from zero weights (:meth:`sgat.models._Model.fit`
             ``zero_init``), not PyTorch's random ones.
+        dad_iterations: rounds of Data as Demonstrator (Venkatraman, Hebert and Bagnell, "Improving
+            multi-step prediction of learned time series models", AAAI 2015, Algorithm 1) for the
+            forward model: the grounded sim replays each real walk's commands, and the states it
+            visits, labelled with the real walk's next states (:func:`dad_transitions`), join the
+            forward model's training data; the forward models are refitted, the inverse models kept
+            (:func:`experiments.grounding.fit_nao_grounding`). A one-step forward model is fitted on
+            real states only, but in the grounded sim it predicts from the states the grounded sim
+            reaches; DAD teaches it where the real robot went from those. 0: the paper.
         max_epochs, lr, patience, batch_size: training of each model (Adam, mini-batches, early
             stopping after ``patience`` epochs without a better validation loss).
     """
@@ -172,6 +216,7 @@ class GroundingConfig:
     matched: bool = False
     zero_init: bool = False
     local_inverse: bool = False
+    dad_iterations: int = 0
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -194,6 +239,8 @@ class GroundingConfig:
             raise ValueError("shadow_memory works with the paper's transformer only (not matched or residual_noise)")
         if int(self.command_history) < 0:
             raise ValueError(f"command_history must be >= 0, got {self.command_history}")
+        if int(self.dad_iterations) < 0:
+            raise ValueError(f"dad_iterations must be >= 0, got {self.dad_iterations}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
         if self.local_inverse and self.hidden:
             raise ValueError(f"local_inverse needs linear models (hidden=()), got hidden={self.hidden}")
@@ -203,7 +250,7 @@ class GroundingConfig:
         d["hidden"] = list(self.hidden)
         # settings added later are left out at their defaults, so saved configs and caches still match
         for k, default in (("components", 1), ("noise_memory", 0.0), ("shadow_memory", 0.0), ("command_history", 0),
-                           ("matched", False), ("zero_init", False), ("local_inverse", False)):
+                           ("matched", False), ("zero_init", False), ("local_inverse", False), ("dad_iterations", 0)):
             if d[k] == default:
                 d.pop(k)
         return d
@@ -266,7 +313,8 @@ def local_inverse_mask(spec: GroundingSpec, *, command_input: bool = False) -> n
 
 
 def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg: GroundingConfig, *,
-                  seed: int = 0) -> GroundingFit:
+                  seed: int = 0, forward_extra: Transitions | None = None,
+                  previous: GroundingFit | None = None) -> GroundingFit:
     """Fit ``f_real`` on ``real`` and ``f_sim^-1`` on ``sim`` (per ensemble member) and build the
     transformer (Algorithm 1, lines "update f_real, f_sim^-1").
 
@@ -276,6 +324,10 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
 
     With ``cfg.command_history`` c > 0 both ``real`` and ``sim`` must hold c past actions per
     transition (``recording_transitions(..., past=c)``).
+
+    ``forward_extra``: more training rows of the forward models (:func:`dad_transitions`), stacked
+    under ``real`` before the bootstrap resampling. ``previous``: a fit of the same data whose
+    inverse models (and sim models) are kept: only the forward models are fitted again.
 
     Raises:
         ValueError: unusable data (see :meth:`sgat.models._Model.fit`), or transitions without the
@@ -288,7 +340,10 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
                          f"past actions (real) and {sim.past_commands} (sim): build them with past={c}")
     kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size,
           "zero_init": cfg.zero_init}
-    Xf, Yf = real.forward_input(), real.dS
+    if forward_extra is not None and forward_extra.past_commands != c:
+        raise ValueError(f"the forward_extra transitions hold {forward_extra.past_commands} past actions, the config {c}")
+    fwd_rows = real if forward_extra is None else Transitions.concat([real, forward_extra])
+    Xf, Yf = fwd_rows.forward_input(), fwd_rows.dS
     inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
     Xs = sim.forward_input()  # the sim's own forward model: applied actions in, its spread out
@@ -302,9 +357,11 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
         fwd = ForwardModel(S, A, history=k, stochastic=sgat, hidden=cfg.hidden,
                            components=int(cfg.components) if sgat else 1, commands=c)
         rf.append(fwd.fit(Xf[fi], Yf[fi], seed=s, **kw))
+        fwds.append(fwd)
+        if previous is not None:  # the inverse (and sim) models stay
+            continue
         inv = InverseModel(S, A, history=k, hidden=cfg.hidden, command_input=cfg.inverse_command)
         ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, input_mask=mask, **kw))
-        fwds.append(fwd)
         invs.append(inv)
         if cfg.residual_noise and cfg.method == "sgat":
             fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden, commands=c)
@@ -314,9 +371,17 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
             fm = ForwardModel(S, A, history=k, stochastic=False, hidden=cfg.hidden, commands=c)
             fm.fit(Xs[ii], sim.dS[ii], seed=s + 3, **kw)
             means.append(fm)
+    if previous is not None:
+        if previous.transformer.n_members != len(fwds):
+            raise ValueError(f"previous fit has {previous.transformer.n_members} members, the config {len(fwds)}")
+        old = previous.transformer
+        invs, sims, means, ri = old.inverses, old.sim_forwards, old.sim_means, previous.inverse_reports
     tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None,
                            noise_memory=cfg.noise_memory, sim_mean=means or None, shadow_memory=cfg.shadow_memory)
-    return GroundingFit(tr, rf, ri, {"n_real": len(real), "n_sim": len(sim)})
+    info = {"n_real": len(real), "n_sim": len(sim)}
+    if forward_extra is not None:
+        info["n_forward_extra"] = len(forward_extra)
+    return GroundingFit(tr, rf, ri, info)
 
 
 def fit_transformer(real: Transitions, sim: Transitions, spec: GroundingSpec, *, method: str = "sgat",

@@ -37,6 +37,8 @@ def test_parse_world_options():
     lm = parse_world("sgat:local=1:matched=1:zero=1").grounding
     assert lm.local_inverse and lm.matched and lm.zero_init and not parse_world("sgat").grounding.local_inverse
     assert parse_world("sgat:local=0").key == parse_world("sgat").key != parse_world("sgat:local=1").key
+    assert parse_world("sgat:dad=2").grounding.dad_iterations == 2 and parse_world("hybrid:dad=1").grounding.dad_iterations == 1
+    assert parse_world("sgat:dad=0").key == parse_world("sgat").key != parse_world("sgat:dad=1").key
     assert parse_world("identified:stepping=9").stepping_logs == 9 and parse_world("hybrid:stepping=6").stepping_logs == 6
     assert parse_world("identified").key != parse_world("identified:stepping=9").key != parse_world("identified:stepping=6").key
     assert not parse_world("hybrid:confounded=0").identified_confounded and parse_world("identified").identified_confounded
@@ -47,7 +49,8 @@ def test_parse_world_options():
                        ("identified:alpha=1", "unknown option"), ("sgat:mixture=0", "components"),
                        ("sgat:memory=-1", "noise_memory"), ("ane:mixture=2", "unknown option"), ("sgat:hidden=0x16", "hidden"),
                        ("sgat:local=1:hidden=64x64", "linear models"), ("identified:stepping=-1", "stepping"),
-                       ("sgat:stepping=9", "unknown option"), ("identified:stepping=x", "bad value")]:
+                       ("sgat:stepping=9", "unknown option"), ("identified:stepping=x", "bad value"),
+                       ("sgat:dad=-1", "dad_iterations"), ("identified:dad=1", "unknown option")]:
         with pytest.raises(ValueError, match=words):
             parse_world(bad)
     with pytest.raises(ValueError, match="repeats"):
@@ -110,6 +113,17 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert 0 <= res["worlds"]["sgat"]["draws"][0]["real_walk_falls"] <= 4
     assert res["worlds"]["sgat"]["data_gaits"] == 1 and res["worlds"]["sim"]["data_gaits"] is None
     assert res["worlds"]["sim"]["draws"][0]["world_ceiling"] is None  # one deterministic episode
+    # GAT is deterministic (its members averaged), so one episode per gait is its answer; SGAT samples
+    from experiments.tasks import run_episode
+
+    assert res["worlds"]["gat"]["episodes"] == 1 and res["worlds"]["sgat"]["episodes"] == 2
+    assert res["worlds"]["gat"]["draws"][0]["world_ceiling"] is None
+    panel = json.loads((out / "panel.json").read_text())["gaits"]
+    for name, same in (("gat", True), ("sgat", False)):
+        task = {"world": "grounded", "transformer": str(out / "models" / f"{parse_world(name).key}_d0"),
+                "theta": panel[0]["theta"], "seconds": 1.5}
+        a, b = (run_episode({**task, "seed": s}) for s in (1, 2))
+        assert (a["distance_m"] == b["distance_m"]) is same, (name, a["distance_m"], b["distance_m"])
     # teacher forcing along each draw's grounding walks pulls the sim's legs toward the real ones
     for name in ("sgat", "gat"):
         for d in res["worlds"][name]["draws"]:
@@ -130,9 +144,11 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert len((out / "episodes.jsonl").read_text().splitlines()) == n_lines + 3 * 2
     assert res2["worlds"]["sgat"] == res["worlds"]["sgat"]
     assert res2["wall_s"] > res["wall_s"] > 0  # the run's time accumulates over its invocations (timing.json)
-    # other settings in the same directory are refused
+    # other settings in the same directory are refused; another identification time budget is not
     assert main(["fidelity", *TINY[:-2], "--real-trials", "3", "--workers", "1", "--out", str(out)]) == 2
     assert "other settings" in capsys.readouterr().err
+    assert main([*args[:-5], "--worlds", "sim", "--identify-budget", "30", "--out", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["worlds"]["sim"] == res["worlds"]["sim"]
 
 
 def test_params_with_one_file_name_stay_apart(tmp_path, capsys):
