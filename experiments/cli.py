@@ -80,12 +80,37 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def limit_blas_threads() -> int:
+    """Run the BLAS and OpenMP pools loaded in this process with ``OMP_NUM_THREADS`` threads (1 unless
+    set; ``threadpoolctl.threadpool_limits``), and those loaded later too (the variable is set).
+
+    The sgatwalk command runs its numerical work in process-pool workers of one thread each, and the
+    rounding of a threaded BLAS reduction depends on its thread count: the engine-gap calibration
+    computed with numpy's two OpenBLAS threads differs from the one-thread result in the 12th digit, and
+    the identified worlds built on it walk differently on random ground. The variable alone does not
+    reach a BLAS already loaded (an entry point that imported numpy before :func:`main`).
+
+    Returns:
+        The thread count applied.
+    """
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        n = max(1, int(os.environ["OMP_NUM_THREADS"]))
+    except ValueError:  # e.g. a nested "4,2": leave the pools as they are
+        return 0
+    from threadpoolctl import threadpool_limits  # lazy: inspects the libraries loaded so far
+
+    threadpool_limits(limits=n)
+    return n
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     for stream in (sys.stdout, sys.stderr):  # lines reach a pipe or file as they are printed
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(line_buffering=True)
-    parser = build_parser()
+    parser = build_parser()  # imports numpy: its BLAS is loaded now
+    limit_blas_threads()
     try:  # ranges and paths are checked here (experiments.argtypes): one line, exit 2
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a bad option (2, already printed)

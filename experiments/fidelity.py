@@ -81,7 +81,8 @@ from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
 from experiments.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
-from experiments.identify import calibrate_engines, identify_real
+from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, identify_real,
+                                  record_excitation_task)
 from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
 from experiments.tasks import fit_grounding_task
 from sgat.grounding import GroundingConfig
@@ -91,7 +92,9 @@ from walk_engine import params_for
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
-#: Purposes of the seed streams (the first key after the run seed).
+#: Purposes of the seed streams (the first key after the run seed). ``_CAL`` drew the engine-gap
+#: calibration's seed until that became one constant (``experiments.identify.ENGINE_GAP_SEED``, seed
+#: 0's draw); it keeps its place so the streams after it keep their values.
 _PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS, _ORACLE = range(11, 21)
 
 
@@ -453,20 +456,44 @@ class Fidelity:
         """Stepping logs of ``spec``'s identifications (its ``stepping`` option or the run's)."""
         return self.cfg.identify_floating_logs if spec.stepping_logs is None else spec.stepping_logs
 
+    def _identify_args(self, draw: int, stepping: int) -> dict:
+        """Where and from what draw ``draw``'s identification with ``stepping`` stepping logs records
+        (the arguments :func:`identify_real` and :func:`excitation_tasks` share): every count shares
+        the draw's fixed-base stage (the same logs in the air), so only the stepping stage differs."""
+        cfg = self.cfg
+        root = os.path.join(self.run_dir, "identified", f"d{draw}")
+        return {"out_dir": root if stepping == cfg.identify_floating_logs else f"{root}_stepping{stepping}",
+                "seed": _seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, "profile": cfg.profile,
+                "n_fixed": cfg.identify_fixed_logs, "n_floating": stepping, "seconds": cfg.identify_seconds,
+                "fixed_dir": os.path.join(root, "fixed")}
+
     def _identify(self, draw: int, stepping: int) -> dict:
-        """Draw ``draw``'s identification from ``stepping`` stepping logs; every count shares the
-        draw's fixed-base stage (the same logs in the air), so only the stepping stage differs. The
+        """Draw ``draw``'s identification from ``stepping`` stepping logs (:meth:`_identify_args`). The
         stepping diagnosis's time budget grows with its logs (``--identify-budget`` per 3 logs):
         with the budget of 3 logs, 2 of 3 diagnoses of 9 logs ran out before the uneven-ground stage
         and left the ground out."""
         cfg = self.cfg
-        root = os.path.join(self.run_dir, "identified", f"d{draw}")
-        out = root if stepping == cfg.identify_floating_logs else f"{root}_stepping{stepping}"
-        return identify_real(out, seed=_seeds(cfg.seed, _IDENT, draw, n=1)[0] % 1_000_000, profile=cfg.profile,
-                             calibration=self._calibration, n_fixed=cfg.identify_fixed_logs, n_floating=stepping,
-                             seconds=cfg.identify_seconds, time_budget_s=cfg.identify_budget_s,
+        return identify_real(**self._identify_args(draw, stepping), calibration=self._calibration,
+                             time_budget_s=cfg.identify_budget_s,
                              stepping_budget_s=cfg.identify_budget_s * max(1.0, stepping / max(1, cfg.identify_floating_logs)),
-                             fixed_dir=os.path.join(root, "fixed"), progress=None)
+                             progress=None)
+
+    def _record_excitation(self, counts: list[int]) -> None:
+        """Record the excitation logs of every identification still to be made side by side on the
+        executor (one recording per core; the diagnoses that follow keep the cores busy themselves)."""
+        todo, seen = [], set()
+        for d in range(self.cfg.data_seeds):
+            for n in counts:
+                for t in excitation_tasks(**self._identify_args(d, n)):
+                    if t["out_dir"] not in seen:  # the counts share the fixed-base stage
+                        seen.add(t["out_dir"])
+                        todo.append(t)
+        if not todo:
+            return
+        t0 = time.perf_counter()
+        self._say(f"recording {len(todo)} sets of excitation logs ({sum(t['n_logs'] for t in todo)} logs)")
+        list(self.ex.map(record_excitation_task, todo))
+        self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
 
     def _model_dir(self, spec: WorldSpec, draw: int) -> str:
         return os.path.join(self.run_dir, "models", f"{spec.key}_d{draw}")
@@ -485,10 +512,12 @@ class Fidelity:
         self._calibration = None
         if counts:
             t0 = time.perf_counter()
+            # one constant of the testbed, whatever the run's seed (seed 0's runs always had it); the
+            # package ships it for the pinned engines, so a run copies it
             self._calibration = calibrate_engines(os.path.join(self.run_dir, "identified", "calibration"),
-                                                  seed=_seeds(cfg.seed, _CAL, n=1)[0] % 1_000_000,
-                                                  floating=max(counts) > 0)
+                                                  seed=ENGINE_GAP_SEED, floating=max(counts) > 0)
             self._say(f"engine-gap calibration ready ({time.perf_counter() - t0:.0f} s)")
+            self._record_excitation(counts)
             t0 = time.perf_counter()
             for d in range(cfg.data_seeds):  # the diagnosis runs its replays on every core itself
                 for n in counts:

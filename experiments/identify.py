@@ -5,7 +5,8 @@ What a user does with the robot (``sgatwalk excite`` + ``sgatwalk diagnose``), i
 1. **Engine-gap calibration** (:func:`calibrate_engines`, once): excitation logs of the real world
    without effects (profile "none"), fixed and floating base; the diagnosis's ``--calibrate``. It
    measures the PyBullet-MuJoCo gap of this testbed, not the robot, so it does not count as real
-   data of the robot.
+   data of the robot; and it is the same for every run, so the package ships it for the pinned
+   engines (:data:`ENGINE_GAP_DIR`) and a run only copies it.
    Floating-base logs are replayed from the simulated world's ground-truth base state
    (:data:`USE_GROUND_TRUTH`, which says why).
 2. **Actuators in the air** (:func:`identify_real`): ``n_fixed`` fixed-base excitation logs of the
@@ -23,9 +24,12 @@ ground roughness) and averages what varies.
 
 from __future__ import annotations
 
+import hashlib
+import importlib.metadata
 import json
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -77,13 +81,61 @@ def _record(out_dir: str, *, fixed_base: bool, profile, n_logs: int, seconds: fl
         env.close()
 
 
-def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds: float = 6.0,
-                      floating: bool = True) -> dict:
+#: Seed of the engine-gap calibration's excitation logs. The calibration measures the PyBullet-MuJoCo
+#: gap of the testbed with no effects injected, nothing of the robot or its ground, so it is one
+#: constant of the testbed and not drawn per run: this is the seed the default ``sgatwalk fidelity``
+#: run's calibration was recorded with.
+ENGINE_GAP_SEED = 510019
+#: Folder of the engine-gap calibrations that ship with the package (``fixed.json``, ``floating.json``;
+#: ``python -m experiments.identify --engine-gap`` writes them): the floating-base one is a whole
+#: diagnosis of stepping logs, about two minutes on two cores.
+ENGINE_GAP_DIR = Path(__file__).with_name("engine_gap")
+
+
+def engine_gap_key(kind: str, *, seed: int, n_logs: int, seconds: float) -> dict:
+    """What an engine-gap calibration depends on besides the code: its logs (base kind, seed, count,
+    length), the replays' base state (:data:`USE_GROUND_TRUTH`), both engines' versions and the robot
+    model (SHA-256 of the NAO's URDF text, from which both worlds are built). A shipped calibration is
+    used only where every field matches.
+
+    Raises:
+        ValueError: ``kind`` is not "fixed" or "floating".
+    """
+    import mujoco  # lazy: loads the engine
+
+    from robots import get_robot
+
+    if kind not in ("fixed", "floating"):
+        raise ValueError(f"calibration kind must be 'fixed' or 'floating', got {kind!r}")
+    return {"kind": kind, "seed": int(seed), "n_logs": int(n_logs), "seconds": float(seconds),
+            "use_ground_truth": USE_GROUND_TRUTH, "mujoco": mujoco.__version__,
+            "pybullet": importlib.metadata.version("pybullet"),
+            "robot_urdf_sha256": hashlib.sha256(get_robot("nao").urdf().encode()).hexdigest()}
+
+
+def shipped_calibration(kind: str, *, seed: int, n_logs: int, seconds: float) -> dict | None:
+    """The package's engine-gap calibration of ``kind`` (:data:`ENGINE_GAP_DIR`) if it was computed for
+    exactly these logs, engines and robot (:func:`engine_gap_key`), else None."""
+    path = ENGINE_GAP_DIR / f"{kind}.json"
+    if not path.exists():
+        return None
+    with open(path) as f:
+        doc = json.load(f)
+    if doc.get("key") != engine_gap_key(kind, seed=seed, n_logs=n_logs, seconds=seconds):
+        return None
+    return doc["calibration"]
+
+
+def calibrate_engines(out_dir: str, *, seed: int = ENGINE_GAP_SEED, n_logs: int = 4, seconds: float = 6.0,
+                      floating: bool = True, use_shipped: bool = True) -> dict:
     """Engine-gap calibrations (``sgatwalk diagnose --calibrate``) from "none" logs of the real world.
 
+    A calibration already in ``out_dir`` is reused; else the package's own (:func:`shipped_calibration`,
+    when ``use_shipped`` and it was computed for these logs, engines and robot) is copied there; else
+    the logs are recorded and calibrated.
+
     Returns:
-        ``{"fixed": path, "floating": path or None}`` of the ``calibration.json`` files (reused when
-        present).
+        ``{"fixed": path, "floating": path or None}`` of the ``calibration.json`` files.
     """
     from sysid.data import load_logs  # lazy: loads the engines
     from sysid.diagnose import calibrate  # lazy: loads the engines and scipy
@@ -92,14 +144,78 @@ def calibrate_engines(out_dir: str, *, seed: int = 100, n_logs: int = 4, seconds
     for kind in ("fixed", "floating") if floating else ("fixed",):
         path = os.path.join(out_dir, kind, "calibration.json")
         if not os.path.exists(path):
-            logs_dir = os.path.join(out_dir, kind, "logs")
-            paths = _record(logs_dir, fixed_base=(kind == "fixed"), profile="none", n_logs=n_logs, seconds=seconds,
-                            seed=seed)
-            cal = calibrate(load_logs(paths, use_ground_truth=USE_GROUND_TRUTH), use_ground_truth=USE_GROUND_TRUTH)
-            atomic_write_text(path, json.dumps(jsonable(cal), indent=1))
+            cal = shipped_calibration(kind, seed=seed, n_logs=n_logs, seconds=seconds) if use_shipped else None
+            if cal is None:
+                logs_dir = os.path.join(out_dir, kind, "logs")
+                paths = _record(logs_dir, fixed_base=(kind == "fixed"), profile="none", n_logs=n_logs,
+                                seconds=seconds, seed=seed)
+                cal = jsonable(calibrate(load_logs(paths, use_ground_truth=USE_GROUND_TRUTH),
+                                         use_ground_truth=USE_GROUND_TRUTH))
+            atomic_write_text(path, json.dumps(cal, indent=1))
         out[kind] = path
     out.setdefault("floating", None)
     return out
+
+
+def write_engine_gap(out_dir: str | os.PathLike = ENGINE_GAP_DIR, *, work_dir: str | None = None) -> dict:
+    """Compute the engine-gap calibrations of :data:`ENGINE_GAP_SEED` (4 logs of 6 s, fixed and floating
+    base) from fresh recordings and write them with their :func:`engine_gap_key` to ``out_dir``
+    (default: the package's :data:`ENGINE_GAP_DIR`). Returns ``{kind: written path}``."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = calibrate_engines(work_dir or tmp, use_shipped=False)
+        written = {}
+        for kind, p in paths.items():
+            with open(p) as f:
+                cal = json.load(f)
+            doc = {"key": engine_gap_key(kind, seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0), "calibration": cal}
+            dest = os.path.join(out_dir, f"{kind}.json")
+            os.makedirs(out_dir, exist_ok=True)
+            atomic_write_text(dest, json.dumps(doc, indent=1) + "\n")
+            written[kind] = dest
+    return written
+
+
+def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, seconds: float,
+            fixed_dir: str | None) -> list[dict]:
+    """The recording task of each stage of :func:`identify_real` that has logs (fixed base first), with
+    its ``report`` path: ``{"kind", "report", "out_dir", "fixed_base", "profile", "n_logs", "seconds",
+    "seed", "lumpy"}``."""
+    out = []
+    for kind, n in (("fixed", n_fixed), ("floating", n_floating)):
+        if n <= 0:
+            continue
+        stage = fixed_dir if kind == "fixed" and fixed_dir else os.path.join(out_dir, kind)
+        out.append({"kind": kind, "report": os.path.join(stage, "report.json"), "out_dir": os.path.join(stage, "logs"),
+                    "fixed_base": kind == "fixed", "profile": profile, "n_logs": n, "seconds": seconds,
+                    "seed": seed + (0 if kind == "fixed" else 50), "lumpy": kind == "floating"})
+    return out
+
+
+def _recorded(task: dict) -> list[str] | None:
+    """The logs of a recording task if all of them are on disk (each is written atomically), else None."""
+    paths = [os.path.join(task["out_dir"], f"excite_{i:03d}.parquet") for i in range(task["n_logs"])]
+    return paths if all(os.path.exists(p) for p in paths) else None
+
+
+def record_excitation_task(task: dict) -> list[str]:
+    """Record one stage's excitation logs (a picklable executor task; a task of :func:`excitation_tasks`).
+    Returns the log paths."""
+    return _record(task["out_dir"], fixed_base=task["fixed_base"], profile=task["profile"], n_logs=task["n_logs"],
+                   seconds=task["seconds"], seed=task["seed"], lumpy=task["lumpy"])
+
+
+def excitation_tasks(out_dir: str, *, seed: int, profile="real", n_fixed: int = 3, n_floating: int = 3,
+                     seconds: float = 6.0, fixed_dir: str | None = None) -> list[dict]:
+    """The excitation recordings that :func:`identify_real` with these arguments still has to make
+    (stages without a report or a complete set of logs), as tasks of :func:`record_excitation_task`: a
+    caller with a process pool records every identification's logs side by side before the diagnoses
+    (each diagnosis keeps the cores busy itself; a recording runs on one). The logs are the same as
+    when :func:`identify_real` records them."""
+    return [st for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating,
+                                 seconds=seconds, fixed_dir=fixed_dir)
+            if not os.path.exists(st["report"]) and _recorded(st) is None]
 
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
@@ -139,15 +255,11 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
     say = progress or (lambda s: None)
     reports, n_logs, secs, budget_hit = [], 0, 0.0, []
     base = None
-    for kind, n in (("fixed", n_fixed), ("floating", n_floating)):
-        if n <= 0:
-            continue
-        stage = fixed_dir if kind == "fixed" and fixed_dir else os.path.join(out_dir, kind)
-        rep_path = os.path.join(stage, "report.json")
-        logs_dir = os.path.join(stage, "logs")
+    for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating, seconds=seconds,
+                      fixed_dir=fixed_dir):
+        kind, rep_path, logs_dir = st["kind"], st["report"], st["out_dir"]
         if not os.path.exists(rep_path):
-            paths = _record(logs_dir, fixed_base=(kind == "fixed"), profile=profile, n_logs=n, seconds=seconds,
-                            seed=seed + (0 if kind == "fixed" else 50), lumpy=(kind == "floating"))
+            paths = _recorded(st) or record_excitation_task(st)
             logs = load_logs(paths, use_ground_truth=USE_GROUND_TRUTH)
             cal = None
             if calibration and calibration.get(kind):
@@ -158,7 +270,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=budget,
                            families=fams,
                            progress=lambda s, k=kind: say(f"identify {kind}: {s}"), use_ground_truth=USE_GROUND_TRUTH)
-            write_report(rep, logs, stage, plots=False)
+            write_report(rep, logs, os.path.dirname(rep_path), plots=False)
         logs = load_logs(logs_dir)
         n_logs += len(logs)
         secs += sum(lg.seconds for lg in logs)
@@ -174,3 +286,17 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
     return {"reports": reports, "logs": n_logs, "seconds": secs,
             "effects": {t.label(): v for t, v in sorted(terms.items())}, "terrain_rms_height": rms,
             "time_budget_reached": budget_hit, "wall_s": time.perf_counter() - t0}
+
+
+if __name__ == "__main__":  # python -m experiments.identify --engine-gap
+    import argparse
+
+    ap = argparse.ArgumentParser(description="Write the engine-gap calibrations that ship with the package.")
+    ap.add_argument("--engine-gap", action="store_true", required=True,
+                    help=f"record and calibrate (about 2.5 min on 2 cores) and write {ENGINE_GAP_DIR}/{{fixed,floating}}.json")
+    ap.add_argument("--work-dir", help="keep the recordings here (default: a temporary folder)")
+    a = ap.parse_args()
+    from experiments.cli import limit_blas_threads
+
+    limit_blas_threads()  # the sgatwalk command's BLAS threads (1), on which the result's rounding depends
+    print(json.dumps(write_engine_gap(work_dir=a.work_dir)))

@@ -57,3 +57,28 @@ def test_json_output_is_reproducible_and_timings_are_opt_in(capsys):
     assert capsys.readouterr().out == first and "wall_s" not in first  # identical runs print identical JSON
     assert main([*argv, "--timings"]) == 0
     assert json.loads(capsys.readouterr().out)["wall_s"] > 0
+
+
+def test_the_command_runs_numpy_blas_with_omp_num_threads(monkeypatch):
+    """``sgatwalk`` limits the BLAS already loaded (numpy imported before ``main``, as
+    ``python -m experiments.readme run`` does) to ``OMP_NUM_THREADS`` (1 unless set): the rounding of
+    threaded reductions, and so the engine-gap calibration, depends on the thread count."""
+    import numpy as np
+    from threadpoolctl import threadpool_info
+
+    from experiments.cli import limit_blas_threads
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+
+    assert np.ones(2) @ np.ones(2) == 2.0  # numpy's BLAS is loaded
+    try:
+        monkeypatch.setenv("OMP_NUM_THREADS", "2")
+        assert limit_blas_threads() == 2 and blas_threads() == {2}
+        monkeypatch.setenv("OMP_NUM_THREADS", "4,2")  # nested OpenMP settings: left as they are
+        assert limit_blas_threads() == 0 and blas_threads() == {2}
+        monkeypatch.delenv("OMP_NUM_THREADS")
+        assert limit_blas_threads() == 1 and blas_threads() == {1}
+    finally:
+        monkeypatch.setenv("OMP_NUM_THREADS", "1")
+        limit_blas_threads()

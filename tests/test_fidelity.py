@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
+from experiments.executors import SerialExecutor
 from experiments.fidelity import FidelityConfig, parse_world
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -79,11 +80,19 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
                 "seconds": 6.0 * (n_fixed + n_floating), "effects": {"ground_compliance": 0.03, "latency": 0.02},
                 "terrain_rms_height": 0.002 + 0.0001 * n_floating, "wall_s": 0.0}
 
+    recorded = []
     monkeypatch.setattr(fid, "identify_real", fake_identify)
+    monkeypatch.setattr(fid, "record_excitation_task", lambda t: recorded.append(t) or [])
     monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
     run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9", "identified:confounded=0"),
-                                      data_seeds=2), str(tmp_path), executor=None)
+                                      data_seeds=2), str(tmp_path), executor=SerialExecutor())
     prep = run.prepare()
+    # every excitation log set is recorded before the diagnoses, side by side on the executor: each
+    # draw's fixed-base stage once (the counts share it), a stepping stage per draw and count
+    rec = sorted((os.path.relpath(t["out_dir"], tmp_path), t["n_logs"], t["fixed_base"]) for t in recorded)
+    assert rec == sorted([(f"identified/d{d}/fixed/logs", 3, True) for d in (0, 1)]
+                         + [(f"identified/d{d}/floating/logs", 3, False) for d in (0, 1)]
+                         + [(f"identified/d{d}_stepping9/floating/logs", 9, False) for d in (0, 1)])
     by_dir = {c[0]: c for c in calls}
     assert sorted(by_dir) == ["identified/d0", "identified/d0_stepping9", "identified/d1", "identified/d1_stepping9"]
     for d in (0, 1):
