@@ -92,11 +92,29 @@ ENGINE_GAP_SEED = 510019
 ENGINE_GAP_DIR = Path(__file__).with_name("engine_gap")
 
 
+#: The code an engine-gap calibration runs (recording in both worlds, the diagnosis): a change in any
+#: of these files makes the shipped calibration stale (:func:`engine_gap_key`).
+_ENGINE_GAP_CODE = ("common", "robots", "terrain", "envs", "sysid", "experiments/identify.py")
+
+
+def _code_sha256() -> str:
+    """SHA-256 over the Python files of :data:`_ENGINE_GAP_CODE` (relative paths and contents)."""
+    root = Path(__file__).resolve().parent.parent
+    h = hashlib.sha256()
+    for entry in _ENGINE_GAP_CODE:
+        p = root / entry
+        for f in sorted(p.rglob("*.py")) if p.is_dir() else [p]:
+            h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
+
+
 def engine_gap_key(kind: str, *, seed: int, n_logs: int, seconds: float) -> dict:
-    """What an engine-gap calibration depends on besides the code: its logs (base kind, seed, count,
-    length), the replays' base state (:data:`USE_GROUND_TRUTH`), both engines' versions and the robot
-    model (SHA-256 of the NAO's URDF text, from which both worlds are built). A shipped calibration is
-    used only where every field matches.
+    """What an engine-gap calibration depends on: its logs (base kind, seed, count, length), the
+    replays' base state (:data:`USE_GROUND_TRUTH`), both engines' versions, the robot model (SHA-256 of
+    the NAO's URDF text, from which both worlds are built) and the code that records and diagnoses
+    (SHA-256 of :data:`_ENGINE_GAP_CODE`). A shipped calibration is used only where every field
+    matches; ``tests/test_identify_real.py`` fails when it is stale (regenerate it with
+    ``python -m experiments.identify --engine-gap``).
 
     Raises:
         ValueError: ``kind`` is not "fixed" or "floating".
@@ -110,7 +128,8 @@ def engine_gap_key(kind: str, *, seed: int, n_logs: int, seconds: float) -> dict
     return {"kind": kind, "seed": int(seed), "n_logs": int(n_logs), "seconds": float(seconds),
             "use_ground_truth": USE_GROUND_TRUTH, "mujoco": mujoco.__version__,
             "pybullet": importlib.metadata.version("pybullet"),
-            "robot_urdf_sha256": hashlib.sha256(get_robot("nao").urdf().encode()).hexdigest()}
+            "robot_urdf_sha256": hashlib.sha256(get_robot("nao").urdf().encode()).hexdigest(),
+            "code_sha256": _code_sha256()}
 
 
 def shipped_calibration(kind: str, *, seed: int, n_logs: int, seconds: float) -> dict | None:
