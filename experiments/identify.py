@@ -86,6 +86,8 @@ def _record(out_dir: str, *, fixed_base: bool, profile, n_logs: int, seconds: fl
 #: constant of the testbed and not drawn per run: this is the seed the default ``sgatwalk fidelity``
 #: run's calibration was recorded with.
 ENGINE_GAP_SEED = 510019
+#: Logs per base kind and their length [s] of the engine-gap calibration (:func:`calibrate_engines`).
+ENGINE_GAP_LOGS, ENGINE_GAP_SECONDS = 4, 6.0
 #: Folder of the engine-gap calibrations that ship with the package (``fixed.json``, ``floating.json``;
 #: ``python -m experiments.identify --engine-gap`` writes them): the floating-base one is a whole
 #: diagnosis of stepping logs, about two minutes on two cores.
@@ -145,7 +147,8 @@ def shipped_calibration(kind: str, *, seed: int, n_logs: int, seconds: float) ->
     return doc["calibration"]
 
 
-def calibrate_engines(out_dir: str, *, seed: int = ENGINE_GAP_SEED, n_logs: int = 4, seconds: float = 6.0,
+def calibrate_engines(out_dir: str, *, seed: int = ENGINE_GAP_SEED, n_logs: int = ENGINE_GAP_LOGS,
+                      seconds: float = ENGINE_GAP_SECONDS,
                       floating: bool = True, use_shipped: bool = True) -> dict:
     """Engine-gap calibrations (``sgatwalk diagnose --calibrate``) from "none" logs of the real world.
 
@@ -177,8 +180,8 @@ def calibrate_engines(out_dir: str, *, seed: int = ENGINE_GAP_SEED, n_logs: int 
 
 
 def write_engine_gap(out_dir: str | os.PathLike = ENGINE_GAP_DIR, *, work_dir: str | None = None) -> dict:
-    """Compute the engine-gap calibrations of :data:`ENGINE_GAP_SEED` (4 logs of 6 s, fixed and floating
-    base) from fresh recordings and write them with their :func:`engine_gap_key` to ``out_dir``
+    """Compute the engine-gap calibrations of :data:`ENGINE_GAP_SEED` (:data:`ENGINE_GAP_LOGS` logs of
+    :data:`ENGINE_GAP_SECONDS`, fixed and floating base) from fresh recordings and write them with their :func:`engine_gap_key` to ``out_dir``
     (default: the package's :data:`ENGINE_GAP_DIR`). Returns ``{kind: written path}``."""
     import tempfile
 
@@ -188,7 +191,8 @@ def write_engine_gap(out_dir: str | os.PathLike = ENGINE_GAP_DIR, *, work_dir: s
         for kind, p in paths.items():
             with open(p) as f:
                 cal = json.load(f)
-            doc = {"key": engine_gap_key(kind, seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0), "calibration": cal}
+            doc = {"key": engine_gap_key(kind, seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS),
+                   "calibration": cal}
             dest = os.path.join(out_dir, f"{kind}.json")
             os.makedirs(out_dir, exist_ok=True)
             atomic_write_text(dest, json.dumps(doc, indent=1) + "\n")

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import experiments.identify as ident
-from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, engine_gap_key, excitation_tasks,
-                                  record_excitation_task, shipped_calibration)
+from experiments.identify import (ENGINE_GAP_LOGS, ENGINE_GAP_SECONDS, ENGINE_GAP_SEED, calibrate_engines,
+                                  engine_gap_key, excitation_tasks, record_excitation_task, shipped_calibration)
 
 
 def _close(a, b, rtol):
@@ -31,13 +31,13 @@ def test_the_shipped_engine_gap_is_for_these_engines_and_robot():
     regenerate them with ``python -m experiments.identify --engine-gap``), and only the logs they were
     computed from select them."""
     for kind in ("fixed", "floating"):
-        cal = shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0)
-        assert cal is not None, f"the shipped {kind} calibration is stale: {engine_gap_key(kind, seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0)}"
-        assert cal["kind"] == "sgatwalk-sysid-calibration" and cal["fixed_base"] == (kind == "fixed") and cal["n_logs"] == 4
-        assert shipped_calibration(kind, seed=ENGINE_GAP_SEED + 1, n_logs=4, seconds=6.0) is None
-        assert shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=3, seconds=6.0) is None
+        cal = shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS)
+        assert cal is not None, f"the shipped {kind} calibration is stale: {engine_gap_key(kind, seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS)}"
+        assert cal["kind"] == "sgatwalk-sysid-calibration" and cal["fixed_base"] == (kind == "fixed") and cal["n_logs"] == ENGINE_GAP_LOGS
+        assert shipped_calibration(kind, seed=ENGINE_GAP_SEED + 1, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS) is None
+        assert shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS - 1, seconds=ENGINE_GAP_SECONDS) is None
     # the stepping logs' engine gap: PyBullet's ground is stiffer than MuJoCo's (a baseline compliance)
-    floating = shipped_calibration("floating", seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0)
+    floating = shipped_calibration("floating", seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS)
     assert 0 < floating["baseline_model"]["ground_compliance"] < 0.01
     with pytest.raises(ValueError, match="fixed' or 'floating"):
         engine_gap_key("air", seed=0, n_logs=4, seconds=6.0)
@@ -50,13 +50,13 @@ def test_calibrate_engines_copies_the_shipped_calibration_and_recomputes_the_fix
     paths = calibrate_engines(str(tmp_path / "run"))
     for kind in ("fixed", "floating"):
         with open(paths[kind]) as f:
-            assert json.load(f) == shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0)
+            assert json.load(f) == shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS)
     assert calibrate_engines(str(tmp_path / "run"), floating=False) == {"fixed": paths["fixed"], "floating": None}
     monkeypatch.undo()
     fresh = calibrate_engines(str(tmp_path / "fresh"), floating=False, use_shipped=False)
     assert (tmp_path / "fresh" / "fixed" / "logs" / "excite_003.parquet").exists()
     with open(fresh["fixed"]) as f:
-        assert _close(json.load(f), shipped_calibration("fixed", seed=ENGINE_GAP_SEED, n_logs=4, seconds=6.0), 1e-6)
+        assert _close(json.load(f), shipped_calibration("fixed", seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS), 1e-6)
 
 
 def test_excitation_logs_recorded_ahead_are_the_ones_identify_real_uses(tmp_path, monkeypatch):
