@@ -80,7 +80,8 @@ from common.defaults import CONTROL_DT, EPISODE_SECONDS
 from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
-from experiments.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, REAL_WALKS, SIM_WALKS
+from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, IDENTIFY_BUDGET_S,
+                                   REAL_WALKS, SIM_WALKS)
 from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, identify_real,
                                   record_excitation_task)
 from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
@@ -302,11 +303,9 @@ class FidelityConfig:
     identify_fixed_logs: int = 3
     identify_floating_logs: int = 3
     identify_seconds: float = 6.0
-    #: wall-clock time budget of each diagnosis [s], a safety net: a budget that binds makes the
-    #: identified worlds depend on the machine's speed (on a machine 1.4 times slower than the one of
-    #: the README's default run, one draw's fixed-base diagnosis ran out of 60 s). Not part of the run's
-    #: identity: a resumed run keeps the identifications it made.
-    identify_budget_s: float = 180.0
+    #: wall-clock time budget of each diagnosis [s], a safety net (``experiments.grounding.IDENTIFY_BUDGET_S``
+    #: says why). Not part of the run's identity: a resumed run keeps the identifications it made.
+    identify_budget_s: float = IDENTIFY_BUDGET_S
     bootstrap: int = 1000
     seed: int = 0
     robot: str = "nao"

@@ -50,6 +50,15 @@ DEFAULT_HISTORY = 6
 #: Hybrid grounding (SGAT on top of the identified sim): the same models, blended at α = 0.1. The
 #: identified sim already ranks gaits well; every larger α tried made the ranking worse.
 HYBRID_GROUNDING = dataclasses.replace(DEFAULT_GROUNDING, alpha=0.1)
+#: Wall-clock time budget [s] of each diagnosis of the real world's identification (the identified
+#: and hybrid worlds: ``experiments.identify.identify_real``), in ``optimize`` and ``fidelity`` alike:
+#: a safety net, not a setting of the result. A budget that binds stops the diagnosis early, so the
+#: identified world then depends on the machine's speed: with 60 s, one draw's fixed-base diagnosis
+#: ran out on a machine 1.4 times slower than the one of the README's default fidelity run, and a
+#: stepping diagnosis that runs out before its uneven-ground stage leaves the ground out. The
+#: stepping diagnoses of Table I's optimization seeds 0-2 take 40-41 s on the faster of the README's two
+#: machines (where that table was made: 60 s did not bind there) and about twice that on the slower.
+IDENTIFY_BUDGET_S = 180.0
 
 
 #: Grounding states of the NAO: what it measures of its legs (encoder angles and joint velocities),

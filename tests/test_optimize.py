@@ -164,6 +164,33 @@ def test_grounding_data_accumulates_across_steps(tmp_path):
     assert j == 2 and np.array_equal(th, th1_gat)
 
 
+def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_reported(tmp_path, monkeypatch):
+    """``optimize``'s identification gives each diagnosis ``IDENTIFY_BUDGET_S`` (the fidelity default
+    too; 60 s bound on a slower machine and made the identified world depend on its speed) and says so
+    on its log line when a diagnosis still ran out of it."""
+    import experiments.optimize as opt_mod
+    from experiments.fidelity import FidelityConfig
+    from experiments.grounding import IDENTIFY_BUDGET_S
+    from experiments.optimize import OptimizeConfig
+
+    assert FidelityConfig().identify_budget_s == IDENTIFY_BUDGET_S >= 180.0
+    seen = {}
+
+    def fake_identify(out_dir, **kw):
+        seen.update(kw)
+        return {"reports": [], "logs": 6, "seconds": 36.0, "effects": {"latency": 0.02}, "terrain_rms_height": 0.002,
+                "time_budget_reached": hit, "wall_s": 1.0}
+
+    monkeypatch.setattr(opt_mod, "identify_real", fake_identify)
+    monkeypatch.setattr(opt_mod, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
+    for hit in ([], ["floating"]):
+        lines = []
+        Optimizer(OptimizeConfig(methods=("hybrid",)), str(tmp_path / f"run{len(hit)}"), None, log=lines.append)._identify()
+        assert seen["time_budget_s"] == IDENTIFY_BUDGET_S and seen.get("stepping_budget_s") is None
+        warned = [ln for ln in lines if "WARNING" in ln]
+        assert len(warned) == len(hit) and all("floating diagnosis ran out" in ln for ln in warned)
+
+
 @pytest.mark.slow
 def test_hybrid_and_identified_run_end_to_end_with_their_identification(tmp_path, capsys):
     """``--methods hybrid,identified``: calibration, excitation logs of the real world, two diagnoses,
