@@ -193,9 +193,18 @@ def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_rep
 
 @pytest.mark.slow
 def test_hybrid_and_identified_run_end_to_end_with_their_identification(tmp_path, capsys):
-    """``--methods hybrid,identified``: calibration, excitation logs of the real world, two diagnoses,
-    the identified sim, SGAT grounding on top of it, CMA-ES, and the real data each method used."""
+    """``--methods hybrid,identified``: excitation logs of the real world, two diagnoses, the identified
+    sim, SGAT grounding on top of it, CMA-ES, and the real data each method used. The engine-gap
+    calibration is the package's, placed where the run keeps its own (a run reuses a calibration it
+    finds there): computing one (a minute on the faster machine, two on the slower) is tested by
+    ``test_foot_friction_found_from_stepping_logs`` (stepping logs) and ``tests/test_identify_real.py``."""
+    from experiments.identify import ENGINE_GAP_DIR
+
     out = tmp_path / "run"
+    for kind in ("fixed", "floating"):
+        dest = out / "identified" / "calibration" / kind / "calibration.json"
+        dest.parent.mkdir(parents=True)
+        dest.write_text(json.dumps(json.loads((ENGINE_GAP_DIR / f"{kind}.json").read_text())["calibration"]))
     assert main(["optimize", *TINY, "--methods", "hybrid,identified", "--out", str(out), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("hybrid", 1), ("identified", 1)]
@@ -205,6 +214,7 @@ def test_hybrid_and_identified_run_end_to_end_with_their_identification(tmp_path
     assert rd["hybrid"]["walks"] == 1 and rd["hybrid"]["excitation_logs"] == 6 and rd["hybrid"]["excitation_seconds"] > 10
     assert rd["identified"]["walks"] == 0 and rd["identified"]["excitation_logs"] == 6
     assert any(f.startswith("identified_") for f in os.listdir(out / "data"))  # hybrid's sim walks: identified sim
+    assert not (out / "identified" / "calibration" / "floating" / "logs").exists()  # the calibration was reused
 
 
 def test_cma_es_improves_the_training_world_fitness(tmp_path, capsys):
