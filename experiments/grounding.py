@@ -57,7 +57,7 @@ HYBRID_GROUNDING = dataclasses.replace(DEFAULT_GROUNDING, alpha=0.1)
 #: ran out on a machine 1.4 times slower than the one of the README's default fidelity run, and a
 #: stepping diagnosis that runs out before its uneven-ground stage leaves the ground out. The
 #: stepping diagnoses of Table I's optimization seeds 0-2 take 40-41 s on the faster of the README's two
-#: machines (where that table was made: 60 s did not bind there) and about twice that on the slower.
+#: machines and about twice that on the slower, where 60 s may have stopped them early.
 IDENTIFY_BUDGET_S = 180.0
 
 
