@@ -40,7 +40,7 @@ COMMANDS: list[str] = [
 
 
 #: Result keys that hold wall-clock measurements: dropped from ``--json`` output unless ``--timings``.
-TIMING_KEYS = frozenset({"wall_s", "elapsed_s", "realtime_factor", "log_seconds", "job_wall_s", "cpu_s"})
+TIMING_KEYS = frozenset({"wall_s", "elapsed_s", "realtime_factor", "log_seconds", "job_wall_s", "cpu_s", "phases_s"})
 
 
 def drop_timings(obj):

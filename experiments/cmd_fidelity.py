@@ -84,4 +84,6 @@ def run(args) -> dict:
     if not args.json:
         print(format_table(res), flush=True)
         print(f"run directory: {out} (fidelity.json, fidelity.png, table.txt)", flush=True)
+        print(f"time: {res['wall_s'] / 60:.1f} min over the run's invocations ("
+              + ", ".join(f"{k} {v:.0f} s" for k, v in res["phases_s"].items()) + ")", flush=True)
     return res

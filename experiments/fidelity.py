@@ -66,6 +66,7 @@ more episodes per gait cannot lift ρ and what is left is the world's model erro
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -93,6 +94,10 @@ from walk_engine import params_for
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
+#: The phases of a run, in run order, whose wall time ``fidelity.json`` reports (``phases_s``): where a
+#: run's time goes (the README's default run: the diagnoses and the world episodes, on busy cores).
+PHASES = ("real trials", "excitation logs", "diagnoses", "grounding walks", "fits", "world episodes",
+          "teacher forcing")
 #: Purposes of the seed streams (the first key after the run seed). ``_CAL`` drew the engine-gap
 #: calibration's seed until that became one constant (``experiments.identify.ENGINE_GAP_SEED``, seed
 #: 0's draw); it keeps its place so the streams after it keep their values.
@@ -364,7 +369,8 @@ class Fidelity:
     Files: ``config.json``, ``panel.json`` (the gaits), ``episodes.jsonl`` (one line per finished
     episode, appended as batches finish), ``data/`` (grounding walks), ``models/`` (transformers per
     world and draw), ``identified/`` (excitation logs and diagnoses), ``fidelity.json`` (the result),
-    ``fidelity.png``, ``table.txt``.
+    ``fidelity.png``, ``table.txt``, ``timing.json`` (wall time of every invocation so far) and
+    ``phases.json`` (its split over :data:`PHASES`).
     """
 
     def __init__(self, cfg: FidelityConfig, run_dir: str, executor, *, log=None, progress: bool = False):
@@ -376,10 +382,31 @@ class Fidelity:
         self.t0 = time.perf_counter()
         os.makedirs(run_dir, exist_ok=True)
         self._episodes: dict[str, dict] = {}
+        self._phases_path = os.path.join(run_dir, "phases.json")
+        try:
+            with open(self._phases_path) as f:
+                self._phases = {k: float(v) for k, v in json.load(f).items() if k in PHASES}
+        except (OSError, ValueError, AttributeError):  # none yet, or unreadable: count from here
+            self._phases = {}
 
     # ---------------------------------------------------------------- bookkeeping
     def _say(self, msg: str) -> None:
         self.log(f"[fidelity {time.perf_counter() - self.t0:7.1f} s] {msg}")
+
+    @contextlib.contextmanager
+    def _phase(self, name: str):
+        """Add the wall time of the block to phase ``name`` of :data:`PHASES` (accumulated over the
+        invocations of the run in ``phases.json``, as ``timing.json`` accumulates the total)."""
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self._phases[name] = self._phases.get(name, 0.0) + time.perf_counter() - t0
+            atomic_write_text(self._phases_path, json.dumps(self._phases))
+
+    def phases(self) -> dict[str, float]:
+        """Seconds spent in each phase of :data:`PHASES` so far, every invocation included, in run order."""
+        return {k: self._phases[k] for k in PHASES if k in self._phases}
 
     def _check_config(self) -> None:
         """Claim the run directory (``experiments.episodes.EpisodeLog``); more worlds, a new
@@ -447,8 +474,9 @@ class Fidelity:
         t0 = time.perf_counter()
         tags = list(dict.fromkeys(tag for _, (tag, _) in todo))
         self._say(f"recording {len(todo)} grounding walks ({', '.join(tags)})")
-        for (p, _), r in zip(todo, map_episodes(self.ex, [t for _, (_, t) in todo])):
-            Recording(*r["recording"]).to_parquet(p)
+        with self._phase("grounding walks"):
+            for (p, _), r in zip(todo, map_episodes(self.ex, [t for _, (_, t) in todo])):
+                Recording(*r["recording"]).to_parquet(p)
         self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
 
     def _stepping(self, spec: WorldSpec) -> int:
@@ -491,7 +519,8 @@ class Fidelity:
             return
         t0 = time.perf_counter()
         self._say(f"recording {len(todo)} sets of excitation logs ({sum(t['n_logs'] for t in todo)} logs)")
-        list(self.ex.map(record_excitation_task, todo))
+        with self._phase("excitation logs"):
+            list(self.ex.map(record_excitation_task, todo))
         self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
 
     def _model_dir(self, spec: WorldSpec, draw: int) -> str:
@@ -520,7 +549,8 @@ class Fidelity:
             t0 = time.perf_counter()
             for d in range(cfg.data_seeds):  # the diagnosis runs its replays on every core itself
                 for n in counts:
-                    idents[d, n] = r = self._identify(d, n)
+                    with self._phase("diagnoses"):
+                        idents[d, n] = r = self._identify(d, n)
                     self._say(f"identified draw {d} ({n} stepping logs): {len(r['effects'])} terms, ground Sq "
                               f"{1000 * r['terrain_rms_height']:.2f} mm, {r['logs']} logs ({r['wall_s']:.0f} s)"
                               + "".join(f"; WARNING: the {k} diagnosis ran out of time (raise --identify-budget)"
@@ -576,7 +606,9 @@ class Fidelity:
         if todo:
             t0 = time.perf_counter()
             self._say(f"fitting {len(todo)} transformers ({len(fits) - len(todo)} resumed)")
-            for f, r in zip(todo, self.ex.map(fit_grounding_task, todo)):
+            with self._phase("fits"):
+                fitted = self.ex.map(fit_grounding_task, todo)
+            for f, r in zip(todo, fitted):
                 self._say(f"  {f['world']} draw {f['draw']}: forward val {r['forward_val']:.3f}, inverse val "
                           f"{r['inverse_val']:.3f} ({r['n_real']} real / {r['n_sim']} sim transitions, {r['wall_s']:.0f} s)")
             self._say(f"fits done ({time.perf_counter() - t0:.0f} s)")
@@ -614,17 +646,22 @@ class Fidelity:
         self._say(f"panel: {len(gaits)} gaits; {cfg.real_trials} real trials each; worlds "
                   f"{', '.join(s.name for s in self.specs)}; {cfg.data_seeds} draws of the real data")
         real_seeds = _seeds(cfg.seed, _REAL, n=cfg.real_trials)
-        self._run([{"world": "real", "theta": g["theta"], "seed": s, "seconds": cfg.seconds, "profile": cfg.profile,
-                    "key": f"real|{g['name']}|t{j}", **cfg.task_robot()} for g in gaits for j, s in enumerate(real_seeds)], "real trials")
+        with self._phase("real trials"):
+            self._run([{"world": "real", "theta": g["theta"], "seed": s, "seconds": cfg.seconds, "profile": cfg.profile,
+                        "key": f"real|{g['name']}|t{j}", **cfg.task_robot()} for g in gaits for j, s in enumerate(real_seeds)],
+                      "real trials")
         prep = self.prepare()
         tasks = []
         for spec in self.specs:
             for d in (range(cfg.data_seeds) if spec.per_draw else [0]):
                 tasks += self._world_tasks(spec, d, prep[spec.name][d], gaits)
-        self._run(tasks, "training-world episodes")
-        self.replay(prep)
+        with self._phase("world episodes"):
+            self._run(tasks, "training-world episodes")
+        with self._phase("teacher forcing"):
+            self.replay(prep)
         res = self.result(gaits, prep)
         res["wall_s"] = clock.save()
+        res["phases_s"] = self.phases()
         self.write(res)
         return res
 

@@ -119,7 +119,9 @@ def _fidelity(res: dict) -> str:
         lines += ["", f"For scale, `{oracle}` (the real world itself, {res['worlds'][oracle]['episodes']} episodes per "
                   "gait on fresh seeds) against the same targets: " + "; ".join(parts) + "."]
     if res.get("wall_s") is not None:
-        lines += ["", f"The run took {res['wall_s'] / 60:.1f} min."]
+        ph = {k: v for k, v in (res.get("phases_s") or {}).items() if v >= 0.5}
+        lines += ["", f"The run took {res['wall_s'] / 60:.1f} min"
+                  + (": " + ", ".join(f"{k} {v:.0f} s" for k, v in ph.items()) + "." if ph else ".")]
     return "\n".join(lines)
 
 

@@ -153,6 +153,13 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert len((out / "episodes.jsonl").read_text().splitlines()) == n_lines + 3 * 2
     assert res2["worlds"]["sgat"] == res["worlds"]["sgat"]
     assert res2["wall_s"] > res["wall_s"] > 0  # the run's time accumulates over its invocations (timing.json)
+    # ... and so does its split over the phases (phases.json): the first invocation ran them all
+    from experiments.fidelity import PHASES
+
+    ph, ph2 = res["phases_s"], res2["phases_s"]
+    assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses")]  # no identified world here
+    assert all(v > 0 for v in ph.values()) and sum(ph.values()) <= res["wall_s"]
+    assert list(ph2) == list(ph) and all(ph2[k] >= ph[k] for k in ph) and ph2["world episodes"] > ph["world episodes"]
     # other settings in the same directory are refused; another identification time budget is not
     assert main(["fidelity", *TINY[:-2], "--real-trials", "3", "--workers", "1", "--out", str(out)]) == 2
     assert "other settings" in capsys.readouterr().err
