@@ -657,8 +657,7 @@ class Fidelity:
                 tasks += self._world_tasks(spec, d, prep[spec.name][d], gaits)
         with self._phase("world episodes"):
             self._run(tasks, "training-world episodes")
-        with self._phase("teacher forcing"):
-            self.replay(prep)
+        self.replay(prep)
         res = self.result(gaits, prep)
         res["wall_s"] = clock.save()
         res["phases_s"] = self.phases()
@@ -698,7 +697,8 @@ class Fidelity:
         t0 = time.perf_counter()
         flat = [t for _, _, tasks, _ in todo if tasks for t in tasks]
         self._say(f"teacher-forcing {len(flat)} grounding walks ({len(first)} sets of inverse models)")
-        results = iter(self.ex.map(replay_walk_task, flat))
+        with self._phase("teacher forcing"):
+            results = iter(self.ex.map(replay_walk_task, flat))
         for info, path, tasks, sig in todo:
             info["replay"] = [next(results) for _ in tasks] if tasks else todo[first[sig]][0]["replay"]
             atomic_write_text(path, json.dumps(jsonable(info["replay"]), indent=1))

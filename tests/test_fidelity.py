@@ -160,6 +160,7 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses")]  # no identified world here
     assert all(v > 0 for v in ph.values()) and sum(ph.values()) <= res["wall_s"]
     assert list(ph2) == list(ph) and all(ph2[k] >= ph[k] for k in ph) and ph2["world episodes"] > ph["world episodes"]
+    assert ph2["teacher forcing"] == ph["teacher forcing"]  # resumed from replay.json: nothing teacher-forced again
     # other settings in the same directory are refused; another identification time budget is not
     assert main(["fidelity", *TINY[:-2], "--real-trials", "3", "--workers", "1", "--out", str(out)]) == 2
     assert "other settings" in capsys.readouterr().err
