@@ -30,7 +30,7 @@ import os
 import sys
 
 from experiments.executors import make_executor
-from experiments.fidelity import DEFAULT_WORLDS, Fidelity, FidelityConfig, format_table
+from experiments.fidelity import DEFAULT_WORLDS, Fidelity, FidelityConfig, format_phases, format_table
 import experiments.argtypes as A
 
 
@@ -84,6 +84,6 @@ def run(args) -> dict:
     if not args.json:
         print(format_table(res), flush=True)
         print(f"run directory: {out} (fidelity.json, fidelity.png, table.txt)", flush=True)
-        print(f"time: {res['wall_s'] / 60:.1f} min over the run's invocations ("
-              + ", ".join(f"{k} {v:.0f} s" for k, v in res["phases_s"].items()) + ")", flush=True)
+        print(f"time: {res['wall_s'] / 60:.1f} min over the run's invocations ({format_phases(res['phases_s'])})",
+              flush=True)
     return res

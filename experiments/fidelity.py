@@ -762,6 +762,12 @@ class Fidelity:
         plot(res, os.path.join(self.run_dir, "fidelity.png"))
 
 
+def format_phases(phases: dict[str, float], min_s: float = 0.0) -> str:
+    """``"real trials 138 s, diagnoses 375 s, ..."``: the phases of ``phases_s`` [s] that took at least
+    ``min_s``, in run order (the text output's ``time:`` line and the README's)."""
+    return ", ".join(f"{k} {v:.0f} s" for k, v in phases.items() if v >= min_s)
+
+
 def _rec_summary(path: str) -> tuple[float, bool]:
     """A recording's length [s] and whether the robot fell in it (``meta["fell"]``)."""
     from envs import Recording  # lazy: loads the engines

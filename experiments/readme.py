@@ -30,7 +30,7 @@ from common.files import atomic_write_text
 from experiments.cli import main as cli_main
 from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
-from experiments.fidelity import replay_totals
+from experiments.fidelity import format_phases, replay_totals
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
@@ -119,9 +119,8 @@ def _fidelity(res: dict) -> str:
         lines += ["", f"For scale, `{oracle}` (the real world itself, {res['worlds'][oracle]['episodes']} episodes per "
                   "gait on fresh seeds) against the same targets: " + "; ".join(parts) + "."]
     if res.get("wall_s") is not None:
-        ph = {k: v for k, v in (res.get("phases_s") or {}).items() if v >= 0.5}
-        lines += ["", f"The run took {res['wall_s'] / 60:.1f} min"
-                  + (": " + ", ".join(f"{k} {v:.0f} s" for k, v in ph.items()) + "." if ph else ".")]
+        ph = format_phases(res.get("phases_s") or {}, min_s=0.5)
+        lines += ["", f"The run took {res['wall_s'] / 60:.1f} min" + (f": {ph}." if ph else ".")]
     return "\n".join(lines)
 
 

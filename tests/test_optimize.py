@@ -198,13 +198,10 @@ def test_hybrid_and_identified_run_end_to_end_with_their_identification(tmp_path
     calibration is the package's, placed where the run keeps its own (a run reuses a calibration it
     finds there): computing one (a minute on the faster machine, two on the slower) is tested by
     ``test_foot_friction_found_from_stepping_logs`` (stepping logs) and ``tests/test_identify_real.py``."""
-    from experiments.identify import ENGINE_GAP_DIR
+    from experiments.identify import calibrate_engines
 
     out = tmp_path / "run"
-    for kind in ("fixed", "floating"):
-        dest = out / "identified" / "calibration" / kind / "calibration.json"
-        dest.parent.mkdir(parents=True)
-        dest.write_text(json.dumps(json.loads((ENGINE_GAP_DIR / f"{kind}.json").read_text())["calibration"]))
+    calibrate_engines(str(out / "identified" / "calibration"))  # copies the package's (ENGINE_GAP_SEED)
     assert main(["optimize", *TINY, "--methods", "hybrid,identified", "--out", str(out), "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("hybrid", 1), ("identified", 1)]
