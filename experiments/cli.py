@@ -35,6 +35,7 @@ COMMANDS: list[str] = [
     "experiments.cmd_visualize",
     "experiments.cmd_stress",
     "experiments.cmd_fidelity",
+    "experiments.cmd_compare",
     "experiments.cmd_table1",
 ]
 

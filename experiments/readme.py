@@ -30,7 +30,7 @@ from common.files import atomic_write_text
 from experiments.cli import main as cli_main
 from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
-from experiments.fidelity import format_phases, replay_totals
+from experiments.fidelity import fidelity_targets, first_world, format_phases, ranking_target, replay_totals
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
@@ -95,7 +95,7 @@ def _fidelity(res: dict) -> str:
                      f"{_f(s['brier']['max'], '{:.3f}')}] | {_pick(res, w)} | {', '.join(data) or 'none'} |"
                      + (f" {_own_ceiling(s)} |" if own else ""))
     lines += _data_gait_falls(res)
-    ref = _first_world(res, "sgat")
+    ref = first_world(res, "sgat")
     targets = fidelity_targets(res, ref) if ref else []
     if targets:
         lines += ["", f"SGAT (`{ref}`) against the targets of the grounding issue:", ""]
@@ -112,7 +112,7 @@ def _fidelity(res: dict) -> str:
             tv = fidelity_targets(res, n)
             lines.append(f"| `{n}` | " + " | ".join(
                 ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
-    oracle = _first_world(res, "oracle")
+    oracle = first_world(res, "oracle")
     if targets and oracle:
         parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")
                  for t, ok, v in fidelity_targets(res, oracle)]
@@ -198,40 +198,42 @@ def _optimize(res: dict) -> str:
     return "\n".join(lines)
 
 
-def _first_world(res: dict, kind: str) -> str | None:
-    """The first world of ``kind`` that a fidelity result lists (its reference world of that kind:
-    the others are variants), or None."""
-    return next((n for n, w in res["worlds"].items() if w.get("kind", n.split(":")[0]) == kind), None)
+def _compare_row_name(r: dict) -> str:
+    return f"`{r['world']}` ({r['run']})"
 
 
-def fidelity_targets(res: dict, world: str = "sgat") -> list[tuple[str, bool, str]]:
-    """The issue's targets for a grounded world (default SGAT) on a fidelity result:
-    ``[(target, met, measured)]``, compared with the plain sim and the first GAT world listed;
-    empty if the world is not in the result."""
-    if world not in res["worlds"]:
-        return []
-    w = res["worlds"][world]
-    draws = w["draws"]
-    ceiling = res["real"]["ceiling"]
-    worst = min(d["rho"] for d in draws)
-    out = [("worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling", worst >= 0.8 or worst >= ceiling - 0.1,
-            f"{worst:.2f} (ceiling {ceiling:.2f})"),
-           ("median |bias| ≤ 2 fitness points", w["summary"]["abs_bias_median"] <= 2,
-            f"{w['summary']['abs_bias_median']:.1f}"),
-           ("bias spread over the draws ≤ 4", w["summary"]["bias"]["spread"] <= 4, f"{w['summary']['bias']['spread']:.1f}")]
-    gat = _first_world(res, "gat")
-    for label, other in (("SIM", "sim" if "sim" in res["worlds"] else None), ("GAT", gat)):
-        if other:
-            ob = res["worlds"][other]["draws"]
-            ref = [ob[min(i, len(ob) - 1)]["brier"] for i in range(len(draws))]
-            ok = all(d["brier"] < r for d, r in zip(draws, ref))
-            out.append((f"Brier below {label}'s on every draw", ok,
-                        ", ".join(f"{d['brier']:.3f} vs {r:.3f}" for d, r in zip(draws, ref))))
-    if gat:
-        g = res["worlds"][gat]["draws"]
-        ok = all(d["rho"] >= e["rho"] for d, e in zip(draws, g))
-        out.append(("ρ ≥ GAT's on every draw", ok, ", ".join(f"{d['rho']:.2f} vs {e['rho']:.2f}" for d, e in zip(draws, g))))
-    return out
+def _compare(res: dict) -> str:
+    """``sgatwalk compare``: per panel a summary line and every world in a folded table."""
+    from experiments.compare import panel_title  # lazy: only this block needs it
+
+    lines = []
+    for p in res["panels"]:
+        rows = p["rows"]
+        ranked = [r for r in rows if r["ranking_target_met"]]
+        full = [r for r in rows if r["targets"] and r["targets_met"] == len(r["targets"])]
+        best = rows[0]
+        name = _compare_row_name
+        lines += [f"**{panel_title(p, rho='ρ', times='×')}**: best worst-draw ρ {best['rho_worst']:.2f}, {name(best)}; worst ρ at the "
+                  f"target ({ranking_target(p['ceiling']):.2f}): " + (", ".join(name(r) for r in ranked) or "none")
+                  + "; SGAT or hybrid worlds that meet every target: " + (", ".join(name(r) for r in full) or "none") + ".",
+                  "", f"<details><summary>all {p['worlds']} worlds of this panel</summary>", "",
+                  "| world | run (+ results with the same draws) | draws | ρ: median [worst, best] | median \\|bias\\| "
+                  "| bias spread | Brier (median) | regret (median) | worst ρ at the target | SGAT targets met "
+                  "| ρ − its run's SGAT: median (draws higher) |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
+        for r in rows:
+            run = r["run"] + (f" (+{len(r['runs']) - 1})" if len(r["runs"]) > 1 else "")
+            v = r.get("vs_sgat")
+            lines.append(f"| `{r['world']}` | {run} | {r['draws']} | {_f(r['rho_median'])} [{_f(r['rho_worst'])}, "
+                         f"{_f(r['rho_best'])}] | {_f(r['abs_bias_median'], '{:.1f}')} | {_f(r['bias_spread'], '{:.1f}')} "
+                         f"| {_f(r['brier_median'], '{:.3f}')} | {_f(r['regret_median'], '{:.1f}')} | "
+                         f"{'✓' if r['ranking_target_met'] else '✗'} | "
+                         + (f"{r['targets_met']}/{len(r['targets'])}" if r["targets"] else "–") + " | "
+                         + (f"{v['rho_diff_median']:+.2f} ({v['wins']}/{v['pairs']})" if v else "–") + " |")
+        lines += ["", "</details>", ""]
+    if res.get("plot"):
+        lines.append(f"![every world's ρ over its draws, per panel]({res['plot']})")
+    return "\n".join(lines).rstrip()
 
 
 def _table1(res: dict) -> str:
@@ -416,7 +418,7 @@ def _blind(res: dict) -> str:
     return "\n".join(lines)
 
 
-RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
+RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "compare": _compare, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext}
 
 

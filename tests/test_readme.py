@@ -5,6 +5,7 @@ import json
 import pytest
 
 from experiments import readme
+from experiments.fidelity import fidelity_targets, first_world
 
 
 def test_readme_blocks_match_saved_results():
@@ -42,16 +43,16 @@ def test_fidelity_targets_compare_with_the_first_gat_world_listed():
         "sgat:hidden=64x64": _world("sgat", [0.85, 0.7], [0.25, 0.30], bias=1.5, spread=5.0),
         "sgat": _world("sgat", [0.9, 0.95], [0.10, 0.15]),
         "gat": _world("gat", [0.99, 0.99], [0.01, 0.01])}}
-    assert readme._first_world(res, "sgat") == "sgat:hidden=64x64" and readme._first_world(res, "gat") == "gat:hidden=64x64"
-    assert readme._first_world(res, "hybrid") is None
-    t = {txt: ok for txt, ok, _ in readme.fidelity_targets(res, "sgat")}
+    assert first_world(res, "sgat") == "sgat:hidden=64x64" and first_world(res, "gat") == "gat:hidden=64x64"
+    assert first_world(res, "hybrid") is None
+    t = {txt: ok for txt, ok, _ in fidelity_targets(res, "sgat")}
     assert t["worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling"] and t["median |bias| ≤ 2 fitness points"]
     assert t["Brier below SIM's on every draw"] and t["Brier below GAT's on every draw"] and t["ρ ≥ GAT's on every draw"]
-    t = {txt: ok for txt, ok, _ in readme.fidelity_targets(res, "sgat:hidden=64x64")}
+    t = {txt: ok for txt, ok, _ in fidelity_targets(res, "sgat:hidden=64x64")}
     assert not t["worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling"] and not t["bias spread over the draws ≤ 4"]
     assert t["Brier below SIM's on every draw"] and not t["Brier below GAT's on every draw"]  # 0.30 vs GAT's 0.20
     assert t["ρ ≥ GAT's on every draw"]
-    assert readme.fidelity_targets(res, "ane") == []
+    assert fidelity_targets(res, "ane") == []
 
 
 def test_fidelity_block_compares_falls_on_the_data_gait_with_the_grounding_walks():

@@ -1,0 +1,151 @@
+"""sgatwalk compare: fidelity results grouped by panel and ranked, on constructed results."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from experiments.compare import compare, format_compare, load_results, panel_key
+from experiments.fidelity import _summary
+from experiments.stats import brier_score, spearman
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+GAITS = ["theta0"] + [f"box{i:02d}" for i in range(7)]
+REAL = np.array([-12.0, -6.0, -3.0, 0.5, 2.0, 4.0, 7.5, 9.0])
+FALLS = np.array([1.0, 0.9, 0.7, 0.5, 0.4, 0.3, 0.1, 0.0])
+OUTCOMES = np.array([[1.0] * k + [0.0] * (10 - k) for k in (10 * FALLS).round().astype(int)])  # 10 trials per gait
+
+
+def _world(kind: str, fits: list, falls=None) -> dict:
+    """A world whose draw d scores the gaits ``fits[d]`` (the figures as Fidelity computes them)."""
+    draws = []
+    for d, f in enumerate(fits):
+        f = np.asarray(f, dtype=float)
+        fr = FALLS if falls is None else np.asarray(falls, dtype=float)
+        draws.append({"draw": d, "fitness": f.tolist(), "fall_rate": fr.tolist(), "rho": spearman(f, REAL),
+                      "mae": float(np.mean(np.abs(f - REAL))), "bias": float(np.mean(f - REAL)),
+                      "brier": brier_score(fr, OUTCOMES)})
+    return {"kind": kind, "draws": draws, "summary": _summary(draws)}
+
+
+def _result(worlds: dict, real=REAL, seed=101) -> dict:
+    return {"config": {"seed": seed, "profile": "real"}, "gaits": GAITS,
+            "real": {"fitness": list(map(float, real)), "fall_rate": FALLS.tolist(), "trials": 10, "ceiling": 0.9},
+            "worlds": worlds}
+
+
+RNG = np.random.default_rng(0)
+SHUFFLED = [RNG.permutation(REAL) for _ in range(3)]
+EXACT = [REAL + 0.1 * d for d in range(3)]
+NOISY = [REAL + RNG.normal(0, 4.0, len(REAL)) for _ in range(3)]
+
+
+def _runs():
+    a = _result({"sim": _world("sim", [REAL + 8.0], falls=np.zeros(8)),
+                 "gat": _world("gat", NOISY),
+                 "sgat": _world("sgat", SHUFFLED),
+                 "sgat:good=1": _world("sgat", EXACT)})
+    b = _result({"sim": _world("sim", [REAL + 8.0], falls=np.zeros(8)),  # the same measurement as run a's
+                 "sgat": _world("sgat", NOISY)})
+    other = _result({"sgat": _world("sgat", EXACT)}, real=REAL + 1.0)  # other real trials: another panel
+    return [("run-a", "a.json", a), ("run-b", "b.json", b), ("run-c", "c.json", other)]
+
+
+def test_compare_groups_by_panel_ranks_by_worst_rho_and_merges_shared_measurements():
+    res = compare(_runs())
+    assert [p["runs"] for p in res["panels"]] == [["run-a", "run-b"], ["run-c"]]
+    rows = res["panels"][0]["rows"]
+    names = [(r["run"], r["world"]) for r in rows]
+    # the exact world first, the shuffled one last; the plain sim of both runs is one row
+    assert names[0] == ("run-a", "sgat:good=1") and names[-1] == ("run-a", "sgat")
+    sim = next(r for r in rows if r["world"] == "sim")
+    assert sim["runs"] == ["run-a", "run-b"] and sum(r["world"] == "sim" for r in rows) == 1
+    worst = [r["rho_worst"] for r in rows]
+    assert worst == sorted(worst, reverse=True)
+    good = rows[0]
+    assert good["rho_worst"] == pytest.approx(1.0) and good["abs_bias_median"] == pytest.approx(0.1)
+    assert good["bias_spread"] == pytest.approx(0.2) and good["regret_median"] == 0.0
+    # paired with run a's reference SGAT (the shuffled world), draw by draw
+    diffs = [1.0 - spearman(s, REAL) for s in SHUFFLED]
+    assert good["vs_sgat"]["rho_diff_median"] == pytest.approx(float(np.median(diffs)))
+    assert good["vs_sgat"]["wins"] == sum(d > 0 for d in diffs) and good["vs_sgat"]["pairs"] == 3
+    shuffled = rows[-1]
+    assert abs(shuffled["rho_median"]) < 0.8 and "vs_sgat" not in shuffled  # the reference itself
+    # the exact world meets the ranking, bias and Brier-vs-sim targets; not "below GAT's Brier" (equal falls)
+    met = {t["target"]: t["met"] for t in good["targets"]}
+    assert met["worst ρ over the draws ≥ 0.8, or within 0.1 of the ceiling"] and met["median |bias| ≤ 2 fitness points"]
+    assert met["Brier below SIM's on every draw"] and not met["Brier below GAT's on every draw"]
+    assert good["targets_met"] == sum(met.values()) == 5
+    assert sim["targets"] == [] and "vs_sgat" not in sim
+
+
+def test_compare_filters_kinds_and_keeps_the_top_rows():
+    res = compare(_runs(), kinds=("sgat",), top=2)
+    p = res["panels"][0]
+    assert p["worlds"] == 3 and len(p["rows"]) == 2 and {r["kind"] for r in p["rows"]} == {"sgat"}
+    assert "1 more" in format_compare(res)
+    with pytest.raises(ValueError, match="top"):
+        compare(_runs(), top=0)
+
+
+def test_panel_key_tells_real_trials_apart_and_ignores_the_worlds():
+    a, b, c = (r for _, _, r in _runs())
+    assert panel_key(a) == panel_key(b) != panel_key(c)
+
+
+def test_load_results_reads_runs_files_and_readme_results(tmp_path):
+    runs = _runs()
+    run_dir = tmp_path / "runs" / "fid"
+    run_dir.mkdir(parents=True)
+    (run_dir / "fidelity.json").write_text(json.dumps(runs[0][2]))
+    (run_dir / "config.json").write_text("{}")
+    saved = tmp_path / "results"
+    saved.mkdir()
+    (saved / "fidelity-b.json").write_text(json.dumps({"command": "sgatwalk fidelity", "result": runs[1][2]}))
+    (saved / "table1.json").write_text(json.dumps({"command": "sgatwalk table1", "result": {"rows": []}}))
+    got, skipped = load_results([str(run_dir), str(saved)])
+    assert [label for label, _, _ in got] == ["fid", "fidelity-b"] and skipped == [str(saved / "table1.json")]
+    got, _ = load_results([str(tmp_path / "runs")])  # a folder of run directories
+    assert [label for label, _, _ in got] == ["fid"]
+    with pytest.raises(ValueError, match="not a fidelity result"):
+        load_results([str(saved / "table1.json")])
+    with pytest.raises(ValueError, match="given twice"):
+        load_results([str(run_dir), str(run_dir / "fidelity.json")])
+    (saved / "bad.json").write_text("{not json")
+    with pytest.raises(ValueError, match="bad.json: not JSON"):
+        load_results([str(saved)])
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="no fidelity results"):
+        load_results([str(empty)])
+
+
+def test_cli_compare_prints_json_text_and_a_figure(tmp_path, capsys):
+    for label, _, res in _runs():
+        (tmp_path / f"{label}.json").write_text(json.dumps(res))
+    png = tmp_path / "cmp.png"
+    assert main(["compare", str(tmp_path / "run-a.json"), str(tmp_path / "run-c.json"), "--plot", str(png), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert len(out["panels"]) == 2 and out["panels"][0]["rows"][0]["world"] == "sgat:good=1"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["compare", str(tmp_path / "run-a.json"), "--kinds", "sgat,gat"]) == 0
+    text = capsys.readouterr().out
+    assert "sgat:good=1" in text and "sim " not in text
+    assert main(["compare", str(tmp_path / "run-a.json"), "--kinds", "sgat,nope"]) == 2
+    assert "unknown world kind" in capsys.readouterr().err
+
+
+def test_readme_ranking_is_the_ranking_of_the_saved_fidelity_results():
+    """The README's ranking of every world (docs/results/compare-fidelity.json) is what `sgatwalk
+    compare` makes of the fidelity results saved beside it now: a fidelity result saved again makes
+    this fail until the ranking is saved again too."""
+    with open(os.path.join(ROOT, "docs", "results", "compare-fidelity.json")) as f:
+        doc = json.load(f)
+    args = doc["command"].split()[2:]
+    assert args[0] == "docs/results" and "--top" not in args
+    results, _ = load_results([os.path.join(ROOT, "docs", "results")])
+    kinds = tuple(args[args.index("--kinds") + 1].split(",")) if "--kinds" in args else None
+    fresh = json.loads(json.dumps(compare(results, kinds=kinds)))
+    assert [p["rows"] for p in fresh["panels"]] == [p["rows"] for p in doc["result"]["panels"]]
