@@ -53,18 +53,20 @@ def load_results(paths: list[str]) -> tuple[list[tuple[str, str, dict]], list[st
 
     Args:
         paths: each a fidelity run directory (its ``fidelity.json`` beside ``config.json``), a
-            ``fidelity.json``, a saved
-            README result (``{"command", "result"}``, ``docs/results/NAME.json``), or a folder of
-            such results or of run directories (every ``*.json`` in it and every ``*/fidelity.json``
-            below it; other JSON files there are skipped).
+            ``fidelity.json``, a saved README result (``{"command", "result"}``,
+            ``docs/results/NAME.json``), or a folder of such results or of run directories (every
+            ``*.json`` in it and every ``*/fidelity.json`` below it; other JSON files there are
+            skipped).
 
     Returns:
         ``([(label, path, result)], [skipped paths])``; the label is the run directory's name, or the
-        file's name without ``.json``.
+        file's name without ``.json``; labels that two results share are lengthened by their parent
+        folders until they differ.
 
     Raises:
-        FileNotFoundError: a path that does not exist. ValueError: a file named directly that is not
-        a fidelity result, a folder with none, or a result listed twice.
+        FileNotFoundError: a path that does not exist. ValueError: a file that is not JSON, a file named
+        directly that is not a fidelity result, a fidelity result with a malformed world (named), a
+        folder with none, or a result listed twice.
     """
     out, skipped, seen = [], [], set()
 
@@ -77,14 +79,12 @@ def load_results(paths: list[str]) -> tuple[list[tuple[str, str, dict]], list[st
                                  "sgatwalk fidelity writes fidelity.json)")
             skipped.append(path)
             return False
+        _check(res, path)
         real = os.path.realpath(path)
         if real in seen:
             raise ValueError(f"{path}: given twice")
         seen.add(real)
-        base = os.path.basename(path)
-        label = os.path.basename(os.path.dirname(os.path.abspath(path))) if base == "fidelity.json" \
-            else base[:-5] if base.endswith(".json") else base
-        out.append((label, path, res))
+        out.append((path, res))
         return True
 
     for p in paths:
@@ -102,7 +102,43 @@ def load_results(paths: list[str]) -> tuple[list[tuple[str, str, dict]], list[st
                                  "or saved README results)")
         else:
             add(p, True)
-    return out, skipped
+    return [(lab, p, r) for lab, (p, r) in zip(_labels([p for p, _ in out]), out)], skipped
+
+
+def _labels(paths: list[str]) -> list[str]:
+    """A short name per result path: the run directory for a ``fidelity.json``, else the file name
+    without ``.json``; lengthened by parent folders where two would be the same."""
+    parts = []
+    for p in paths:
+        ps = os.path.abspath(p).split(os.sep)
+        if ps[-1] == "fidelity.json":
+            ps = ps[:-1]
+        elif ps[-1].endswith(".json"):
+            ps[-1] = ps[-1][:-5]
+        parts.append(ps)
+    labels = []
+    for i, ps in enumerate(parts):
+        for k in range(1, len(ps) + 1):
+            name = "/".join(ps[-k:])
+            if all("/".join(q[-k:]) != name for j, q in enumerate(parts) if j != i):
+                break
+        labels.append(name)
+    return labels
+
+
+def _check(res: dict, path: str) -> None:
+    """Raise ValueError naming ``path`` and the world when a fidelity result lacks what a ranking reads."""
+    n = len(res["real"]["fitness"])
+    for key in ("fall_rate", "ceiling"):
+        if key not in res["real"]:
+            raise ValueError(f"{path}: the real trials have no {key!r}")
+    for name, w in res["worlds"].items():
+        draws = w.get("draws") if isinstance(w, dict) else None
+        if not draws or not isinstance(w.get("summary"), dict):
+            raise ValueError(f"{path}: world {name!r} has no draws or summary")
+        for d in draws:
+            if not all(k in d for k in ("rho", "brier", "fitness")) or len(d["fitness"]) != n:
+                raise ValueError(f"{path}: world {name!r}: a draw without rho, brier or one fitness per gait")
 
 
 def panel_key(res: dict) -> str:
@@ -168,7 +204,7 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
         (runs that share a run directory) is one row: ``run`` is the first result, ``runs`` all.
 
     Raises:
-        ValueError: two runs with one label in a panel, or ``top`` < 1.
+        ValueError: ``top`` < 1.
     """
     if top is not None and top < 1:
         raise ValueError(f"top must be >= 1, got {top}")
@@ -182,8 +218,6 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
             "real_fitness_mean": float(sum(res["real"]["fitness"]) / len(res["real"]["fitness"])),
             "real_fall_rate": float(sum(res["real"]["fall_rate"]) / len(res["real"]["fall_rate"])),
             "runs": [], "rows": []})
-        if label in p["runs"]:
-            raise ValueError(f"{path}: a second run labelled {label!r} on one panel")
         p["runs"].append(label)
         for n, w in res["worlds"].items():
             if kinds is not None and w.get("kind", n.split(":")[0]) not in kinds:

@@ -8,7 +8,7 @@ import pytest
 
 from experiments.cli import main
 from experiments.compare import compare, format_compare, load_results, panel_key
-from experiments.fidelity import _summary
+from experiments.fidelity import _summary, ranking_target
 from experiments.stats import brier_score, spearman
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -90,6 +90,17 @@ def test_compare_filters_kinds_and_keeps_the_top_rows():
         compare(_runs(), top=0)
 
 
+def test_ranking_target_is_0_8_or_within_0_1_of_a_lower_ceiling():
+    assert ranking_target(0.95) == 0.8 and ranking_target(0.88) == pytest.approx(0.78)
+    swapped = REAL[[3, 1, 2, 0, 4, 5, 6, 7]]  # ranks 1 and 4 swapped: rho = 1 - 6 * 18 / 504 = 0.786
+    assert spearman(swapped, REAL) == pytest.approx(1 - 108 / 504)
+    res = _result({"sgat": _world("sgat", [swapped, swapped])})
+    res["real"]["ceiling"] = 0.88
+    assert compare([("r", "r.json", res)])["panels"][0]["rows"][0]["ranking_target_met"]
+    res["real"]["ceiling"] = 0.95
+    assert not compare([("r", "r.json", res)])["panels"][0]["rows"][0]["ranking_target_met"]
+
+
 def test_panel_key_tells_real_trials_apart_and_ignores_the_worlds():
     a, b, c = (r for _, _, r in _runs())
     assert panel_key(a) == panel_key(b) != panel_key(c)
@@ -116,6 +127,16 @@ def test_load_results_reads_runs_files_and_readme_results(tmp_path):
     (saved / "bad.json").write_text("{not json")
     with pytest.raises(ValueError, match="bad.json: not JSON"):
         load_results([str(saved)])
+    broken = json.loads(json.dumps(runs[0][2]))
+    del broken["worlds"]["gat"]["draws"][1]["brier"]
+    (tmp_path / "broken.json").write_text(json.dumps(broken))
+    with pytest.raises(ValueError, match="broken.json: world 'gat'"):
+        load_results([str(tmp_path / "broken.json")])
+    other = tmp_path / "other" / "fid"  # a second run directory of the same name elsewhere
+    other.mkdir(parents=True)
+    (other / "fidelity.json").write_text(json.dumps(runs[1][2]))
+    got, _ = load_results([str(run_dir), str(other)])
+    assert [label for label, _, _ in got] == ["runs/fid", "other/fid"]
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(ValueError, match="no fidelity results"):
