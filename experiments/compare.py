@@ -26,7 +26,7 @@ import math
 import os
 import statistics
 
-from experiments.fidelity import fidelity_targets, first_world, ranking_target
+from experiments.fidelity import distinct_suffixes, fidelity_targets, first_world, ranking_target
 from experiments.stats import pick_regret
 
 #: Worlds drawn per panel by :func:`plot` (the best by worst ρ).
@@ -116,14 +116,7 @@ def _labels(paths: list[str]) -> list[str]:
         elif ps[-1].endswith(".json"):
             ps[-1] = ps[-1][:-5]
         parts.append(ps)
-    labels = []
-    for i, ps in enumerate(parts):
-        for k in range(1, len(ps) + 1):
-            name = "/".join(ps[-k:])
-            if all("/".join(q[-k:]) != name for j, q in enumerate(parts) if j != i):
-                break
-        labels.append(name)
-    return labels
+    return distinct_suffixes(parts)
 
 
 def _check(res: dict, path: str) -> None:

@@ -266,6 +266,19 @@ def parse_world(text: str) -> WorldSpec:
 
 
 # ------------------------------------------------------------------------------------------ config
+def distinct_suffixes(parts: list[list[str]]) -> list[str]:
+    """Per path (given as its components), the shortest trailing part, joined with ``/``, that no
+    other path of ``parts`` ends in (the whole path where none is shorter)."""
+    names = []
+    for i, ps in enumerate(parts):
+        for k in range(1, len(ps) + 1):
+            name = "/".join(ps[-k:])
+            if all("/".join(q[-k:]) != name for j, q in enumerate(parts) if j != i):
+                break
+        names.append(name)
+    return names
+
+
 def param_gait_names(paths) -> list[str]:
     """Panel names of the θ files ``paths``: each file's name without its extension, or, where two
     files share it (``table1/opt_seed0/thetas/sgat_step1.json`` and ``.../opt_seed1/...``), the
@@ -279,13 +292,7 @@ def param_gait_names(paths) -> list[str]:
     real = [os.path.realpath(p) for p in paths]
     if len(set(real)) != len(real):
         raise ValueError(f"params: the same θ file is given twice: {sorted({p for p, r in zip(paths, real) if real.count(r) > 1})}")
-    names = []
-    for i, ps in enumerate(parts):
-        for k in range(1, len(ps) + 1):
-            name = "/".join(ps[-k:])
-            if all("/".join(q[-k:]) != name for j, q in enumerate(parts) if j != i):
-                break
-        names.append(name)
+    names = distinct_suffixes(parts)
     for name in names:
         if name == "theta0" or (name.startswith("box") and name[3:].isdigit()):
             raise ValueError(f"params: the gait name {name!r} clashes with the panel's own gaits; rename the file")
