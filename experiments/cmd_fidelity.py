@@ -11,7 +11,9 @@ frequency, each over the K draws, and the ceiling the real trials' noise allows;
 grounded world, how often the sim falls where the real robot fell when it is teacher-forced along
 its own grounding walks (their real next states in place of the forward model). Writes
 ``fidelity.json``, ``fidelity.png`` (predicted vs real fitness, one colour per draw), ``table.txt``
-into the run directory; re-running the same command resumes where it stopped.
+into the run directory; re-running the same command resumes where it stopped, and re-running it
+with more worlds or another ``--episodes`` measures only what is new (the first k episode seeds of a
+gait are the same whatever the count).
 
 World options after ':' (e.g. ``--worlds sgat sgat:ensemble=5 sgat:real=8``): ``alpha``,
 ``ensemble``, ``inverse_command`` (0/1), ``hidden`` (e.g. 64x64: the paper's tanh networks; 0: linear models, the default), ``epochs``, ``real`` and ``sim`` (walks

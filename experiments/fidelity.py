@@ -105,6 +105,9 @@ _PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAIT
 
 
 def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
+    """``n`` seeds keyed by (seed, purpose, keys) (``numpy.random.SeedSequence.generate_state``): the
+    first k of n are the k seeds asked for with ``n=k``, so a run resumed with more episodes per gait
+    adds episodes to those it has."""
     return [int(s) for s in np.random.SeedSequence([seed, purpose, *keys]).generate_state(n, dtype=np.uint32)]
 
 
@@ -416,10 +419,12 @@ class Fidelity:
         return {k: self._phases[k] for k in PHASES if k in self._phases}
 
     def _check_config(self) -> None:
-        """Claim the run directory (``experiments.episodes.EpisodeLog``); more worlds, a new
-        bootstrap or another identification time budget reuse what was measured."""
+        """Claim the run directory (``experiments.episodes.EpisodeLog``); more worlds, more or fewer
+        episodes per gait, a new bootstrap or another identification time budget reuse what was
+        measured (a world's episode seeds are a prefix-stable stream, :func:`_seeds`: the first k of
+        n are the k of a run with k episodes)."""
         self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "fidelity run",
-                               ignore=("worlds", "bootstrap", "identify_budget_s"), say=self._say)
+                               ignore=("worlds", "episodes", "bootstrap", "identify_budget_s"), say=self._say)
         self._episodes = self._log.done
 
     def _run(self, tasks: list[dict], desc: str) -> None:

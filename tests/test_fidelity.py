@@ -108,6 +108,27 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
     assert prep["identified:confounded=0"][0]["effects"] == {"latency": 0.02}
 
 
+def test_more_episodes_per_gait_extend_a_run_as_a_fresh_run_would_walk_them(tmp_path, capsys):
+    """A run resumed with another --episodes walks only the episodes it lacks, and its result is a
+    fresh run's with that count: the first k episode seeds of a gait are those of a k-episode run."""
+    base = ["fidelity", "--gaits", "2", "--real-trials", "2", "--seconds", "1.0", "--workers", "1",
+            "--worlds", "sim", "ane", "--json"]
+    grown, fresh = tmp_path / "grown", tmp_path / "fresh"
+    assert main([*base, "--episodes", "2", "--out", str(grown)]) == 0
+    two = json.loads(capsys.readouterr().out)
+    n2 = len((grown / "episodes.jsonl").read_text().splitlines())
+    assert main([*base, "--episodes", "3", "--out", str(grown)]) == 0
+    grown_res = json.loads(capsys.readouterr().out)
+    assert len((grown / "episodes.jsonl").read_text().splitlines()) == n2 + 3  # one more ane episode per gait
+    assert main([*base, "--episodes", "3", "--out", str(fresh)]) == 0
+    fresh_res = json.loads(capsys.readouterr().out)
+    assert grown_res["worlds"] == fresh_res["worlds"] and grown_res["real"] == fresh_res["real"]
+    assert grown_res["worlds"]["ane"]["episodes"] == 3 and two["worlds"]["ane"]["episodes"] == 2
+    assert main([*base, "--episodes", "2", "--out", str(grown)]) == 0  # fewer: the first two again
+    assert json.loads(capsys.readouterr().out)["worlds"] == two["worlds"]
+    assert json.loads((grown / "config.json").read_text())["episodes"] == 2
+
+
 def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     out = tmp_path / "fid"
     args = ["fidelity", *TINY, "--worlds", "sim", "sgat", "gat", "--out", str(out), "--timings", "--json"]
