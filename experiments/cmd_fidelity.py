@@ -13,7 +13,9 @@ its own grounding walks (their real next states in place of the forward model). 
 ``fidelity.json``, ``fidelity.png`` (predicted vs real fitness, one colour per draw), ``table.txt``
 into the run directory; re-running the same command resumes where it stopped, and re-running it
 with more worlds or another ``--episodes`` measures only what is new (the first k episode seeds of a
-gait are the same whatever the count).
+gait are the same whatever the count). Every stochastic world is also scored from its first 1, 2,
+4, ... episodes per gait: the table ends with fidelity against the number of episodes per gait
+(``fidelity_episodes.png``), the figures runs with fewer ``--episodes`` would report.
 
 World options after ':' (e.g. ``--worlds sgat sgat:ensemble=5 sgat:real=8``): ``alpha``,
 ``ensemble``, ``inverse_command`` (0/1), ``hidden`` (e.g. 64x64: the paper's tanh networks; 0: linear models, the default), ``epochs``, ``real`` and ``sim`` (walks
@@ -85,7 +87,8 @@ def run(args) -> dict:
     res["run_dir"] = out  # res["wall_s"]: the run's time over all its invocations (timing.json)
     if not args.json:
         print(format_table(res), flush=True)
-        print(f"run directory: {out} (fidelity.json, fidelity.png, table.txt)", flush=True)
+        figs = "fidelity.png" + (", fidelity_episodes.png" if os.path.exists(os.path.join(out, "fidelity_episodes.png")) else "")
+        print(f"run directory: {out} (fidelity.json, {figs}, table.txt)", flush=True)
         print(f"time: {res['wall_s'] / 60:.1f} min over the run's invocations ({format_phases(res['phases_s'])})",
               flush=True)
     return res

@@ -60,7 +60,11 @@ what optimizing in the world over this panel would cost); and the spread of each
 The ceiling that the real trials' own noise allows is the square root of their split-half
 reliability (``experiments.stats``); the same figure over a stochastic world's episodes
 (``world_ceiling``, per draw) is the ceiling its own episode noise puts on ρ: when it is near 1,
-more episodes per gait cannot lift ρ and what is left is the world's model error. Everything random is keyed by (seed, purpose,
+more episodes per gait cannot lift ρ and what is left is the world's model error. Every stochastic
+world is also scored from the first k of its episodes per gait, k = 1, 2, 4, ... up to ``episodes``
+(``by_episodes``, :func:`episodes_rows`, ``fidelity_episodes.png``): episode seeds are a
+prefix-stable stream, so these are the figures a run with ``--episodes k`` reports, and one run
+gives fidelity against the number of episodes per gait. Everything random is keyed by (seed, purpose,
 ...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
 """
 
@@ -94,6 +98,8 @@ from walk_engine import params_for
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
+#: Kinds whose every episode of a gait is the same whatever its seed (:attr:`WorldSpec.deterministic`).
+DETERMINISTIC_KINDS = ("sim", "gat")
 #: The phases of a run, in run order, whose wall time ``fidelity.json`` reports (``phases_s``): where a
 #: run's time goes (the README's default run: the diagnoses and the world episodes, on busy cores).
 PHASES = ("real trials", "excitation logs", "diagnoses", "grounding walks", "fits", "world episodes",
@@ -165,7 +171,7 @@ class WorldSpec:
         the world's answer: the sim (MuJoCo is deterministic) and GAT on it (deterministic models, an
         ensemble's members averaged: ``sgat.ActionTransformer.transform``). ``tests/test_fidelity.py``
         checks it on episodes with different seeds."""
-        return self.kind in ("sim", "gat")
+        return self.kind in DETERMINISTIC_KINDS
 
     @property
     def per_draw(self) -> bool:
@@ -379,8 +385,9 @@ class Fidelity:
     Files: ``config.json``, ``panel.json`` (the gaits), ``episodes.jsonl`` (one line per finished
     episode, appended as batches finish), ``data/`` (grounding walks), ``models/`` (transformers per
     world and draw), ``identified/`` (excitation logs and diagnoses), ``fidelity.json`` (the result),
-    ``fidelity.png``, ``table.txt``, ``timing.json`` (wall time of every invocation so far) and
-    ``phases.json`` (its split over :data:`PHASES`).
+    ``fidelity.png``, ``fidelity_episodes.png`` (fidelity against episodes per gait, where a
+    stochastic world has more than one), ``table.txt``, ``timing.json`` (wall time of every
+    invocation so far) and ``phases.json`` (its split over :data:`PHASES`).
     """
 
     def __init__(self, cfg: FidelityConfig, run_dir: str, executor, *, log=None, progress: bool = False):
@@ -737,7 +744,7 @@ class Fidelity:
                         "brier_own_frequency": brier_score(real_fall, F)},
                "worlds": {}}
         for spec in self.specs:
-            draws = []
+            draws, curve = [], {}
             n = 1 if spec.deterministic else cfg.episodes
             for d in (range(cfg.data_seeds) if spec.per_draw else [0]):
                 pre = f"w|{spec.key}|d{d}"
@@ -748,12 +755,13 @@ class Fidelity:
                 # the world's own episode noise: how well its n-episode means would rank against themselves
                 # (a deterministic world and single episodes have none to measure)
                 own = split_half_reliability(W, seed=cfg.seed + d) if n >= 2 else None
+                for k in episode_counts(n):  # the same figures from the first k episodes of every gait
+                    curve.setdefault(k, []).append(
+                        {"draw": d, **_draw_metrics(W[:, :k].mean(1), WF[:, :k].mean(1), real_fit, F)})
                 draws.append({
                     "draw": d, "fitness": wf.tolist(), "fall_rate": wp.tolist(),
-                    "rho": spearman(wf, real_fit),
+                    **_draw_metrics(wf, wp, real_fit, F),
                     "rho_ci90": list(bootstrap_spearman(wf, R, n_boot=cfg.bootstrap, seed=cfg.seed + d)),
-                    "mae": float(np.mean(np.abs(wf - real_fit))), "bias": float(np.mean(wf - real_fit)),
-                    "brier": brier_score(wp, F), "pick_regret": pick_regret(wf, real_fit),
                     "world_reliability": None if own is None else own["reliability"],
                     "world_ceiling": None if own is None else own["ceiling"],
                     "real_walks": info["real_walks"], "real_seconds": info["real_seconds"],
@@ -765,13 +773,17 @@ class Fidelity:
                 })
             out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
                                         "data_gaits": spec.data_gaits if spec.grounded else None,
-                                        "grounding": spec.grounding.to_dict() if spec.grounding else None}
+                                        "grounding": spec.grounding.to_dict() if spec.grounding else None,
+                                        **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
+                                                            for k, c in curve.items()}} if curve else {})}
         return out
 
     def write(self, res: dict) -> None:
         atomic_write_text(os.path.join(self.run_dir, "fidelity.json"), json.dumps(jsonable(res), indent=1))
         atomic_write_text(os.path.join(self.run_dir, "table.txt"), format_table(res) + "\n")
         plot(res, os.path.join(self.run_dir, "fidelity.png"))
+        if len({r["episodes"] for r in episodes_rows(res)}) > 1:
+            plot_episodes(res, os.path.join(self.run_dir, "fidelity_episodes.png"))
 
 
 def format_phases(phases: dict[str, float], min_s: float = 0.0) -> str:
@@ -820,6 +832,44 @@ def replay_totals(replays: list[dict]) -> dict:
     median over the draws of the leg-joint RMS errors [rad], forced and ungrounded."""
     return {k: sum(r[k] for r in replays) for k in ("walks", "real_fell", "fell_with_real", "fell_without_real")} | {
         k: float(np.median([r[k] for r in replays])) for k in ("q_rms_rad", "q_rms_plain_rad")}
+
+
+def episode_counts(n: int) -> list[int]:
+    """The episode counts per gait a world of ``n`` episodes is also scored at (``by_episodes`` of a
+    fidelity result): 1, 2, 4, ... below ``n``, and ``n``; none for a single episode."""
+    return [] if n < 2 else sorted({2 ** i for i in range(n.bit_length()) if 2 ** i < n} | {n})
+
+
+def _draw_metrics(wf: np.ndarray, wp: np.ndarray, real_fit: np.ndarray, real_falls: np.ndarray) -> dict:
+    """One draw of a world against the real trials: Spearman ρ, MAE and bias (world − real) of the
+    fitness, the Brier score of its fall frequencies ``wp`` (G,) against the real falls (G, M), and
+    the regret of its pick (``experiments.stats``)."""
+    return {"rho": spearman(wf, real_fit), "mae": float(np.mean(np.abs(wf - real_fit))),
+            "bias": float(np.mean(wf - real_fit)), "brier": brier_score(wp, real_falls),
+            "pick_regret": pick_regret(wf, real_fit)}
+
+
+def episodes_view(res: dict, k: int) -> dict:
+    """A fidelity result as it would read with ``k`` episodes per gait in every stochastic world: each
+    world that has ``by_episodes[k]`` gets those draws and summary (the first k of its episodes, on the
+    same seeds as a run with ``--episodes k``); deterministic worlds keep theirs; worlds measured with
+    fewer than ``k`` episodes are left out. The targets (:func:`fidelity_targets`) read it like a result.
+
+    Raises:
+        ValueError: ``k`` < 1.
+    """
+    if k < 1:
+        raise ValueError(f"episodes per gait must be >= 1, got {k}")
+    worlds = {}
+    for name, w in res["worlds"].items():
+        cur = (w.get("by_episodes") or {}).get(str(k))
+        if cur is not None:
+            worlds[name] = {**w, "episodes": k, "draws": cur["draws"], "summary": cur["summary"]}
+        elif w.get("kind", name.split(":")[0]) in DETERMINISTIC_KINDS:  # one episode is its answer, whatever k
+            worlds[name] = w
+        elif k == w.get("episodes"):  # a world measured with k episodes, in a run saved before by_episodes
+            worlds[name] = w
+    return {**res, "worlds": worlds}
 
 
 def _summary(draws: list[dict]) -> dict:
@@ -923,7 +973,43 @@ def format_table(res: dict) -> str:
             lines.append(f"  {name:26s} sim fell on {t['fell_with_real']}/{t['real_fell']} walks that fell, "
                          f"{t['fell_without_real']}/{t['walks'] - t['real_fell']} that did not; leg joints "
                          f"{t['q_rms_rad']:.3f} rad RMS from the real walk (ungrounded {t['q_rms_plain_rad']:.3f})")
+    lines += format_episodes(res)
     return "\n".join(lines)
+
+
+def episodes_rows(res: dict) -> list[dict]:
+    """Fidelity against the number of episodes per gait, one row per stochastic world and count k of
+    ``by_episodes`` (1, 2, 4, ... and the run's own): worst and median ρ over the draws, median
+    |bias|, bias spread, median Brier, and for SGAT, hybrid and oracle worlds how many of the issue's
+    targets they meet at k (:func:`fidelity_targets` on :func:`episodes_view`; None for others).
+    Empty for a result saved before ``by_episodes``."""
+    rows = []
+    ks = sorted({int(k) for w in res["worlds"].values() for k in (w.get("by_episodes") or {})})
+    views = {k: episodes_view(res, k) for k in ks}
+    for name, w in res["worlds"].items():
+        for k in sorted(int(k) for k in (w.get("by_episodes") or {})):
+            s = w["by_episodes"][str(k)]["summary"]
+            t = fidelity_targets(views[k], name) if w.get("kind") in ("sgat", "hybrid", "oracle") else []
+            rows.append({"world": name, "episodes": k, "rho_worst": s["rho"]["min"], "rho_median": s["rho"]["median"],
+                         "abs_bias_median": s["abs_bias_median"], "bias_spread": s["bias"]["spread"],
+                         "brier_median": s["brier"]["median"], "targets_met": sum(ok for _, ok, _ in t) if t else None,
+                         "targets": len(t) if t else None, "ranking_met": bool(t[0][1]) if t else None})
+    return rows
+
+
+def format_episodes(res: dict) -> list[str]:
+    """The text lines of :func:`episodes_rows` (none for a result without ``by_episodes``)."""
+    rows = episodes_rows(res)
+    if not rows:
+        return []
+    lines = ["", f"against episodes per gait (the first k of every gait's episodes, the seeds of a run with --episodes k; "
+                 f"ranking target {ranking_target(res['real']['ceiling']):.2f}):",
+             f"  {'world':26s} {'k':>3s} {'rho worst [median]':>19s} {'|bias|':>7s} {'spread':>7s} {'Brier':>6s} {'targets met':>12s}"]
+    for r in rows:
+        met = "-" if r["targets"] is None else f"{r['targets_met']}/{r['targets']}" + (" (rank)" if r["ranking_met"] else "")
+        lines.append(f"  {r['world']:26s} {r['episodes']:>3d} {r['rho_worst']:>8.2f} [{r['rho_median']:.2f}]     "
+                     f"{r['abs_bias_median']:>7.1f} {r['bias_spread']:>7.1f} {r['brier_median']:>6.3f} {met:>12s}")
+    return lines
 
 
 def _own(summary: dict) -> str:
@@ -971,5 +1057,50 @@ def plot(res: dict, path: str) -> None:
     plt.close(fig)
 
 
-__all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "fidelity_targets", "first_world", "format_table",
-           "parse_world", "plot", "ranking_target"]
+def plot_episodes(res: dict, path: str) -> None:
+    """Fidelity against episodes per gait (:func:`episodes_rows`): worst (solid) and median (dashed)
+    ρ over the draws with the ranking target, and the bias spread over the draws with its target of 4,
+    one line per stochastic world; the deterministic worlds as horizontal lines."""
+    import matplotlib  # lazy: matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # lazy: matplotlib
+
+    rows = episodes_rows(res)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    worlds = list(dict.fromkeys(r["world"] for r in rows))
+    for i, name in enumerate(worlds):
+        rs = [r for r in rows if r["world"] == name]
+        k = [r["episodes"] for r in rs]
+        c = colors[i % len(colors)]
+        a1.plot(k, [r["rho_worst"] for r in rs], "o-", color=c, label=name)
+        a1.plot(k, [r["rho_median"] for r in rs], "o--", color=c, alpha=0.5, ms=3)
+        a2.plot(k, [r["bias_spread"] for r in rs], "o-", color=c, label=name)
+    for j, (name, w) in enumerate((n, w) for n, w in res["worlds"].items()
+                                  if w.get("kind", n.split(":")[0]) in DETERMINISTIC_KINDS):
+        c = colors[(len(worlds) + j) % len(colors)]
+        a1.axhline(w["summary"]["rho"]["min"], color=c, lw=1, ls=":", label=f"{name} (deterministic, worst draw)")
+        a2.axhline(w["summary"]["bias"]["spread"], color=c, lw=1, ls=":", label=f"{name} (deterministic)")
+    a1.axhline(ranking_target(res["real"]["ceiling"]), color="k", lw=1.2, label="ranking target")
+    a1.axhline(res["real"]["ceiling"], color="0.5", lw=1, ls="-.", label="ceiling (real trials' noise)")
+    a2.axhline(4.0, color="k", lw=1.2, label="target (≤ 4)")
+    for ax in (a1, a2):
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(sorted({r["episodes"] for r in rows}), [str(x) for x in sorted({r["episodes"] for r in rows})])
+        ax.set_xlabel("episodes per gait in the training world")
+        ax.grid(alpha=0.3)
+    a1.set_ylabel("Spearman ρ with real fitness\n(solid: worst draw, dashed: median)")
+    a2.set_ylabel("bias spread over the draws [fitness points]")
+    a1.legend(fontsize=6, loc="lower right")
+    a2.legend(fontsize=6, loc="upper right")
+    fig.suptitle(f"fidelity against episodes per gait: {len(res['gaits'])} gaits × {res['real']['trials']} real trials",
+                 fontsize=10)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+
+
+__all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "episode_counts", "episodes_rows", "episodes_view",
+           "fidelity_targets", "first_world", "format_table",
+           "parse_world", "plot", "plot_episodes", "ranking_target"]

@@ -30,7 +30,8 @@ from common.files import atomic_write_text
 from experiments.cli import main as cli_main
 from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
-from experiments.fidelity import fidelity_targets, first_world, format_phases, ranking_target, replay_totals
+from experiments.fidelity import (episodes_rows, fidelity_targets, first_world, format_phases, ranking_target,
+                                  replay_totals)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
@@ -61,6 +62,33 @@ def save_benchmark(name: str, script: str, argv: list[str], result: dict, load_b
 
 def _f(x, fmt="{:.2f}") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
+
+
+def _episodes_table(res: dict) -> list[str]:
+    """Fidelity against episodes per gait (``experiments.fidelity.episodes_rows``), one row per
+    stochastic world, one column per count k: worst ρ [median], bias spread, targets met."""
+    rows = episodes_rows(res)
+    ks = sorted({r["episodes"] for r in rows})
+    if len(ks) < 2:
+        return []
+    cell = {(r["world"], r["episodes"]): r for r in rows}
+    out = ["", f"Against the number of episodes per gait (each stochastic world's first k episodes of every gait, "
+               f"the seeds a run with `--episodes k` walks): worst ρ over the draws [median], bias spread, and for "
+               f"the SGAT, hybrid and oracle worlds the targets met (ranking target "
+               f"{ranking_target(res['real']['ceiling']):.2f}, **bold** where met):", "",
+           "| world | " + " | ".join(f"k = {k}" for k in ks) + " |", "|---|" + "---|" * len(ks)]
+    for name in dict.fromkeys(r["world"] for r in rows):
+        cells = []
+        for k in ks:
+            r = cell.get((name, k))
+            if r is None:
+                cells.append("–")
+                continue
+            rho = f"{_f(r['rho_worst'])} [{_f(r['rho_median'])}]"
+            cells.append((f"**{rho}**" if r["ranking_met"] else rho) + f", spread {_f(r['bias_spread'], '{:.1f}')}"
+                         + ("" if r["targets"] is None else f", {r['targets_met']}/{r['targets']}"))
+        out.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    return out
 
 
 def _fidelity(res: dict) -> str:
@@ -112,6 +140,7 @@ def _fidelity(res: dict) -> str:
             tv = fidelity_targets(res, n)
             lines.append(f"| `{n}` | " + " | ".join(
                 ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
+    lines += _episodes_table(res)
     oracle = first_world(res, "oracle")
     if targets and oracle:
         parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")

@@ -12,7 +12,7 @@ import pytest
 
 from experiments.cli import main
 from experiments.executors import SerialExecutor
-from experiments.fidelity import FidelityConfig, parse_world
+from experiments.fidelity import FidelityConfig, _summary, episode_counts, episodes_rows, episodes_view, parse_world
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--gaits", "2", "--real-trials", "2", "--data-seeds", "2", "--episodes", "2", "--seconds", "1.5",
@@ -127,6 +127,45 @@ def test_more_episodes_per_gait_extend_a_run_as_a_fresh_run_would_walk_them(tmp_
     assert main([*base, "--episodes", "2", "--out", str(grown)]) == 0  # fewer: the first two again
     assert json.loads(capsys.readouterr().out)["worlds"] == two["worlds"]
     assert json.loads((grown / "config.json").read_text())["episodes"] == 2
+    # the curve over episodes per gait: the first 2 of 3 episodes score as the 2-episode run does
+    ane3, ane2 = grown_res["worlds"]["ane"], two["worlds"]["ane"]
+    assert sorted(ane3["by_episodes"], key=int) == ["1", "2", "3"] and "by_episodes" not in grown_res["worlds"]["sim"]
+    for key in ("rho", "mae", "bias", "brier", "pick_regret"):
+        assert ane3["by_episodes"]["2"]["draws"][0][key] == pytest.approx(ane2["draws"][0][key], nan_ok=True)
+        assert ane3["by_episodes"]["3"]["draws"][0][key] == pytest.approx(ane3["draws"][0][key], nan_ok=True)
+    view = episodes_view(grown_res, 2)
+    assert view["worlds"]["ane"]["summary"] == {k: v for k, v in ane2["summary"].items() if k != "world_ceiling"}
+    assert view["worlds"]["sim"] == grown_res["worlds"]["sim"]
+
+
+def test_episode_counts_and_the_view_at_k_episodes():
+    """The counts a world is scored at (powers of two below its own, and its own), and a result read
+    at k episodes: deterministic worlds as they are, stochastic ones from their first k episodes, those
+    measured with fewer left out; the targets then judge the k-episode figures."""
+    assert episode_counts(1) == [] and episode_counts(2) == [1, 2] and episode_counts(6) == [1, 2, 4, 6]
+    assert episode_counts(16) == [1, 2, 4, 8, 16]
+
+    def world(kind, rhos, bias, brier=0.2):
+        draws = [{"draw": i, "rho": r, "bias": b, "mae": abs(b), "brier": brier, "pick_regret": 0.0}
+                 for i, (r, b) in enumerate(zip(rhos, bias))]
+        return {"kind": kind, "draws": draws, "summary": _summary(draws)}
+
+    # a world whose ranking and bias settle with more episodes: 0.5 worst at one, 0.9 at four
+    noisy = {**world("sgat", [0.9, 0.92], [1.0, 1.5]), "episodes": 4,
+             "by_episodes": {"1": world("sgat", [0.5, 0.7], [-3.0, 3.0]), "4": world("sgat", [0.9, 0.92], [1.0, 1.5])}}
+    res = {"gaits": ["a", "b", "c"], "real": {"ceiling": 0.95, "trials": 10}, "worlds": {
+        "sim": {**world("sim", [0.6], [5.0], brier=0.5), "episodes": 1},
+        "gat": {**world("gat", [0.6, 0.6], [2.0, 2.0], brier=0.3), "episodes": 1},
+        "sgat": noisy, "ane": {**world("ane", [0.3], [0.0]), "episodes": 2}}}
+    one = episodes_view(res, 1)
+    assert set(one["worlds"]) == {"sim", "gat", "sgat"} and one["worlds"]["sim"] is res["worlds"]["sim"]
+    assert one["worlds"]["sgat"]["summary"]["rho"]["min"] == 0.5 and one["worlds"]["sgat"]["episodes"] == 1
+    assert set(episodes_view(res, 2)["worlds"]) == {"sim", "gat", "ane"}  # ane ran 2 episodes and has no curve
+    rows = {r["episodes"]: r for r in episodes_rows(res) if r["world"] == "sgat"}
+    assert (rows[1]["ranking_met"], rows[4]["ranking_met"]) == (False, True)
+    assert rows[1]["bias_spread"] == pytest.approx(6.0) and rows[4]["targets_met"] == rows[4]["targets"] == 6
+    with pytest.raises(ValueError, match="episodes per gait"):
+        episodes_view(res, 0)
 
 
 def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
