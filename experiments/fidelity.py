@@ -1076,12 +1076,14 @@ def plot_episodes(res: dict, path: str) -> None:
         c = colors[i % len(colors)]
         a1.plot(k, [r["rho_worst"] for r in rs], "o-", color=c, label=name)
         a1.plot(k, [r["rho_median"] for r in rs], "o--", color=c, alpha=0.5, ms=3)
-        a2.plot(k, [r["bias_spread"] for r in rs], "o-", color=c, label=name)
+        if res["worlds"][name]["summary"]["draws"] > 1:  # a spread needs draws
+            a2.plot(k, [r["bias_spread"] for r in rs], "o-", color=c, label=name)
     for j, (name, w) in enumerate((n, w) for n, w in res["worlds"].items()
                                   if w.get("kind", n.split(":")[0]) in DETERMINISTIC_KINDS):
         c = colors[(len(worlds) + j) % len(colors)]
         a1.axhline(w["summary"]["rho"]["min"], color=c, lw=1, ls=":", label=f"{name} (deterministic, worst draw)")
-        a2.axhline(w["summary"]["bias"]["spread"], color=c, lw=1, ls=":", label=f"{name} (deterministic)")
+        if w["summary"]["draws"] > 1:
+            a2.axhline(w["summary"]["bias"]["spread"], color=c, lw=1, ls=":", label=f"{name} (deterministic)")
     a1.axhline(ranking_target(res["real"]["ceiling"]), color="k", lw=1.2, label="ranking target")
     a1.axhline(res["real"]["ceiling"], color="0.5", lw=1, ls="-.", label="ceiling (real trials' noise)")
     a2.axhline(4.0, color="k", lw=1.2, label="target (≤ 4)")
@@ -1092,8 +1094,8 @@ def plot_episodes(res: dict, path: str) -> None:
         ax.grid(alpha=0.3)
     a1.set_ylabel("Spearman ρ with real fitness\n(solid: worst draw, dashed: median)")
     a2.set_ylabel("bias spread over the draws [fitness points]")
-    a1.legend(fontsize=6, loc="lower right")
-    a2.legend(fontsize=6, loc="upper right")
+    a1.legend(fontsize=6, loc="best")
+    a2.legend(fontsize=6, loc="best")
     fig.suptitle(f"fidelity against episodes per gait: {len(res['gaits'])} gaits × {res['real']['trials']} real trials",
                  fontsize=10)
     with atomic_path(path, suffix=".png") as tmp:
