@@ -73,7 +73,8 @@ def _episodes_table(res: dict) -> list[str]:
         return []
     cell = {(r["world"], r["episodes"]): r for r in rows}
     out = ["", f"Against the number of episodes per gait (each stochastic world's first k episodes of every gait, "
-               f"the seeds a run with `--episodes k` walks): worst ρ over the draws [median], bias spread, and for "
+               f"the seeds a run with `--episodes k` walks): worst ρ over the draws [median], bias spread over the "
+               f"draws, and for "
                f"the SGAT, hybrid and oracle worlds the targets met (ranking target "
                f"{ranking_target(res['real']['ceiling']):.2f}, **bold** where met):", "",
            "| world | " + " | ".join(f"k = {k}" for k in ks) + " |", "|---|" + "---|" * len(ks)]
@@ -85,7 +86,9 @@ def _episodes_table(res: dict) -> list[str]:
                 cells.append("–")
                 continue
             rho = f"{_f(r['rho_worst'])} [{_f(r['rho_median'])}]"
-            cells.append((f"**{rho}**" if r["ranking_met"] else rho) + f", spread {_f(r['bias_spread'], '{:.1f}')}"
+            one_draw = res["worlds"][name]["summary"]["draws"] == 1  # a spread needs draws
+            cells.append((f"**{rho}**" if r["ranking_met"] else rho)
+                         + ("" if one_draw else f", spread {_f(r['bias_spread'], '{:.1f}')}")
                          + ("" if r["targets"] is None else f", {r['targets_met']}/{r['targets']}"))
         out.append(f"| `{name}` | " + " | ".join(cells) + " |")
     return out

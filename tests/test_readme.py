@@ -89,3 +89,30 @@ def test_fidelity_block_compares_falls_on_the_data_gait_with_the_grounding_walks
         for d in w["draws"]:
             d.pop("real_walk_falls", None)
     assert readme._data_gait_falls(res) == []
+
+
+def test_fidelity_block_tabulates_fidelity_against_episodes_per_gait():
+    """A result with ``by_episodes`` gets one row per stochastic world and a column per count: worst ρ
+    [median] (bold where the ranking target is met), the bias spread (not for a one-draw world) and,
+    for SGAT, hybrid and oracle worlds, the targets met at that count; a result without it gets none."""
+    from experiments.fidelity import _summary
+
+    def world(kind, rhos, bias, brier=0.2):
+        draws = [{"draw": i, "rho": r, "bias": b, "mae": abs(b), "brier": brier, "pick_regret": 0.0}
+                 for i, (r, b) in enumerate(zip(rhos, bias))]
+        return {"kind": kind, "draws": draws, "summary": _summary(draws)}
+
+    res = {"gaits": ["a", "b", "c"], "real": {"ceiling": 0.95, "trials": 10}, "worlds": {
+        "sim": {**world("sim", [0.6], [5.0], brier=0.5), "episodes": 1},
+        "ane": {**world("ane", [0.3], [1.0]), "episodes": 2,
+                "by_episodes": {"1": world("ane", [0.2], [1.0]), "2": world("ane", [0.3], [1.0])}},
+        "oracle": {**world("oracle", [0.9, 0.85], [0.5, 1.0]), "episodes": 2,
+                   "by_episodes": {"1": world("oracle", [0.6, 0.7], [0.0, 3.0]),
+                                   "2": world("oracle", [0.9, 0.85], [0.5, 1.0])}}}}
+    lines = readme._episodes_table(res)
+    assert "| world | k = 1 | k = 2 |" in lines
+    assert "| `oracle` | 0.60 [0.65], spread 3.0, 3/4 | **0.85 [0.88]**, spread 0.5, 4/4 |" in lines, lines
+    assert "| `ane` | 0.20 [0.20] | 0.30 [0.30] |" in lines  # one draw: no spread, no targets
+    for w in res["worlds"].values():
+        w.pop("by_episodes", None)
+    assert readme._episodes_table(res) == []
