@@ -8,7 +8,7 @@ fitness agree), so their worlds are scored against the same real fitness and the
 The same seed on another machine kind is another panel (the real trials differ in their last bits,
 and falls amplify that).
 
-Per world: Spearman ρ with the real fitness over the draws (median, worst, best), median |bias| and
+Per world: its episodes per gait, Spearman ρ with the real fitness over the draws (median, worst, best), median |bias| and
 the bias spread over the draws, the median Brier score, the median regret of its pick, whether its
 worst ρ meets the grounding issue's ranking target (:func:`experiments.fidelity.ranking_target`),
 and for SGAT and hybrid worlds how many of the issue's targets it meets
@@ -154,7 +154,7 @@ def world_row(res: dict, name: str) -> dict:
     draws = w["draws"]
     rhos = [d["rho"] for d in draws if d["rho"] is not None and math.isfinite(d["rho"])]
     kind = w.get("kind", name.split(":")[0])
-    row = {"world": name, "kind": kind, "draws": len(draws),
+    row = {"world": name, "kind": kind, "draws": len(draws), "episodes": w.get("episodes"),
            "rho_median": _median(rhos), "rho_worst": min(rhos) if rhos else math.nan,
            "rho_best": max(rhos) if rhos else math.nan,
            "abs_bias_median": float(w["summary"]["abs_bias_median"]),
@@ -257,17 +257,22 @@ def _targets(r: dict) -> str:
     return "-" if not r["targets"] else f"{r['targets_met']}/{len(r['targets'])}"
 
 
+def _episodes(r: dict) -> str:
+    """A row's episodes per gait, '-' for results saved before the field."""
+    return "-" if r.get("episodes") is None else str(r["episodes"])
+
+
 def format_compare(res: dict) -> str:
     """The ranking as text: one table per panel."""
     lines = []
     for p in res["panels"]:
         lines += [panel_title(p),
-                  f"  {'world':40s} {'run (+ others with the same draws)':33s} {'draws':>5s} {'rho median [worst, best]':>26s} {'|bias|':>6s} "
+                  f"  {'world':40s} {'run (+ others with the same draws)':33s} {'draws':>5s} {'ep.':>4s} {'rho median [worst, best]':>26s} {'|bias|':>6s} "
                   f"{'spread':>6s} {'Brier':>6s} {'regret':>6s} {'worst>=target':>13s} {'targets':>7s} {'rho - sgat (wins)':>18s}",
                   f"  (target for the worst rho: {ranking_target(p['ceiling']):.2f})"]
         for r in p["rows"]:
             run = r["run"] + (f" (+{len(r['runs']) - 1})" if len(r["runs"]) > 1 else "")
-            lines.append(f"  {r['world']:40s} {run:33s} {r['draws']:>5d} "
+            lines.append(f"  {r['world']:40s} {run:33s} {r['draws']:>5d} {_episodes(r):>4s} "
                          f"{r['rho_median']:>8.2f} [{r['rho_worst']:5.2f}, {r['rho_best']:5.2f}] "
                          f"{r['abs_bias_median']:>6.1f} {r['bias_spread']:>6.1f} {r['brier_median']:>6.3f} "
                          f"{r['regret_median']:>6.1f} {'yes' if r['ranking_target_met'] else 'no':>13s} {_targets(r):>7s} "
@@ -313,7 +318,8 @@ def plot(res: dict, path: str, *, max_rows: int = PLOT_ROWS) -> None:
         ax.axvline(p["ceiling"], color="0.3", ls="--", lw=1, label=f"ceiling {p['ceiling']:.2f}")
         ax.axvline(ranking_target(p["ceiling"]), color="tab:red", ls=":", lw=1,
                    label=f"target for the worst draw {ranking_target(p['ceiling']):.2f}")
-        ax.set_yticks(y, [f"{r['world']}  ({r['run']}" + (f" +{len(r['runs']) - 1}" if len(r["runs"]) > 1 else "") + ")"
+        ax.set_yticks(y, [f"{r['world']}  ({r['run']}" + (f" +{len(r['runs']) - 1}" if len(r["runs"]) > 1 else "")
+                          + (f"; {r['episodes']} ep." if r.get("episodes") not in (None, 1) else "") + ")"
                           for r in rows], fontsize=6)
         ax.set_ylim(-0.7, h - 0.3)
         ax.set_xlim(min(0.0, min(r["rho_worst"] for r in rows if math.isfinite(r["rho_worst"])) if any(

@@ -249,14 +249,15 @@ def _compare(res: dict) -> str:
                   f"target ({ranking_target(p['ceiling']):.2f}): " + (", ".join(name(r) for r in ranked) or "none")
                   + "; SGAT or hybrid worlds that meet every target: " + (", ".join(name(r) for r in full) or "none") + ".",
                   "", f"<details><summary>all {p['worlds']} worlds of this panel</summary>", "",
-                  "| world | run (+ results with the same draws) | draws | ρ: median [worst, best] | median \\|bias\\| "
+                  "| world | run (+ results with the same draws) | draws × episodes per gait | ρ: median [worst, best] | median \\|bias\\| "
                   "| bias spread | Brier (median) | regret (median) | worst ρ at the target | SGAT targets met "
                   "| ρ − its run's SGAT: median (draws higher) |",
                   "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in rows:
             run = r["run"] + (f" (+{len(r['runs']) - 1})" if len(r["runs"]) > 1 else "")
             v = r.get("vs_sgat")
-            lines.append(f"| `{r['world']}` | {run} | {r['draws']} | {_f(r['rho_median'])} [{_f(r['rho_worst'])}, "
+            eps = "" if r.get("episodes") is None else f" × {r['episodes']}"
+            lines.append(f"| `{r['world']}` | {run} | {r['draws']}{eps} | {_f(r['rho_median'])} [{_f(r['rho_worst'])}, "
                          f"{_f(r['rho_best'])}] | {_f(r['abs_bias_median'], '{:.1f}')} | {_f(r['bias_spread'], '{:.1f}')} "
                          f"| {_f(r['brier_median'], '{:.3f}')} | {_f(r['regret_median'], '{:.1f}')} | "
                          f"{'✓' if r['ranking_target_met'] else '✗'} | "

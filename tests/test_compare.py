@@ -170,3 +170,20 @@ def test_readme_ranking_is_the_ranking_of_the_saved_fidelity_results():
     kinds = tuple(args[args.index("--kinds") + 1].split(",")) if "--kinds" in args else None
     fresh = json.loads(json.dumps(compare(results, kinds=kinds)))
     assert [p["rows"] for p in fresh["panels"]] == [p["rows"] for p in doc["result"]["panels"]]
+
+
+def test_rows_carry_the_episodes_per_gait_so_runs_of_one_world_tell_apart():
+    """Two runs of one world on one panel with 4 and 16 episodes per gait are two rows, each with its
+    count in the row, the text table and the README table; results saved before the field show '-'."""
+    from experiments import readme
+
+    four, sixteen = _world("sgat", NOISY), _world("sgat", EXACT)
+    four["episodes"], sixteen["episodes"] = 4, 16
+    res = compare([("run-4", "a.json", _result({"sgat": four})), ("run-16", "b.json", _result({"sgat": sixteen})),
+                   ("old", "c.json", _result({"sgat": _world("sgat", SHUFFLED)}))])
+    rows = {r["run"]: r for r in res["panels"][0]["rows"]}
+    assert (rows["run-4"]["episodes"], rows["run-16"]["episodes"], rows["old"]["episodes"]) == (4, 16, None)
+    text = format_compare(res)
+    assert any(" run-16 " in line and "   16 " in line for line in text.splitlines())
+    md = readme._compare(res)
+    assert "| `sgat` | run-16 | 3 × 16 |" in md and "| `sgat` | old | 3 |" in md
