@@ -202,9 +202,12 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
             assert 0 < rp["q_rms_rad"] < rp["q_rms_plain_rad"], rp
     assert "replay" not in res["worlds"]["sim"]["draws"][0]
     table = (out / "table.txt").read_text()
-    forced = table.split("teacher-forced")[1].splitlines()[1:]
+    forced = table.split("teacher-forced")[1].split("\n\n")[0].splitlines()[1:]
     assert sorted(line.split()[0] for line in forced) == ["gat", "sgat"]  # the grounded worlds only
-    for f in ("fidelity.json", "fidelity.png", "table.txt", "panel.json", "episodes.jsonl"):
+    # fidelity against episodes per gait: SGAT at 1 and 2 episodes, GAT and the sim deterministic
+    curve = table.split("against episodes per gait")[1].splitlines()[2:]
+    assert [line.split()[:2] for line in curve] == [["sgat", "1"], ["sgat", "2"]]
+    for f in ("fidelity.json", "fidelity.png", "fidelity_episodes.png", "table.txt", "panel.json", "episodes.jsonl"):
         assert (out / f).exists(), f
     n_lines = len((out / "episodes.jsonl").read_text().splitlines())
     # a second run with one more world measures only that world
