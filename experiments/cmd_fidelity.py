@@ -24,7 +24,9 @@ per draw), ``noise`` (exploration noise [rad]), ``gaits`` (walks spread over thi
 one frame), ``commands`` (c: the forward model also sees the c previous commands) for gat, sgat and hybrid, ``method`` (sgat/gat) for hybrid; ``sigma`` for ane;
 ``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification) and ``confounded`` (0: without the contact terms that only stand in for the identified uneven ground) for identified and hybrid.
 The world ``oracle`` (not a default) is the real world itself on fresh seeds: the ρ a world that is
-exactly right gets with the same number of episodes per gait.
+exactly right gets with the same number of episodes per gait; ``oracle:mean=1`` is the real world
+with every effect fixed at the middle of its range (the terrain's amplitude too): what a world that
+knows the real physics exactly, as one point and without its spread from episode to episode, gets.
 """
 
 from __future__ import annotations

@@ -26,7 +26,10 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
               the physics library could not name
 ``oracle``    the real world itself, on fresh seeds per draw and as many episodes per gait as
               the other stochastic worlds: what a training world that is exactly right gets
-              with that many episodes (not a default world; it costs real trials)
+              with that many episodes (not a default world; it costs real trials);
+              ``oracle:mean=1``: the real world with every effect fixed at the middle of its
+              range (its terrain amplitude too; the surface stays random): what a world that
+              knows the real physics exactly, as one point, gets (the identified sim's best)
 ============  ==========================================================================
 
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
@@ -120,7 +123,7 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 # ------------------------------------------------------------------------------------------ worlds
 #: WorldSpec fields added after the first release, with their defaults (left out of the cache key).
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
-                  "stepping_logs": None, "identified_confounded": True}
+                  "stepping_logs": None, "identified_confounded": True, "oracle_mean": False}
 
 
 @dataclass(frozen=True)
@@ -141,6 +144,7 @@ class WorldSpec:
     identified_ground: bool = True  # identified: the uneven ground (ablation switch)
     stepping_logs: int | None = None  # identified / hybrid: stepping logs per identification (None: the run's)
     identified_confounded: bool = True  # identified / hybrid: build in contact terms confounded with the ground
+    oracle_mean: bool = False  # oracle: the real world with its effects fixed at their mean (experiments.tasks.mean_profile)
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -207,6 +211,8 @@ def parse_world(text: str) -> WorldSpec:
                 kw["stepping_logs"] = int(v)
             elif kind in ("identified", "hybrid") and k == "confounded":
                 kw["identified_confounded"] = bool(int(v))
+            elif kind == "oracle" and k == "mean":
+                kw["oracle_mean"] = bool(int(v))
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
@@ -642,6 +648,8 @@ class Fidelity:
         if spec.kind == "oracle":  # real episodes on seeds of their own, new for every draw
             base["world"] = "real"
             seeds = _seeds(cfg.seed, _ORACLE, draw, n=n)
+            if spec.oracle_mean:  # its mean physics, one point (experiments.tasks.mean_profile)
+                base["profile"] = f"{cfg.profile}:mean"
         elif spec.kind in ("sim", "ane"):
             base["world"] = "sim"
             if spec.kind == "ane":
@@ -774,6 +782,7 @@ class Fidelity:
             out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
                                         "data_gaits": spec.data_gaits if spec.grounded else None,
                                         "grounding": spec.grounding.to_dict() if spec.grounding else None,
+                                        **({"oracle_mean": True} if spec.oracle_mean else {}),
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
                                                             for k, c in curve.items()}} if curve else {})}
         return out

@@ -118,7 +118,8 @@ def _fidelity(res: dict) -> str:
         if d0["excitation_logs"]:
             data.append(f"{d0['excitation_logs']} excitation logs ({d0['excitation_seconds']:.0f} s)")
         if w.get("kind") == "oracle":
-            data.append(f"it is the real world ({w['episodes']} episodes per gait on fresh seeds)")
+            data.append(f"it is the real world{' at its mean physics' if w.get('oracle_mean') else ''} "
+                        f"({w['episodes']} episodes per gait on fresh seeds)")
         lines.append(f"| `{name}` | {s['draws']} | {_f(s['rho']['median'])} [{_f(s['rho']['min'])}, {_f(s['rho']['max'])}] "
                      f"| [{_f(ci[0])}, {_f(ci[1])}] | {_f(s['mae']['median'], '{:.1f}')} | "
                      f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "

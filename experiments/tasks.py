@@ -12,7 +12,9 @@ key                       meaning
 ``theta``                 the 16 gait parameters in SI units (list)
 ``seed``                  the episode seed (terrain, effects, noise, SGAT sampling)
 ``seconds``               episode length [s] (the paper: 7.5)
-``profile``               real-world effect profile name (real world only)
+``profile``               real-world effect profile name (real world only); ``NAME:mean`` is that
+                          profile with every effect fixed at the middle of its range
+                          (:func:`mean_profile`: its mean physics without its spread)
 ``action_noise``          std [rad] of Gaussian noise on the applied leg targets (sim data
                           collection with exploration noise, or the ANE baseline)
 ``transformer``           directory of a saved ``sgat.ActionTransformer`` (grounded world)
@@ -80,7 +82,8 @@ def _world(task: dict):
             _WORLDS.clear()
         robot = get_robot(robot_name)
         if world == "real":
-            _WORLDS[key] = NaoRealEnv(robot, profile=task.get("profile", "real"), terrain=task.get("terrain", "lumpy"))
+            _WORLDS[key] = NaoRealEnv(robot, profile=_real_profile(task.get("profile", "real"), robot),
+                                      terrain=task.get("terrain", "lumpy"))
         elif reports:
             from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
 
@@ -95,6 +98,36 @@ def _world(task: dict):
     if world == "grounded":
         env = GroundedEnv(env, _transformer(task["transformer"]))
     return env
+
+
+def mean_profile(profile):
+    """``profile`` (an ``envs.effects.RealProfile``) with every effect fixed at the middle of its
+    range, named ``"<name>:mean"``: the real world's mean physics without its spread from episode to
+    episode (the terrain's shape stays random per episode; its amplitude is fixed too). What a
+    training world that identified the real physics exactly, as one point, can at best be."""
+    import dataclasses
+
+    from envs.effects import EFFECTS  # lazy: loads the engines
+
+    mids = {f: ((lo + hi) / 2.0,) * 2 for f in EFFECTS for lo, hi in [getattr(profile, f)]}
+    return dataclasses.replace(profile, name=f"{profile.name}:mean", **mids)
+
+
+def _real_profile(name: str, robot):
+    """The profile a task names: ``"real"`` etc. as they are (``envs.effects.get_profile`` resolves
+    them), ``"<name>:mean"`` as :func:`mean_profile` of that profile for ``robot``.
+
+    Raises:
+        ValueError: an unknown suffix after ``:``.
+    """
+    base, sep, mode = str(name).partition(":")
+    if not sep:
+        return name
+    if mode != "mean":
+        raise ValueError(f"profile {name!r}: unknown form {mode!r} (NAME or NAME:mean)")
+    from envs.effects import get_profile  # lazy: loads the engines
+
+    return mean_profile(get_profile(base, robot))
 
 
 def run_episode(task: dict) -> dict:

@@ -398,3 +398,36 @@ def test_the_oracle_world_walks_the_real_world_on_fresh_seeds_per_draw(tmp_path)
     from experiments.fidelity import _REAL, _seeds
 
     assert not set(seeds0) & set(_seeds(cfg.seed, _REAL, n=cfg.real_trials))  # not the real trials' seeds
+
+
+def test_the_mean_oracle_walks_the_real_world_at_the_middle_of_every_effect_range(tmp_path):
+    """``oracle:mean=1``: the real world's episodes on the oracle's own seeds, with every effect fixed
+    at the middle of its range (``experiments.tasks.mean_profile``): an episode draws exactly those
+    values, whatever its seed, while the plain real world draws others."""
+    from envs.effects import EFFECTS, PROFILES
+    from experiments.fidelity import Fidelity
+    from experiments.tasks import _real_profile, _world, mean_profile
+
+    m = parse_world("oracle:mean=1")
+    assert m.oracle_mean and not parse_world("oracle").oracle_mean and m.key != parse_world("oracle").key
+    mp = mean_profile(PROFILES["real"])
+    assert mp.name == "real:mean" and mp.latency_s == (0.015, 0.015) and mp.terrain_amplitude == (0.01, 0.01)
+    assert all(lo == hi for lo, hi in (getattr(mp, f) for f in EFFECTS))
+    assert _real_profile("real", None) == "real"
+    with pytest.raises(ValueError, match="NAME:mean"):
+        _real_profile("real:median", None)
+    cfg = FidelityConfig(worlds=("oracle", "oracle:mean=1"), gaits=2, real_trials=2, episodes=2, data_seeds=1)
+    run = Fidelity(cfg, str(tmp_path), executor=None)
+    gaits = [{"name": "a", "theta": [0.0]}, {"name": "b", "theta": [1.0]}]
+    plain, mean = (run._world_tasks(s, 0, {}, gaits) for s in run.specs)
+    assert [t["seed"] for t in plain] == [t["seed"] for t in mean]  # paired: only the physics differs
+    assert {t["profile"] for t in mean} == {"real:mean"} and {t["profile"] for t in plain} == {"real"}
+    env = _world({"world": "real", "profile": "real:mean", "seed": 0})
+    for seed in (1, 2):
+        env.reset(seed=seed)
+        e = env.unwrapped.effects
+        assert e.latency_s == pytest.approx(0.015) and e.terrain_amplitude == pytest.approx(0.01)
+        assert np.allclose(e.kp_scale, 0.925) and np.allclose(e.foot_friction, 0.7)
+    real = _world({"world": "real", "profile": "real", "seed": 0})
+    real.reset(seed=1)
+    assert not np.allclose(real.unwrapped.effects.kp_scale, 0.925)
