@@ -1076,7 +1076,7 @@ def plot_episodes(res: dict, path: str) -> None:
     import matplotlib.pyplot as plt  # lazy: matplotlib
 
     rows = episodes_rows(res)
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 4.2), layout="constrained")
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     worlds = list(dict.fromkeys(r["world"] for r in rows))
     for i, name in enumerate(worlds):
@@ -1086,16 +1086,16 @@ def plot_episodes(res: dict, path: str) -> None:
         a1.plot(k, [r["rho_worst"] for r in rs], "o-", color=c, label=name)
         a1.plot(k, [r["rho_median"] for r in rs], "o--", color=c, alpha=0.5, ms=3)
         if res["worlds"][name]["summary"]["draws"] > 1:  # a spread needs draws
-            a2.plot(k, [r["bias_spread"] for r in rs], "o-", color=c, label=name)
+            a2.plot(k, [r["bias_spread"] for r in rs], "o-", color=c)
     for j, (name, w) in enumerate((n, w) for n, w in res["worlds"].items()
                                   if w.get("kind", n.split(":")[0]) in DETERMINISTIC_KINDS):
         c = colors[(len(worlds) + j) % len(colors)]
         a1.axhline(w["summary"]["rho"]["min"], color=c, lw=1, ls=":", label=f"{name} (deterministic, worst draw)")
         if w["summary"]["draws"] > 1:
-            a2.axhline(w["summary"]["bias"]["spread"], color=c, lw=1, ls=":", label=f"{name} (deterministic)")
+            a2.axhline(w["summary"]["bias"]["spread"], color=c, lw=1, ls=":")
     a1.axhline(ranking_target(res["real"]["ceiling"]), color="k", lw=1.2, label="ranking target")
     a1.axhline(res["real"]["ceiling"], color="0.5", lw=1, ls="-.", label="ceiling (real trials' noise)")
-    a2.axhline(4.0, color="k", lw=1.2, label="target (≤ 4)")
+    a2.axhline(4.0, color="k", lw=1.2, label="target for the spread (≤ 4)")
     for ax in (a1, a2):
         ax.set_xscale("log", base=2)
         ax.set_xticks(sorted({r["episodes"] for r in rows}), [str(x) for x in sorted({r["episodes"] for r in rows})])
@@ -1103,8 +1103,8 @@ def plot_episodes(res: dict, path: str) -> None:
         ax.grid(alpha=0.3)
     a1.set_ylabel("Spearman ρ with real fitness\n(solid: worst draw, dashed: median)")
     a2.set_ylabel("bias spread over the draws [fitness points]")
-    a1.legend(fontsize=6, loc="best")
     a2.legend(fontsize=6, loc="best")
+    fig.legend(*a1.get_legend_handles_labels(), loc="outside right upper", fontsize=7)  # one legend, both panels
     fig.suptitle(f"fidelity against episodes per gait: {len(res['gaits'])} gaits × {res['real']['trials']} real trials",
                  fontsize=10)
     with atomic_path(path, suffix=".png") as tmp:

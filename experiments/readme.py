@@ -145,11 +145,12 @@ def _fidelity(res: dict) -> str:
             lines.append(f"| `{n}` | " + " | ".join(
                 ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
     lines += _episodes_table(res)
-    oracle = first_world(res, "oracle")
-    if targets and oracle:
+    for oracle in [n for n, w in res["worlds"].items() if w.get("kind") == "oracle"] if targets else []:
+        w = res["worlds"][oracle]
         parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")
                  for t, ok, v in fidelity_targets(res, oracle)]
-        lines += ["", f"For scale, `{oracle}` (the real world itself, {res['worlds'][oracle]['episodes']} episodes per "
+        what = "at its mean physics, every effect at the middle of its range" if w.get("oracle_mean") else "itself"
+        lines += ["", f"For scale, `{oracle}` (the real world {what}, {w['episodes']} episodes per "
                   "gait on fresh seeds) against the same targets: " + "; ".join(parts) + "."]
     if res.get("wall_s") is not None:
         ph = format_phases(res.get("phases_s") or {}, min_s=0.5)
