@@ -22,11 +22,13 @@ World options after ':' (e.g. ``--worlds sgat sgat:ensemble=5 sgat:real=8``): ``
 per draw), ``noise`` (exploration noise [rad]), ``gaits`` (walks spread over this many gaits),
 ``residual`` (0/1), ``matched`` (0/1: the matched transformer, a + f_sim^-1(s, ŝ_real) - f_sim^-1(s, ŝ_sim)), ``zero`` (0/1: linear models from zero weights), ``local`` (0/1: a joint-local inverse model, each joint's command from its own state only), ``mixture`` (K Gaussians in SGAT's forward model), ``memory`` (correlation time of SGAT's noise [s]), ``shadow`` (τ [s] of the shadow state the forward model predicts from; 0: the sim's state, the paper), ``state`` (legs, legs+imu), ``history`` (frames of state the models see; default 6; 1: the paper's
 one frame), ``commands`` (c: the forward model also sees the c previous commands) for gat, sgat and hybrid, ``method`` (sgat/gat) for hybrid; ``sigma`` for ane;
-``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification) and ``confounded`` (0: without the contact terms that only stand in for the identified uneven ground) for identified and hybrid.
+``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification) ``confounded`` (0: without the contact terms that only stand in for the identified uneven ground) and ``walkfit`` (actuation: torque limit, leg kp and latency; ground: latency and the ground's RMS height; fitted to the real walks of θ0) for identified and hybrid.
 The world ``oracle`` (not a default) is the real world itself on fresh seeds: the ρ a world that is
 exactly right gets with the same number of episodes per gait; ``oracle:mean=1`` is the real world
 with every effect fixed at the middle of its range (the terrain's amplitude too): what a world that
-knows the real physics exactly, as one point and without its spread from episode to episode, gets.
+knows the real physics exactly, as one point and without its spread from episode to episode, gets. ``oracle:mean=1:engine=mujoco`` builds that mean physics into the MuJoCo sim
+with the identified sim's effect models: what the identified world gets if the diagnosis finds every
+effect exactly.
 """
 
 from __future__ import annotations

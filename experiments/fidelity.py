@@ -29,7 +29,10 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
               with that many episodes (not a default world; it costs real trials);
               ``oracle:mean=1``: the real world with every effect fixed at the middle of its
               range (its terrain amplitude too; the surface stays random): what a world that
-              knows the real physics exactly, as one point, gets (the identified sim's best)
+              knows the real physics exactly, as one point, gets (the identified sim's best);
+              ``oracle:mean=1:engine=mujoco``: that mean physics built into the MuJoCo sim by
+              the identified sim's effect models (``experiments.tasks.mean_physics_report``):
+              what the identified world would get if the diagnosis found every effect exactly
 ============  ==========================================================================
 
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
@@ -53,7 +56,11 @@ effects), to see which part of the identified physics carries its fidelity; of `
 ``hybrid``: ``stepping`` (stepping logs per identification, default the run's 3; the fixed-base
 logs stay the draw's), for fidelity against the amount of excitation data; ``confounded=0``: leave
 out the contact terms the diagnosis kept only as uncertain and could not tell apart from the uneven
-ground it declared (``sysid.identified.confounded_with_ground``: they count the ground twice).
+ground it declared (``sysid.identified.confounded_with_ground``: they count the ground twice);
+``walkfit=actuation`` (torque-limit and leg kp scales, latency) or ``walkfit=ground`` (latency and the
+RMS height of the uneven ground): those terms fitted to the draw's real walks of θ0, the walks SGAT
+is grounded on, by simulated moments of the leg tracking errors and the torso's sway
+(:mod:`experiments.walkfit`; thirteenth round), over the diagnosis's values.
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
@@ -94,6 +101,7 @@ from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation
                                   record_excitation_task)
 from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
 from experiments.tasks import fit_grounding_task
+from experiments.walkfit import GRIDS as WALKFIT_GRIDS
 from sgat.grounding import GroundingConfig
 from robots import ROBOT_NAMES, get_robot
 from walk_engine import params_for
@@ -105,12 +113,12 @@ DEFAULT_WORLDS = KINDS[:-1]
 DETERMINISTIC_KINDS = ("sim", "gat")
 #: The phases of a run, in run order, whose wall time ``fidelity.json`` reports (``phases_s``): where a
 #: run's time goes (the README's default run: the diagnoses and the world episodes, on busy cores).
-PHASES = ("real trials", "excitation logs", "diagnoses", "grounding walks", "fits", "world episodes",
+PHASES = ("real trials", "excitation logs", "diagnoses", "grounding walks", "walk fits", "fits", "world episodes",
           "teacher forcing")
 #: Purposes of the seed streams (the first key after the run seed). ``_CAL`` drew the engine-gap
 #: calibration's seed until that became one constant (``experiments.identify.ENGINE_GAP_SEED``, seed
 #: 0's draw); it keeps its place so the streams after it keep their values.
-_PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS, _ORACLE = range(11, 21)
+_PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS, _ORACLE, _WALKFIT = range(11, 22)
 
 
 def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
@@ -123,7 +131,8 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 # ------------------------------------------------------------------------------------------ worlds
 #: WorldSpec fields added after the first release, with their defaults (left out of the cache key).
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
-                  "stepping_logs": None, "identified_confounded": True, "oracle_mean": False}
+                  "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
+                  "oracle_engine": "pybullet"}
 
 
 @dataclass(frozen=True)
@@ -145,6 +154,8 @@ class WorldSpec:
     stepping_logs: int | None = None  # identified / hybrid: stepping logs per identification (None: the run's)
     identified_confounded: bool = True  # identified / hybrid: build in contact terms confounded with the ground
     oracle_mean: bool = False  # oracle: the real world with its effects fixed at their mean (experiments.tasks.mean_profile)
+    walkfit: str = ""  # identified / hybrid: terms fitted to the real walks of θ0 (a grid of experiments.walkfit.GRIDS)
+    oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -211,8 +222,17 @@ def parse_world(text: str) -> WorldSpec:
                 kw["stepping_logs"] = int(v)
             elif kind in ("identified", "hybrid") and k == "confounded":
                 kw["identified_confounded"] = bool(int(v))
+            elif kind in ("identified", "hybrid") and k == "walkfit":
+                if v not in (*WALKFIT_GRIDS, "0"):
+                    raise ValueError(f"world {text!r}: unknown option value walkfit={v!r} "
+                                     f"({' or '.join(WALKFIT_GRIDS)}; 0: none)")
+                kw["walkfit"] = "" if v == "0" else v
             elif kind == "oracle" and k == "mean":
                 kw["oracle_mean"] = bool(int(v))
+            elif kind == "oracle" and k == "engine":
+                if v not in ("pybullet", "mujoco"):
+                    raise ValueError(f"world {text!r}: unknown option value engine={v!r} (pybullet or mujoco)")
+                kw["oracle_engine"] = v
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
@@ -274,6 +294,9 @@ def parse_world(text: str) -> WorldSpec:
             raise ValueError(f"world {text!r}: {k} must be >= 1")
     if kw.get("stepping_logs", 0) < 0:
         raise ValueError(f"world {text!r}: stepping must be >= 0 (stepping logs per identification)")
+    if kw.get("oracle_engine") == "mujoco" and not kw.get("oracle_mean"):
+        raise ValueError(f"world {text!r}: engine=mujoco builds the real world's mean physics into the sim: "
+                         "it needs mean=1")
     if kw.get("exploration_noise", 0) < 0 or kw.get("sigma", 0) < 0:
         raise ValueError(f"world {text!r}: noise levels must be >= 0")
     grounding = GroundingConfig(**{**dataclasses.asdict(g), **gkw}) if g is not None else None
@@ -548,6 +571,50 @@ class Fidelity:
             list(self.ex.map(record_excitation_task, todo))
         self._say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
 
+    def _walk_fits(self, idents: dict) -> dict:
+        """The terms of every walk-fitted identified world (``walkfit=GRID``), per draw: fitted to the
+        draw's real grounding walks of θ0, the walks SGAT's grounding of the same draw is fitted on
+        (:func:`experiments.walkfit.fit_walk_actuation`), cached under ``identified/d<draw>/walkfit_<GRID>*``.
+
+        Returns:
+            ``{(draw, stepping logs, confounded, real walks, grid): {"path": its report, "real_paths": [...]}}``.
+        """
+        from envs import Recording  # lazy: loads the engines
+        from experiments.walkfit import SIM_WALKS as FIT_WALKS, describe_terms, fit_walk_actuation  # lazy: loads the engines
+
+        cfg = self.cfg
+        want = sorted({(self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit) for s in self.specs if s.walkfit})
+        if not want:
+            return {}
+        theta0 = self._data_gaits(1, 0)[0]
+        real = {(d, n): self._walks("real", _seeds(cfg.seed, _GROUND_REAL, d, n=n), f"real_d{d}", [theta0])
+                for d in range(cfg.data_seeds) for _, _, n, _ in want}
+        self._record_walks()
+        out = {}
+        for d in range(cfg.data_seeds):
+            for stepping, conf, n, grid in want:
+                odir = os.path.join(self._identify_args(d, stepping)["out_dir"],
+                                    f"walkfit_{grid}" + ("" if conf else "x") + ("" if n == REAL_WALKS else f"_r{n}"))
+                t0 = time.perf_counter()
+                with self._phase("walk fits"):
+                    fit = fit_walk_actuation([Recording.from_parquet(p) for p in real[d, n]], idents[d, stepping]["reports"],
+                                             theta0, odir, self.ex, seeds=_seeds(cfg.seed, _WALKFIT, d, n=FIT_WALKS),
+                                             seconds=cfg.seconds, grid=grid, identified_confounded=conf)
+                self._say(f"walk fit ({grid}) draw {d}: {describe_terms(fit['terms'])} ({time.perf_counter() - t0:.0f} s)")
+                out[d, stepping, conf, n, grid] = {"path": fit["path"], "real_paths": real[d, n]}
+        return out
+
+    def _mean_physics(self) -> str:
+        """The report of the real world's mean physics for the identified sim (``oracle:mean=1:
+        engine=mujoco``; :func:`experiments.tasks.mean_physics_report`), written once into the run."""
+        from experiments.tasks import mean_physics_report  # lazy: loads the engines
+
+        path = os.path.join(self.run_dir, "oracle", f"mean_physics_{self.cfg.profile}", "report.json")
+        if not os.path.exists(path):
+            os.makedirs(os.path.dirname(path), exist_ok=True)
+            atomic_write_text(path, json.dumps(mean_physics_report(self.cfg.profile, self.cfg.robot), indent=1))
+        return path
+
     def _model_dir(self, spec: WorldSpec, draw: int) -> str:
         return os.path.join(self.run_dir, "models", f"{spec.key}_d{draw}")
 
@@ -581,6 +648,7 @@ class Fidelity:
                               + "".join(f"; WARNING: the {k} diagnosis ran out of time (raise --identify-budget)"
                                         for k in r.get("time_budget_reached", [])))
             self._say(f"identification done ({time.perf_counter() - t0:.0f} s)")
+        walkfits = self._walk_fits(idents)
         fits = []
         for d in range(cfg.data_seeds):
             for s in self.specs:
@@ -588,14 +656,19 @@ class Fidelity:
                               "excitation_logs": 0, "excitation_seconds": 0.0}
                 if s.needs_identification:
                     idn = idents[d, self._stepping(s)]
-                    effects = idn["effects"]
-                    if not s.identified_confounded:  # the terms this world builds in
+                    effects, reports = idn["effects"], list(idn["reports"])
+                    if s.walkfit:  # the actuation fitted to the real walks overrides the diagnosis's
+                        wf = walkfits[d, self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit]
+                        reports.append(wf["path"])
+                        info["real_paths"] = wf["real_paths"]
+                    if not s.identified_confounded or s.walkfit:  # the terms this world builds in
                         from sysid.identified import load_identified  # lazy: loads the engines
 
-                        effects = {t.label(): v for t, v in sorted(load_identified(idn["reports"], False)[0].items())}
-                    info.update(identified=idn["reports"], excitation_logs=idn["logs"],
+                        terms, rms = load_identified(reports, s.identified_confounded)
+                        effects = {t.label(): v for t, v in sorted(terms.items())}
+                    info.update(identified=reports, excitation_logs=idn["logs"],
                                 excitation_seconds=idn["seconds"], effects=effects,
-                                terrain_rms_height=idn["terrain_rms_height"])
+                                terrain_rms_height=rms if s.walkfit else idn["terrain_rms_height"])
                 if s.grounded:
                     thetas = self._data_gaits(s.data_gaits, d)
                     g = "" if s.data_gaits == 1 else f"_g{s.data_gaits}"
@@ -608,6 +681,8 @@ class Fidelity:
                         base += f"{self._stepping(s)}"  # walks on another identified world
                     if s.kind == "hybrid" and not s.identified_confounded:
                         base += "x"  # ... or on one without the contact terms confounded with the ground
+                    if s.kind == "hybrid" and s.walkfit:
+                        base += f"w{s.walkfit}"  # ... or on one with terms fitted to the real walks
                     sim = self._walks("identified" if s.kind == "hybrid" else "sim",
                                       _seeds(cfg.seed, _GROUND_SIM, d, n=s.sim_walks),
                                       f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)
@@ -650,6 +725,9 @@ class Fidelity:
             seeds = _seeds(cfg.seed, _ORACLE, draw, n=n)
             if spec.oracle_mean:  # its mean physics, one point (experiments.tasks.mean_profile)
                 base["profile"] = f"{cfg.profile}:mean"
+            if spec.oracle_engine == "mujoco":  # ... built into the sim (experiments.tasks.mean_physics_report)
+                del base["profile"]
+                base.update(world="identified", identified=[self._mean_physics()])
         elif spec.kind in ("sim", "ane"):
             base["world"] = "sim"
             if spec.kind == "ane":
@@ -783,6 +861,7 @@ class Fidelity:
                                         "data_gaits": spec.data_gaits if spec.grounded else None,
                                         "grounding": spec.grounding.to_dict() if spec.grounding else None,
                                         **({"oracle_mean": True} if spec.oracle_mean else {}),
+                                        **({"oracle_engine": spec.oracle_engine} if spec.oracle_engine != "pybullet" else {}),
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
                                                             for k, c in curve.items()}} if curve else {})}
         return out

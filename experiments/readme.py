@@ -118,7 +118,8 @@ def _fidelity(res: dict) -> str:
         if d0["excitation_logs"]:
             data.append(f"{d0['excitation_logs']} excitation logs ({d0['excitation_seconds']:.0f} s)")
         if w.get("kind") == "oracle":
-            data.append(f"it is the real world{' at its mean physics' if w.get('oracle_mean') else ''} "
+            data.append(f"it is the real world{' at its mean physics' if w.get('oracle_mean') else ''}"
+                        f"{' built into the sim (MuJoCo)' if w.get('oracle_engine') == 'mujoco' else ''} "
                         f"({w['episodes']} episodes per gait on fresh seeds)")
         lines.append(f"| `{name}` | {s['draws']} | {_f(s['rho']['median'])} [{_f(s['rho']['min'])}, {_f(s['rho']['max'])}] "
                      f"| [{_f(ci[0])}, {_f(ci[1])}] | {_f(s['mae']['median'], '{:.1f}')} | "
@@ -150,6 +151,8 @@ def _fidelity(res: dict) -> str:
         parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")
                  for t, ok, v in fidelity_targets(res, oracle)]
         what = "at its mean physics, every effect at the middle of its range" if w.get("oracle_mean") else "itself"
+        if w.get("oracle_engine") == "mujoco":
+            what += ", built into the sim (MuJoCo) by the identified sim's effect models"
         lines += ["", f"For scale, `{oracle}` (the real world {what}, {w['episodes']} episodes per "
                   "gait on fresh seeds) against the same targets: " + "; ".join(parts) + "."]
     if res.get("wall_s") is not None:

@@ -113,6 +113,52 @@ def mean_profile(profile):
     return dataclasses.replace(profile, name=f"{profile.name}:mean", **mids)
 
 
+def mean_physics_report(profile, robot_name: str = "nao", terrain_samples: int = 16) -> dict:
+    """The real world's mean physics (:func:`mean_profile`) as a report of ``sgatwalk diagnose``, so
+    that the identified sim (``sysid.identified.IdentifiedSimEnv``) builds it into MuJoCo: what the
+    identified world would be if the diagnosis found every effect exactly (the ``oracle:mean=1:
+    engine=mujoco`` world of ``sgatwalk fidelity``, thirteenth round; it reads the profile, so it is
+    a yardstick, not a method).
+
+    Each effect at the middle of its range becomes the diagnosis family with the same meaning:
+    ``kp_scale`` -> ``pd_gain[j]``, ``latency_s`` -> ``latency``, ``backlash_rad`` -> ``backlash[j]``,
+    ``coulomb_friction_nm`` -> ``coulomb_friction[j]``, ``viscous_damping`` -> ``viscous_damping[j]``
+    (every actuated joint j), ``torque_limit_scale`` -> ``torque_limit``, ``mass_scale`` ->
+    ``link_mass[l]`` (every link), ``foot_friction``; ``terrain_amplitude`` -> a declared uneven ground
+    of the RMS height the lumpy terrain of that amplitude has (mean over ``terrain_samples`` surfaces:
+    the identified world's ground is a Gaussian surface of that RMS height, not the lumpy one). Left
+    out: the servo damping scale (its middle is 1), the encoder offsets (middle 0) and the sensor
+    noises (no deterministic family).
+
+    Args:
+        profile: an ``envs.effects.RealProfile`` or a profile name (``envs.effects.get_profile``).
+
+    Returns:
+        ``{"model": {label: value}, "base_model": {}, "effects": [terrain_roughness] or []}``.
+    """
+    from envs.effects import get_profile  # lazy: loads the engines
+    from terrain import lumpy
+
+    robot = get_robot(robot_name)
+    p = mean_profile(get_profile(profile, robot))
+    mid = {f: getattr(p, f)[0] for f in ("kp_scale", "kd_scale", "latency_s", "backlash_rad", "coulomb_friction_nm",
+                                         "viscous_damping", "torque_limit_scale", "mass_scale", "foot_friction",
+                                         "terrain_amplitude")}
+    model: dict[str, float] = {"latency": mid["latency_s"], "torque_limit": mid["torque_limit_scale"],
+                               "foot_friction": mid["foot_friction"]}
+    for fam, eff in (("pd_gain", "kp_scale"), ("backlash", "backlash_rad"), ("coulomb_friction", "coulomb_friction_nm"),
+                     ("viscous_damping", "viscous_damping")):
+        for j in robot.actuated_joint_names:
+            model[f"{fam}[{j}]"] = mid[eff]
+    for link in robot.links:
+        model[f"link_mass[{link}]"] = mid["mass_scale"]
+    effects = []
+    if mid["terrain_amplitude"] > 0:
+        rms = float(np.mean([lumpy(s, amplitude=mid["terrain_amplitude"]).heights.std() for s in range(terrain_samples)]))
+        effects.append({"family": "terrain_roughness", "value": rms})
+    return {"model": model, "base_model": {}, "effects": effects}
+
+
 def _real_profile(name: str, robot):
     """The profile a task names: ``"real"`` etc. as they are (``envs.effects.get_profile`` resolves
     them), ``"<name>:mean"`` as :func:`mean_profile` of that profile for ``robot``.

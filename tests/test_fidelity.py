@@ -108,6 +108,57 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
     assert prep["identified:confounded=0"][0]["effects"] == {"latency": 0.02}
 
 
+def test_a_walk_fitted_identified_world_adds_the_fitted_actuation_to_its_draws_reports(tmp_path, monkeypatch):
+    """``identified:walkfit=actuation``: per draw, the actuation fitted to the draw's real walks of θ0 (the
+    walks SGAT's grounding records, ``real_d<draw>``) is one more report over the diagnosis's, and the
+    world counts those walks as its real data besides the excitation logs."""
+    import experiments.fidelity as fid
+    import experiments.walkfit as walkfit
+
+    def fake_identify(out_dir, *, n_fixed, n_floating, **kw):
+        rep = os.path.join(out_dir, "floating", "report.json")
+        os.makedirs(os.path.dirname(rep), exist_ok=True)
+        with open(rep, "w") as f:
+            json.dump({"model": {"latency": 0.02}, "base_model": {}, "effects": []}, f)
+        return {"reports": [rep], "logs": n_fixed + n_floating, "seconds": 36.0, "effects": {"latency": 0.02},
+                "terrain_rms_height": 0.0, "wall_s": 0.0}
+
+    fits = []
+
+    def fake_fit(real, reports, theta, out_dir, executor, *, seeds, seconds, grid, identified_confounded=True, **kw):
+        assert grid == "actuation"
+        fits.append(([r.meta["seed"] for r in real], list(reports), seeds))
+        path = os.path.join(out_dir, "report.json")
+        os.makedirs(out_dir, exist_ok=True)
+        with open(path, "w") as f:
+            json.dump({"model": {"torque_limit": 0.8, "latency": 0.01}, "base_model": {}, "effects": []}, f)
+        return {"terms": {"torque_limit": 0.8, "latency": 0.01}, "path": path}
+
+    monkeypatch.setattr(fid, "identify_real", fake_identify)
+    monkeypatch.setattr(fid, "record_excitation_task", lambda t: [])
+    monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
+    monkeypatch.setattr(walkfit, "fit_walk_actuation", fake_fit)
+    assert parse_world("identified:walkfit=ground").walkfit == "ground"
+    assert parse_world("hybrid:walkfit=actuation").key != parse_world("hybrid:walkfit=ground").key != parse_world("hybrid").key
+    assert parse_world("identified:walkfit=0").key == parse_world("identified").key
+    with pytest.raises(ValueError, match="unknown option"):
+        parse_world("sgat:walkfit=ground")
+    with pytest.raises(ValueError, match="actuation or ground"):
+        parse_world("identified:walkfit=1")
+    run = fid.Fidelity(FidelityConfig(worlds=("identified", "identified:walkfit=actuation"), data_seeds=2, seconds=1.0),
+                       str(tmp_path), executor=SerialExecutor())
+    prep = run.prepare()
+    assert len(fits) == 2 and fits[0][2] != fits[1][2]  # one fit per draw, on sim seeds of its own
+    for d in (0, 1):
+        plain, fitted = prep["identified"][d], prep["identified:walkfit=actuation"][d]
+        assert fitted["identified"][:-1] == plain["identified"] == fits[d][1]
+        assert fitted["identified"][-1].endswith(os.path.join(f"d{d}", "walkfit_actuation", "report.json"))
+        assert fitted["effects"] == {"latency": 0.01, "torque_limit": 0.8} and plain["effects"] == {"latency": 0.02}
+        assert fitted["real_walks"] == 4 and plain["real_walks"] == 0 and fitted["excitation_logs"] == 6
+        assert all(os.path.basename(p).startswith(f"real_d{d}_") for p in fitted["real_paths"])
+        assert fits[d][0] == fid._seeds(run.cfg.seed, fid._GROUND_REAL, d, n=4)  # SGAT's grounding walks of the draw
+
+
 def test_more_episodes_per_gait_extend_a_run_as_a_fresh_run_would_walk_them(tmp_path, capsys):
     """A run resumed with another --episodes walks only the episodes it lacks, and its result is a
     fresh run's with that count: the first k episode seeds of a gait are those of a k-episode run."""
@@ -220,7 +271,7 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     from experiments.fidelity import PHASES
 
     ph, ph2 = res["phases_s"], res2["phases_s"]
-    assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses")]  # no identified world here
+    assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses", "walk fits")]  # no identified world here
     assert all(v > 0 for v in ph.values()) and sum(ph.values()) <= res["wall_s"]
     assert list(ph2) == list(ph) and all(ph2[k] >= ph[k] for k in ph) and ph2["world episodes"] > ph["world episodes"]
     assert ph2["teacher forcing"] == ph["teacher forcing"]  # resumed from replay.json: nothing teacher-forced again
@@ -431,3 +482,44 @@ def test_the_mean_oracle_walks_the_real_world_at_the_middle_of_every_effect_rang
     real = _world({"world": "real", "profile": "real", "seed": 0})
     real.reset(seed=1)
     assert not np.allclose(real.unwrapped.effects.kp_scale, 0.925)
+
+
+def test_the_mean_oracle_in_mujoco_builds_the_mean_physics_into_the_identified_sim(tmp_path):
+    """``oracle:mean=1:engine=mujoco``: the real world's mean physics as a diagnosis report
+    (``experiments.tasks.mean_physics_report``), walked in the identified sim on the oracle's seeds;
+    the sim's model carries every value (latency in the actuator delay, the weaker servos and torque
+    limits in the actuators, the heavier links) and its ground is as rough as the lumpy terrain."""
+    from experiments.fidelity import Fidelity
+    from experiments.tasks import _world, mean_physics_report
+    from robots import get_robot
+    from terrain import lumpy
+
+    m = parse_world("oracle:mean=1:engine=mujoco")
+    assert m.oracle_engine == "mujoco" and m.key != parse_world("oracle:mean=1").key
+    assert parse_world("oracle:mean=1:engine=pybullet").key == parse_world("oracle:mean=1").key
+    for bad, msg in (("oracle:engine=mujoco", "needs mean=1"), ("oracle:mean=1:engine=ode", "pybullet or mujoco")):
+        with pytest.raises(ValueError, match=msg):
+            parse_world(bad)
+    rep = mean_physics_report("real")
+    robot = get_robot("nao")
+    assert rep["model"]["latency"] == pytest.approx(0.015) and rep["model"]["torque_limit"] == pytest.approx(0.825)
+    assert all(rep["model"][f"pd_gain[{j}]"] == pytest.approx(0.925) for j in robot.actuated_joint_names)
+    rms = rep["effects"][0]["value"]
+    assert rep["effects"][0]["family"] == "terrain_roughness"
+    assert rms == pytest.approx(np.std(lumpy(99, amplitude=0.01).heights), rel=0.25) and 0.001 < rms < 0.005
+
+    cfg = FidelityConfig(worlds=("oracle:mean=1", "oracle:mean=1:engine=mujoco"), gaits=2, real_trials=2,
+                         episodes=2, data_seeds=1)
+    run = Fidelity(cfg, str(tmp_path), executor=None)
+    gaits = [{"name": "a", "theta": [0.0]}]
+    bullet, sim = (run._world_tasks(s, 0, {}, gaits) for s in run.specs)
+    assert [t["seed"] for t in bullet] == [t["seed"] for t in sim]  # paired: only the engine differs
+    assert {t["world"] for t in sim} == {"identified"} and all("profile" not in t for t in sim)
+    env = _world(sim[0]).unwrapped
+    plain = _world({"world": "sim", "seed": 0}).unwrapped
+    assert np.allclose(env.model.actuator_delay, 0.015)
+    ratio = env.model.actuator_forcerange[:, 1] / plain.model.actuator_forcerange[:, 1]
+    assert np.allclose(ratio, 0.825)
+    assert env.model.body_mass.sum() == pytest.approx(1.015 * plain.model.body_mass.sum(), rel=1e-3)
+    env.reset(seed=3)
+    assert np.std(env.terrain.heights) == pytest.approx(rms, rel=0.05)
