@@ -574,13 +574,13 @@ class Fidelity:
     def _walk_fits(self, idents: dict) -> dict:
         """The terms of every walk-fitted identified world (``walkfit=GRID``), per draw: fitted to the
         draw's real grounding walks of θ0, the walks SGAT's grounding of the same draw is fitted on
-        (:func:`experiments.walkfit.fit_walk_actuation`), cached under ``identified/d<draw>/walkfit_<GRID>*``.
+        (:func:`experiments.walkfit.fit_walk_terms`), cached under ``identified/d<draw>/walkfit_<GRID>*``.
 
         Returns:
             ``{(draw, stepping logs, confounded, real walks, grid): {"path": its report, "real_paths": [...]}}``.
         """
         from envs import Recording  # lazy: loads the engines
-        from experiments.walkfit import SIM_WALKS as FIT_WALKS, describe_terms, fit_walk_actuation  # lazy: loads the engines
+        from experiments.walkfit import SIM_WALKS as FIT_WALKS, describe_terms, fit_walk_terms  # lazy: loads the engines
 
         cfg = self.cfg
         want = sorted({(self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit) for s in self.specs if s.walkfit})
@@ -597,7 +597,7 @@ class Fidelity:
                                     f"walkfit_{grid}" + ("" if conf else "x") + ("" if n == REAL_WALKS else f"_r{n}"))
                 t0 = time.perf_counter()
                 with self._phase("walk fits"):
-                    fit = fit_walk_actuation([Recording.from_parquet(p) for p in real[d, n]], idents[d, stepping]["reports"],
+                    fit = fit_walk_terms([Recording.from_parquet(p) for p in real[d, n]], idents[d, stepping]["reports"],
                                              theta0, odir, self.ex, seeds=_seeds(cfg.seed, _WALKFIT, d, n=FIT_WALKS),
                                              seconds=cfg.seconds, grid=grid, identified_confounded=conf)
                 self._say(f"walk fit ({grid}) draw {d}: {describe_terms(fit['terms'])} ({time.perf_counter() - t0:.0f} s)")
@@ -657,7 +657,7 @@ class Fidelity:
                 if s.needs_identification:
                     idn = idents[d, self._stepping(s)]
                     effects, reports = idn["effects"], list(idn["reports"])
-                    if s.walkfit:  # the actuation fitted to the real walks overrides the diagnosis's
+                    if s.walkfit:  # the terms fitted to the real walks override the diagnosis's
                         wf = walkfits[d, self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit]
                         reports.append(wf["path"])
                         info["real_paths"] = wf["real_paths"]

@@ -141,9 +141,8 @@ def mean_physics_report(profile, robot_name: str = "nao", terrain_samples: int =
 
     robot = get_robot(robot_name)
     p = mean_profile(get_profile(profile, robot))
-    mid = {f: getattr(p, f)[0] for f in ("kp_scale", "kd_scale", "latency_s", "backlash_rad", "coulomb_friction_nm",
-                                         "viscous_damping", "torque_limit_scale", "mass_scale", "foot_friction",
-                                         "terrain_amplitude")}
+    mid = {f: getattr(p, f)[0] for f in ("kp_scale", "latency_s", "backlash_rad", "coulomb_friction_nm", "viscous_damping",
+                                         "torque_limit_scale", "mass_scale", "foot_friction", "terrain_amplitude")}
     model: dict[str, float] = {"latency": mid["latency_s"], "torque_limit": mid["torque_limit_scale"],
                                "foot_friction": mid["foot_friction"]}
     for fam, eff in (("pd_gain", "kp_scale"), ("backlash", "backlash_rad"), ("coulomb_friction", "coulomb_friction_nm"),

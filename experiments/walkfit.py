@@ -171,10 +171,10 @@ def _report(path: str, terms: dict, extra: dict | None = None) -> str:
     return path
 
 
-def fit_walk_actuation(real_recordings: list, reports: list[str], theta, out_dir: str, executor, *,
+def fit_walk_terms(real_recordings: list, reports: list[str], theta, out_dir: str, executor, *,
                        seeds: list[int], seconds: float, grid: str | dict = "actuation", robot_name: str = "nao",
                        identified_confounded: bool = True) -> dict:
-    """Fit the actuation of the identified sim of ``reports`` to real walks of the gait ``theta``.
+    """Fit the terms of ``grid`` in the identified sim of ``reports`` to real walks of the gait ``theta``.
 
     Args:
         real_recordings: ``envs.Recording`` of the real walks (at least 2), all of ``theta``.
@@ -213,7 +213,8 @@ def fit_walk_actuation(real_recordings: list, reports: list[str], theta, out_dir
               "theta": list(map(float, theta)), "seed": int(s), "seconds": float(seconds), "record": True, "robot": robot_name}
              for p in paths for s in seeds]
     res = map_episodes(executor, tasks)
-    S = np.array([tracking_statistics(r["recording"][0], robot_name, fell=bool(r["fell"])) for r in res])
+    S = np.array([tracking_statistics(r["recording"][0], robot_name, float(r["recording"][1].get("control_dt", 0.01)),
+                                      bool(r["fell"])) for r in res])
     S = S.reshape(len(cands), len(seeds), -1)
     dist = moment_distance(S, R)
     best = int(np.argmin(dist))

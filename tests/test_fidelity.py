@@ -137,7 +137,7 @@ def test_a_walk_fitted_identified_world_adds_the_fitted_actuation_to_its_draws_r
     monkeypatch.setattr(fid, "identify_real", fake_identify)
     monkeypatch.setattr(fid, "record_excitation_task", lambda t: [])
     monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
-    monkeypatch.setattr(walkfit, "fit_walk_actuation", fake_fit)
+    monkeypatch.setattr(walkfit, "fit_walk_terms", fake_fit)
     assert parse_world("identified:walkfit=ground").walkfit == "ground"
     assert parse_world("hybrid:walkfit=actuation").key != parse_world("hybrid:walkfit=ground").key != parse_world("hybrid").key
     assert parse_world("identified:walkfit=0").key == parse_world("identified").key

@@ -9,7 +9,7 @@ import pytest
 from envs import Recording
 from experiments.executors import SerialExecutor
 from experiments.tasks import run_episode
-from experiments.walkfit import (GRIDS, candidates, describe_terms, fit_walk_actuation, moment_distance,
+from experiments.walkfit import (GRIDS, candidates, describe_terms, fit_walk_terms, moment_distance,
                                  statistic_names, tracking_statistics)
 from robots import get_robot
 
@@ -102,7 +102,7 @@ def test_the_fit_recovers_an_injected_ground(tmp_path):
     real = [Recording(*run_episode({"world": "identified", "identified": [base, truth], "theta": THETA0, "seed": s,
                                     "seconds": 3.0, "record": True})["recording"]) for s in (1, 2, 3)]
     grid = {"terrain_roughness": (None, 0.003, 0.005)}
-    fit = fit_walk_actuation(real, [base], THETA0, str(tmp_path / "fit"), SerialExecutor(), seeds=[1, 2, 3],
+    fit = fit_walk_terms(real, [base], THETA0, str(tmp_path / "fit"), SerialExecutor(), seeds=[1, 2, 3],
                              seconds=3.0, grid=grid)
     assert fit["terms"] == {"terrain_roughness": 0.003}
     terms, rms = load_identified([base, fit["path"]])  # the fitted ground overrides the diagnosis's
@@ -120,12 +120,12 @@ def test_the_fit_recovers_an_injected_actuator_weakness(tmp_path):
                          "seconds": 2.0, "record": True})
         real.append(Recording(*r["recording"]))
     grid = {"torque_limit": (1.0,), "pd_gain": (1.0, 0.8), "latency": (None,)}
-    fit = fit_walk_actuation(real, [base], THETA0, str(tmp_path / "fit"), SerialExecutor(), seeds=[5, 6],
+    fit = fit_walk_terms(real, [base], THETA0, str(tmp_path / "fit"), SerialExecutor(), seeds=[5, 6],
                              seconds=2.0, grid=grid)
     assert fit["terms"]["pd_gain[LKneePitch]"] == 0.8 and "latency" not in fit["terms"]
     d = [c["distance"] for c in fit["walkfit"]["candidates"]]
     assert d[1] < 0.1 * d[0]
-    again = fit_walk_actuation([], [base], THETA0, str(tmp_path / "fit"), None, seeds=[5, 6], seconds=2.0, grid=grid)
+    again = fit_walk_terms([], [base], THETA0, str(tmp_path / "fit"), None, seeds=[5, 6], seconds=2.0, grid=grid)
     assert again["terms"] == fit["terms"]  # read back, nothing walked (no executor, no real walks)
     with pytest.raises(ValueError, match="at least 2 real walks"):
-        fit_walk_actuation(real[:1], [base], THETA0, str(tmp_path / "fit2"), SerialExecutor(), seeds=[5], seconds=2.0)
+        fit_walk_terms(real[:1], [base], THETA0, str(tmp_path / "fit2"), SerialExecutor(), seeds=[5], seconds=2.0)
