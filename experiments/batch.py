@@ -45,7 +45,7 @@ def _group_key(task: dict) -> tuple:
     """Tasks that share a world (and so a template env) and a duration."""
     return (task["world"], task.get("transformer"), float(task.get("seconds", EPISODE_SECONDS)),
             tuple(task.get("identified") or ()), bool(task.get("identified_terms", True)),
-            bool(task.get("identified_ground", True)), bool(task.get("identified_confounded", True)))
+            bool(task.get("identified_ground", True)), bool(task.get("identified_confounded", False)))
 
 
 def run_batch(tasks: list[dict]) -> list[dict]:

@@ -48,6 +48,9 @@ def register(sub) -> argparse.ArgumentParser:
                    help="fit the linear grounding models from zero weights (default: optimize's)")
     p.add_argument("--shadow", type=A.real(0.0, 10.0, unit="s"),
                    help="τ [s] of the transformer's shadow state (default: optimize's)")
+    p.add_argument("--confounded-terms", dest="identified_confounded", action="store_true", default=None,
+                   help="hybrid: also build in the contact terms the diagnosis could not tell apart from the uneven "
+                        "ground (default: optimize's, off)")
     p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
                    "pair every row with it (e.g. another grounding setting)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
@@ -56,13 +59,20 @@ def register(sub) -> argparse.ArgumentParser:
     return p
 
 
-def run(args) -> dict:
-    opt = {k: v for k, v in (("popsize", args.popsize), ("generations", args.generations),
+def optimize_overrides(args) -> dict:
+    """The :class:`experiments.optimize.OptimizeConfig` settings given on the command line (the rest
+    stay optimize's defaults)."""
+    return {k: v for k, v in (("popsize", args.popsize), ("generations", args.generations),
                              ("grounding_steps", args.grounding_steps), ("seconds", args.seconds),
                              ("hidden", None if args.hidden is None else list(args.hidden)),
                              ("history", args.history), ("command_history", args.command_history),
                              ("matched", args.matched), ("local_inverse", args.local_inverse),
-                             ("zero_init", args.zero_init), ("shadow", args.shadow)) if v is not None}
+                             ("zero_init", args.zero_init), ("shadow", args.shadow),
+                             ("identified_confounded", args.identified_confounded)) if v is not None}
+
+
+def run(args) -> dict:
+    opt = optimize_overrides(args)
     cfg = Table1Config(methods=tuple(m.strip() for m in args.methods.split(",") if m.strip()), seeds=args.seeds,
                        trials=args.trials, seed=args.seed, optimize=opt, baseline=args.baseline)
     cfg.validate()

@@ -26,6 +26,9 @@ def register(sub) -> argparse.ArgumentParser:
                    help="sim (MuJoCo), real (PyBullet) or identified (the sim with the physics of --report)")
     p.add_argument("--report", type=A.in_path, nargs="+", metavar="REPORT_JSON",
                    help="with --world identified: report.json file(s) or folders of sgatwalk diagnose")
+    p.add_argument("--confounded-terms", action="store_true",
+                   help="with --world identified: also build in the contact terms the diagnosis could not tell apart "
+                        "from the uneven ground (default off, as in sgatwalk fidelity and optimize)")
     p.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
     p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
     p.add_argument("--profile", default=None, help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
@@ -52,6 +55,8 @@ def run(args) -> dict:
         raise ValueError("--world identified models the NAO only (sgatwalk diagnose identifies the NAO's physics)")
     if args.world != "real" and args.profile is not None:
         raise ValueError("--profile applies to the real world only (use --world real)")
+    if args.confounded_terms and args.world != "identified":
+        raise ValueError("--confounded-terms applies to --world identified only")
     if (args.world == "identified") != bool(args.report):
         raise ValueError("--world identified needs --report REPORT_JSON (and --report needs --world identified)")
     profile = args.profile or "real"
@@ -66,7 +71,8 @@ def run(args) -> dict:
     if args.world == "identified":
         from sysid.identified import IdentifiedSimEnv  # lazy: sysid; keeps sgatwalk --help fast
 
-        env = IdentifiedSimEnv.from_reports(args.report, terrain=None if terrain in (None, "flat") else terrain)
+        env = IdentifiedSimEnv.from_reports(args.report, confounded=bool(args.confounded_terms),
+                                            terrain=None if terrain in (None, "flat") else terrain)
     t0 = time.perf_counter()
     rec, res = run_walk(params, world=args.world, seed=args.seed, seconds=args.seconds, profile=profile,
                         terrain=terrain, command=command, env=env, robot=robot if env is None else None)

@@ -14,7 +14,10 @@ worst ρ meets the grounding issue's ranking target (:func:`experiments.fidelity
 and for SGAT and hybrid worlds how many of the issue's targets it meets
 (:func:`experiments.fidelity.fidelity_targets`, against its own run's plain sim and GAT) and its ρ
 against its run's reference SGAT world draw by draw (draw d of both is fitted on the same real
-grounding walks: a paired comparison).
+grounding walks: a paired comparison). Worlds are named in today's meaning of their options
+(:func:`experiments.fidelity.canonical_world_name`: an ``identified`` world saved before the
+fourteenth round, which built in the contact terms confounded with the ground, ranks as
+``identified:confounded=1``).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ import math
 import os
 import statistics
 
-from experiments.fidelity import distinct_suffixes, fidelity_targets, first_world, ranking_target
+from experiments.fidelity import canonical_world_name, distinct_suffixes, fidelity_targets, first_world, ranking_target
 from experiments.stats import pick_regret
 
 #: Worlds drawn per panel by :func:`plot` (the best by worst ρ).
@@ -154,7 +157,7 @@ def world_row(res: dict, name: str) -> dict:
     draws = w["draws"]
     rhos = [d["rho"] for d in draws if d["rho"] is not None and math.isfinite(d["rho"])]
     kind = w.get("kind", name.split(":")[0])
-    row = {"world": name, "kind": kind, "draws": len(draws), "episodes": w.get("episodes"),
+    row = {"world": canonical_world_name(name, w), "kind": kind, "draws": len(draws), "episodes": w.get("episodes"),
            "rho_median": _median(rhos), "rho_worst": min(rhos) if rhos else math.nan,
            "rho_best": max(rhos) if rhos else math.nan,
            "abs_bias_median": float(w["summary"]["abs_bias_median"]),
@@ -215,7 +218,7 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
         for n, w in res["worlds"].items():
             if kinds is not None and w.get("kind", n.split(":")[0]) not in kinds:
                 continue
-            sig = _measurement(n, w)
+            sig = _measurement(canonical_world_name(n, w), w)
             same = next((r for r in p["rows"] if r["_sig"] == sig), None)
             if same is not None:  # one measurement that several runs carry (a shared run directory)
                 same["runs"].append(label)

@@ -54,9 +54,11 @@ previous commands, so the transformer can represent an actuation latency); ``met
 of ``identified``: ``terms=0`` (only the identified ground) or ``ground=0`` (only the deterministic
 effects), to see which part of the identified physics carries its fidelity; of ``identified`` and
 ``hybrid``: ``stepping`` (stepping logs per identification, default the run's 3; the fixed-base
-logs stay the draw's), for fidelity against the amount of excitation data; ``confounded=0``: leave
-out the contact terms the diagnosis kept only as uncertain and could not tell apart from the uneven
-ground it declared (``sysid.identified.confounded_with_ground``: they count the ground twice);
+logs stay the draw's), for fidelity against the amount of excitation data; ``confounded=1``: also
+build in the contact terms the diagnosis kept only as uncertain and could not tell apart from the uneven
+ground it declared (``sysid.identified.confounded_with_ground``: they count the ground twice); the
+default (``confounded=0``) leaves them out since the fourteenth round, and results saved before it
+name the world that builds them in plain ``identified`` / ``hybrid`` (:func:`canonical_world_name`);
 ``walkfit=actuation`` (torque-limit and leg kp scales, latency) or ``walkfit=ground`` (latency and the
 RMS height of the uneven ground): those terms fitted to the draw's real walks of θ0, the walks SGAT
 is grounded on, by simulated moments of the leg tracking errors and the torso's sway
@@ -129,7 +131,10 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 
 
 # ------------------------------------------------------------------------------------------ worlds
-#: WorldSpec fields added after the first release, with their defaults (left out of the cache key).
+#: WorldSpec fields added after the first release, with their defaults then (left out of the cache key).
+#: ``identified_confounded`` keeps True here though the field's default is False since the fourteenth
+#: round: a default world hashes as ``confounded=0`` did and ``confounded=1`` as the old default did, so
+#: every cached world keeps its meaning.
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
                   "oracle_engine": "pybullet"}
@@ -152,7 +157,7 @@ class WorldSpec:
     identified_terms: bool = True  # identified: the deterministic effects (ablation switch)
     identified_ground: bool = True  # identified: the uneven ground (ablation switch)
     stepping_logs: int | None = None  # identified / hybrid: stepping logs per identification (None: the run's)
-    identified_confounded: bool = True  # identified / hybrid: build in contact terms confounded with the ground
+    identified_confounded: bool = False  # identified / hybrid: build in contact terms confounded with the ground
     oracle_mean: bool = False  # oracle: the real world with its effects fixed at their mean (experiments.tasks.mean_profile)
     walkfit: str = ""  # identified / hybrid: terms fitted to the real walks of θ0 (a grid of experiments.walkfit.GRIDS)
     oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
@@ -166,6 +171,8 @@ class WorldSpec:
         """The world's cache key: its kind and a hash of every setting (a changed default is a new world)."""
         d = dataclasses.asdict(self)
         d.pop("name")
+        if not self.needs_identification:  # a setting of the identified worlds only: it names no other world
+            d["identified_confounded"] = _LATER_OPTIONS["identified_confounded"]
         for k in _LATER_OPTIONS:  # options added later hash only when set, so earlier caches stay valid
             if d[k] == _LATER_OPTIONS[k]:
                 d.pop(k)
@@ -301,6 +308,36 @@ def parse_world(text: str) -> WorldSpec:
         raise ValueError(f"world {text!r}: noise levels must be >= 0")
     grounding = GroundingConfig(**{**dataclasses.asdict(g), **gkw}) if g is not None else None
     return WorldSpec(name=str(text), kind=kind, grounding=grounding, **kw)
+
+
+def canonical_world_name(name: str, world: dict) -> str:
+    """A world's name in today's meaning of the options, for results saved by any round.
+
+    Up to the thirteenth round ``identified`` and ``hybrid`` built in the contact terms confounded
+    with the uneven ground (today ``confounded=1``) and ``confounded=0`` left them out (today the
+    default); results since then record the setting (``identified_confounded`` of the world). The
+    name keeps its other options in their order, drops any ``confounded=`` option and ends with
+    ``:confounded=1`` where the world builds those terms in; other kinds' names are returned as they
+    are. ``sgatwalk compare`` ranks worlds of old and new results by this name.
+
+    Args:
+        name: the world's name as its run gave it (``hybrid:alpha=0.5:confounded=0``).
+        world: its entry of the result's ``worlds`` (``kind``, and ``identified_confounded`` since
+            the fourteenth round).
+
+    Returns:
+        e.g. ``"hybrid:alpha=0.5"`` (confounded terms left out) or ``"identified:confounded=1"``.
+    """
+    parts = [p.strip() for p in str(name).split(":")]
+    if world.get("kind", parts[0]) not in ("identified", "hybrid"):
+        return name
+    opts = [p for p in parts[1:] if p.split("=", 1)[0].strip() != "confounded"]
+    if "identified_confounded" in world:
+        confounded = bool(world["identified_confounded"])
+    else:  # saved before the fourteenth round: the old default unless the name said confounded=0
+        given = [p.split("=", 1)[1].strip() for p in parts[1:] if p.split("=", 1)[0].strip() == "confounded" and "=" in p]
+        confounded = bool(int(given[-1])) if given else True
+    return ":".join([parts[0], *opts, *(["confounded=1"] if confounded else [])])
 
 
 # ------------------------------------------------------------------------------------------ config
@@ -860,6 +897,8 @@ class Fidelity:
             out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
                                         "data_gaits": spec.data_gaits if spec.grounded else None,
                                         "grounding": spec.grounding.to_dict() if spec.grounding else None,
+                                        **({"identified_confounded": spec.identified_confounded}
+                                           if spec.needs_identification else {}),
                                         **({"oracle_mean": True} if spec.oracle_mean else {}),
                                         **({"oracle_engine": spec.oracle_engine} if spec.oracle_engine != "pybullet" else {}),
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}

@@ -22,8 +22,9 @@ key                       meaning
                           or the base of a grounded one: hybrid grounding)
 ``identified_terms``      False: leave the deterministic effects out (ablation; default True)
 ``identified_ground``     False: leave the identified uneven ground out (ablation; default True)
-``identified_confounded`` False: leave out the contact terms that only stand in for the identified
-                          uneven ground (``sysid.identified.confounded_with_ground``; default True)
+``identified_confounded`` True: also build in the contact terms that only stand in for the identified
+                          uneven ground (``sysid.identified.confounded_with_ground``; default False
+                          since the fourteenth round, True before)
 ``robot``                 ``robots.get_robot`` name (default ``"nao"``; the identified worlds are the NAO's)
 ``record``                return the recording too (columns + metadata)
 ``meta``                  extra metadata for the recording
@@ -70,7 +71,7 @@ def _world(task: dict):
     if world == "identified" and not reports:
         raise ValueError("the identified world needs the diagnosis reports (task['identified'])")
     parts = (bool(task.get("identified_terms", True)), bool(task.get("identified_ground", True)),
-             bool(task.get("identified_confounded", True)))
+             bool(task.get("identified_confounded", False)))
     robot_name = task.get("robot", "nao")
     if reports and robot_name != "nao":
         raise ValueError("the identified worlds model the NAO only")

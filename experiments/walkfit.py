@@ -173,7 +173,7 @@ def _report(path: str, terms: dict, extra: dict | None = None) -> str:
 
 def fit_walk_terms(real_recordings: list, reports: list[str], theta, out_dir: str, executor, *,
                        seeds: list[int], seconds: float, grid: str | dict = "actuation", robot_name: str = "nao",
-                       identified_confounded: bool = True) -> dict:
+                       identified_confounded: bool = False) -> dict:
     """Fit the terms of ``grid`` in the identified sim of ``reports`` to real walks of the gait ``theta``.
 
     Args:
@@ -186,6 +186,8 @@ def fit_walk_terms(real_recordings: list, reports: list[str], theta, out_dir: st
         seeds: the sim walks' seeds, the same for every candidate (common random numbers).
         seconds: walk length [s].
         grid: what is fitted: a name of :data:`GRIDS` or such a dict (:func:`candidates`).
+        identified_confounded: also build in the contact terms confounded with the uneven ground
+            (``sysid.identified.confounded_with_ground``; the identified world's default leaves them out).
 
     Returns:
         The saved result: ``{"terms": the chosen terms (:func:`candidates` labels), "walkfit":

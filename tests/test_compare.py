@@ -187,3 +187,24 @@ def test_rows_carry_the_episodes_per_gait_so_runs_of_one_world_tell_apart():
     assert any(" run-16 " in line and "   16 " in line for line in text.splitlines())
     md = readme._compare(res)
     assert "| `sgat` | run-16 | 3 × 16 |" in md and "| `sgat` | old | 3 |" in md
+
+
+def test_identified_worlds_of_old_and_new_results_rank_under_todays_names():
+    from experiments.fidelity import canonical_world_name
+
+    # before the fourteenth round plain `identified` built in the confounded contact terms and
+    # `identified:confounded=0` left them out; results since then record the setting
+    old = _result({"identified": _world("identified", NOISY), "identified:confounded=0": _world("identified", EXACT),
+                   "hybrid:alpha=0.5": _world("hybrid", NOISY), "sgat": _world("sgat", SHUFFLED)})
+    new = _result({"identified": {**_world("identified", EXACT), "identified_confounded": False},
+                   "identified:confounded=1": {**_world("identified", NOISY), "identified_confounded": True}})
+    assert canonical_world_name("identified", old["worlds"]["identified"]) == "identified:confounded=1"
+    assert canonical_world_name("identified:confounded=0", old["worlds"]["identified:confounded=0"]) == "identified"
+    assert canonical_world_name("hybrid:alpha=0.5", old["worlds"]["hybrid:alpha=0.5"]) == "hybrid:alpha=0.5:confounded=1"
+    assert canonical_world_name("hybrid:confounded=0:alpha=0.5", {"kind": "hybrid"}) == "hybrid:alpha=0.5"
+    assert canonical_world_name("sgat:alpha=0.5", old["worlds"]["sgat"]) == "sgat:alpha=0.5"
+    rows = compare([("old", "o.json", old), ("new", "n.json", new)])["panels"][0]["rows"]
+    # the same measurement under either name is one row, with today's name
+    by = {r["world"]: r for r in rows}
+    assert set(by) == {"identified", "identified:confounded=1", "hybrid:alpha=0.5:confounded=1", "sgat"}
+    assert by["identified"]["runs"] == ["old", "new"] and by["identified:confounded=1"]["runs"] == ["old", "new"]

@@ -42,8 +42,17 @@ def test_parse_world_options():
     assert parse_world("sgat:dad=0").key == parse_world("sgat").key != parse_world("sgat:dad=1").key
     assert parse_world("identified:stepping=9").stepping_logs == 9 and parse_world("hybrid:stepping=6").stepping_logs == 6
     assert parse_world("identified").key != parse_world("identified:stepping=9").key != parse_world("identified:stepping=6").key
-    assert not parse_world("hybrid:confounded=0").identified_confounded and parse_world("identified").identified_confounded
-    assert parse_world("identified:confounded=1").key == parse_world("identified").key != parse_world("identified:confounded=0").key
+    # since the fourteenth round the identified worlds leave the confounded contact terms out by default
+    assert parse_world("hybrid:confounded=1").identified_confounded and not parse_world("identified").identified_confounded
+    assert parse_world("identified:confounded=0").key == parse_world("identified").key != parse_world("identified:confounded=1").key
+    # ... and every cached world keeps its meaning: the keys are the ones those worlds had before
+    # (plain identified / hybrid of the earlier rounds, which built those terms in, and confounded=0)
+    assert parse_world("identified:confounded=1").key == "identified-93b905ef6f"
+    assert parse_world("hybrid:confounded=1").key == "hybrid-1d80807e52"
+    assert parse_world("identified").key == "identified-ab4e2aa64c" and parse_world("hybrid").key == "hybrid-f22aa61161"
+    # ... and the worlds the setting does not concern keep theirs
+    assert [parse_world(w).key for w in ("sim", "ane", "gat", "sgat")] == \
+        ["sim-48bb3e43b8", "ane-eaeef1c08a", "gat-833017b206", "sgat-5b13614641"]
     for bad, words in [("magic", "unknown world"), ("sgat:foo=1", "unknown option"), ("sgat:alpha=x", "bad value"),
                        ("sim:alpha=1", "unknown option"), ("sgat:ensemble", "key=value"), ("sgat:alpha=3", "alpha"),
                        ("sgat:real=0", "real_walks"), ("sgat:state=arms", "state"), ("hybrid:method=ane", "method"),
@@ -84,7 +93,7 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
     monkeypatch.setattr(fid, "identify_real", fake_identify)
     monkeypatch.setattr(fid, "record_excitation_task", lambda t: recorded.append(t) or [])
     monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
-    run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9", "identified:confounded=0"),
+    run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9", "identified:confounded=1"),
                                       data_seeds=2), str(tmp_path), executor=SerialExecutor())
     prep = run.prepare()
     # every excitation log set is recorded before the diagnoses, side by side on the executor: each
@@ -103,9 +112,9 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
         assert prep["identified:stepping=9"][d]["terrain_rms_height"] == pytest.approx(0.0029)
     assert by_dir["identified/d0"][3] != by_dir["identified/d1"][3]  # draws are independent
     assert prep["sim"][0]["identified"] is None
-    # a world without the confounded contact terms lists the terms it builds in
-    assert prep["identified"][0]["effects"] == {"ground_compliance": 0.03, "latency": 0.02}
-    assert prep["identified:confounded=0"][0]["effects"] == {"latency": 0.02}
+    # each world lists the terms it builds in: the default leaves out the contact term confounded with the ground
+    assert prep["identified:confounded=1"][0]["effects"] == {"ground_compliance": 0.03, "latency": 0.02}
+    assert prep["identified"][0]["effects"] == {"latency": 0.02}
 
 
 def test_a_walk_fitted_identified_world_adds_the_fitted_actuation_to_its_draws_reports(tmp_path, monkeypatch):
@@ -152,7 +161,8 @@ def test_a_walk_fitted_identified_world_adds_the_fitted_actuation_to_its_draws_r
     for d in (0, 1):
         plain, fitted = prep["identified"][d], prep["identified:walkfit=actuation"][d]
         assert fitted["identified"][:-1] == plain["identified"] == fits[d][1]
-        assert fitted["identified"][-1].endswith(os.path.join(f"d{d}", "walkfit_actuation", "report.json"))
+        # the fit of the default world (without the confounded contact terms: the "x" of its folder)
+        assert fitted["identified"][-1].endswith(os.path.join(f"d{d}", "walkfit_actuationx", "report.json"))
         assert fitted["effects"] == {"latency": 0.01, "torque_limit": 0.8} and plain["effects"] == {"latency": 0.02}
         assert fitted["real_walks"] == 4 and plain["real_walks"] == 0 and fitted["excitation_logs"] == 6
         assert all(os.path.basename(p).startswith(f"real_d{d}_") for p in fitted["real_paths"])

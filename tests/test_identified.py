@@ -118,7 +118,9 @@ def test_contact_terms_that_only_stand_in_for_the_ground_can_be_left_out(tmp_pat
     without, rms2 = load_identified(path, confounded=False)
     assert every == {Term("latency"): 0.02, Term("ground_compliance"): 0.03} and rms == rms2 == 0.0025
     assert without == {Term("latency"): 0.02, Term("ground_compliance"): 0.0025}  # the calibrated engine gap's
-    # the rollout tasks build the same worlds (and keep them apart in their cache)
+    # the rollout tasks build the same worlds (and keep them apart in their cache); a task leaves the
+    # term out unless it asks for it (the identified worlds' default since the fourteenth fidelity round)
     task = {"world": "identified", "identified": [str(path)]}
-    assert _world(task).terms[Term("ground_compliance")] == 0.03
+    assert _world(task).terms[Term("ground_compliance")] == 0.0025
+    assert _world({**task, "identified_confounded": True}).terms[Term("ground_compliance")] == 0.03
     assert _world({**task, "identified_confounded": False}).terms[Term("ground_compliance")] == 0.0025

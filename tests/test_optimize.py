@@ -191,6 +191,39 @@ def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_rep
         assert len(warned) == len(hit) and all("floating diagnosis ran out" in ln for ln in warned)
 
 
+def test_identified_worlds_leave_the_confounded_contact_terms_out_unless_asked_and_old_runs_resume_as_they_began(tmp_path):
+    """The identified and hybrid worlds of ``optimize`` build in what ``sgatwalk fidelity``'s do (since
+    its fourteenth round: without the contact terms confounded with the ground); ``--confounded-terms``
+    builds them in, and a run saved before the setting existed resumes with them, as it began."""
+    import argparse
+
+    from experiments.cmd_optimize import config_from_args, register
+    from experiments.optimize import OptimizeConfig, config_from_state
+
+    opt = Optimizer(OptimizeConfig(methods=("identified", "hybrid")), str(tmp_path / "run"), None)
+    opt.state = {"identification": {"reports": ["f.json", "s.json"]}}
+    assert opt._world_kw("identified", 1) == ("identified", {"identified": ["f.json", "s.json"], "identified_confounded": False})
+    world, kw = opt._world_kw("hybrid", 1)
+    assert world == "grounded" and kw["identified_confounded"] is False and kw["identified"] == ["f.json", "s.json"]
+    ap = argparse.ArgumentParser()
+    register(ap.add_subparsers())
+    assert config_from_args(ap.parse_args(["optimize", "--methods", "hybrid", "--confounded-terms"])).identified_confounded
+    assert not config_from_args(ap.parse_args(["optimize", "--methods", "hybrid"])).identified_confounded
+    from experiments import cmd_table1
+
+    ap1 = argparse.ArgumentParser()
+    cmd_table1.register(ap1.add_subparsers())
+    assert cmd_table1.optimize_overrides(ap1.parse_args(["table1", "--confounded-terms"])) == {"identified_confounded": True}
+    assert cmd_table1.optimize_overrides(ap1.parse_args(["table1"])) == {}
+    opt.cfg = OptimizeConfig(methods=("identified",), identified_confounded=True)
+    assert opt._world_kw("identified", 1)[1]["identified_confounded"] is True
+    # a run state saved before the field existed resumes as it began; a new one as it was saved
+    old = OptimizeConfig(methods=("identified",), hidden=(8,)).to_dict()
+    del old["identified_confounded"]
+    assert config_from_state(old).identified_confounded is True and config_from_state(old).hidden == (8,)
+    assert config_from_state(OptimizeConfig(methods=("hybrid",)).to_dict()) == OptimizeConfig(methods=("hybrid",))
+
+
 @pytest.mark.slow
 def test_hybrid_and_identified_run_end_to_end_with_their_identification(tmp_path, capsys):
     """``--methods hybrid,identified``: excitation logs of the real world, two diagnoses, the identified
