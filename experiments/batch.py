@@ -30,7 +30,7 @@ from envs.rollout import assemble_recording
 from envs.wrappers import ActionMismatch
 from experiments.fitness import walk_fitness, walk_meta
 from experiments.grounding import nao_spec
-from experiments.tasks import _transformer, _world, episode_result, run_episode
+from experiments.tasks import IDENTIFIED_CONFOUNDED, _transformer, _world, episode_result, run_episode
 from robots import get_robot
 from walk_engine import GaitParams
 from walk_engine.batch import BatchWalkEngine
@@ -45,7 +45,7 @@ def _group_key(task: dict) -> tuple:
     """Tasks that share a world (and so a template env) and a duration."""
     return (task["world"], task.get("transformer"), float(task.get("seconds", EPISODE_SECONDS)),
             tuple(task.get("identified") or ()), bool(task.get("identified_terms", True)),
-            bool(task.get("identified_ground", True)), bool(task.get("identified_confounded", False)))
+            bool(task.get("identified_ground", True)), bool(task.get("identified_confounded", IDENTIFIED_CONFOUNDED)))
 
 
 def run_batch(tasks: list[dict]) -> list[dict]:

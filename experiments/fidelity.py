@@ -102,7 +102,7 @@ from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATI
 from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, identify_real,
                                   record_excitation_task)
 from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
-from experiments.tasks import fit_grounding_task
+from experiments.tasks import IDENTIFIED_CONFOUNDED, fit_grounding_task
 from experiments.walkfit import GRIDS as WALKFIT_GRIDS
 from sgat.grounding import GroundingConfig
 from robots import ROBOT_NAMES, get_robot
@@ -157,7 +157,7 @@ class WorldSpec:
     identified_terms: bool = True  # identified: the deterministic effects (ablation switch)
     identified_ground: bool = True  # identified: the uneven ground (ablation switch)
     stepping_logs: int | None = None  # identified / hybrid: stepping logs per identification (None: the run's)
-    identified_confounded: bool = False  # identified / hybrid: build in contact terms confounded with the ground
+    identified_confounded: bool = IDENTIFIED_CONFOUNDED  # identified / hybrid: build in contact terms confounded with the ground
     oracle_mean: bool = False  # oracle: the real world with its effects fixed at their mean (experiments.tasks.mean_profile)
     walkfit: str = ""  # identified / hybrid: terms fitted to the real walks of θ0 (a grid of experiments.walkfit.GRIDS)
     oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
@@ -328,16 +328,15 @@ def canonical_world_name(name: str, world: dict) -> str:
     Returns:
         e.g. ``"hybrid:alpha=0.5"`` (confounded terms left out) or ``"identified:confounded=1"``.
     """
-    parts = [p.strip() for p in str(name).split(":")]
-    if world.get("kind", parts[0]) not in ("identified", "hybrid"):
+    kind, *opts = [p.strip() for p in str(name).split(":")]
+    if world.get("kind", kind) not in ("identified", "hybrid"):
         return name
-    opts = [p for p in parts[1:] if p.split("=", 1)[0].strip() != "confounded"]
-    if "identified_confounded" in world:
-        confounded = bool(world["identified_confounded"])
-    else:  # saved before the fourteenth round: the old default unless the name said confounded=0
-        given = [p.split("=", 1)[1].strip() for p in parts[1:] if p.split("=", 1)[0].strip() == "confounded" and "=" in p]
-        confounded = bool(int(given[-1])) if given else True
-    return ":".join([parts[0], *opts, *(["confounded=1"] if confounded else [])])
+    pairs = [(p.split("=", 1)[0].strip(), p) for p in opts]
+    given = [p.split("=", 1)[1].strip() for k, p in pairs if k == "confounded" and "=" in p]
+    # saved before the fourteenth round: the old default (True) unless the name said confounded=0
+    confounded = bool(world["identified_confounded"]) if "identified_confounded" in world \
+        else (bool(int(given[-1])) if given else True)
+    return ":".join([kind, *(p for k, p in pairs if k != "confounded"), *(["confounded=1"] if confounded else [])])
 
 
 # ------------------------------------------------------------------------------------------ config

@@ -72,6 +72,7 @@ from experiments.batch import expected_generation_seconds, map_episodes
 from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, IDENTIFY_BUDGET_S,
                                    REAL_WALKS, SIM_WALKS, fit_nao_grounding)
 from experiments.identify import calibrate_engines, identify_real
+from experiments.tasks import IDENTIFIED_CONFOUNDED
 from sgat.algorithm import grounding_loop, new_progress
 from sgat.grounding import GroundingConfig
 from robots import ROBOT_NAMES, get_robot
@@ -115,10 +116,9 @@ class OptimizeConfig:
     inverse_command: bool = DEFAULT_GROUNDING.inverse_command
     hidden: tuple = DEFAULT_GROUNDING.hidden
     ane_sigma: float = 0.05
-    #: identified / hybrid: also build in the contact terms the diagnosis kept only as uncertain and
-    #: could not tell apart from the uneven ground (``sysid.identified.confounded_with_ground``); the
-    #: default since the fourteenth round leaves them out (README, sgatwalk fidelity)
-    identified_confounded: bool = False
+    #: identified / hybrid: also build in the contact terms confounded with the uneven ground
+    #: (``experiments.tasks.IDENTIFIED_CONFOUNDED``)
+    identified_confounded: bool = IDENTIFIED_CONFOUNDED
     model_epochs: int = DEFAULT_GROUNDING.max_epochs
     aggregate: bool = True
     seed: int = 0

@@ -23,8 +23,8 @@ key                       meaning
 ``identified_terms``      False: leave the deterministic effects out (ablation; default True)
 ``identified_ground``     False: leave the identified uneven ground out (ablation; default True)
 ``identified_confounded`` True: also build in the contact terms that only stand in for the identified
-                          uneven ground (``sysid.identified.confounded_with_ground``; default False
-                          since the fourteenth round, True before)
+                          uneven ground (``sysid.identified.confounded_with_ground``; default
+                          :data:`IDENTIFIED_CONFOUNDED`)
 ``robot``                 ``robots.get_robot`` name (default ``"nao"``; the identified worlds are the NAO's)
 ``record``                return the recording too (columns + metadata)
 ``meta``                  extra metadata for the recording
@@ -40,6 +40,12 @@ import os
 import time
 
 import numpy as np
+
+#: Whether the identified worlds build in the contact terms the diagnosis kept only as uncertain and
+#: could not tell apart from the uneven ground it declared (``sysid.identified.confounded_with_ground``):
+#: the default of a task's ``identified_confounded`` and of every identified / hybrid world of
+#: ``fidelity``, ``optimize`` and ``walkfit``. False since the fourteenth fidelity round (README), True before.
+IDENTIFIED_CONFOUNDED = False
 
 from common.defaults import EPISODE_SECONDS
 from robots import get_robot
@@ -71,7 +77,7 @@ def _world(task: dict):
     if world == "identified" and not reports:
         raise ValueError("the identified world needs the diagnosis reports (task['identified'])")
     parts = (bool(task.get("identified_terms", True)), bool(task.get("identified_ground", True)),
-             bool(task.get("identified_confounded", False)))
+             bool(task.get("identified_confounded", IDENTIFIED_CONFOUNDED)))
     robot_name = task.get("robot", "nao")
     if reports and robot_name != "nao":
         raise ValueError("the identified worlds model the NAO only")

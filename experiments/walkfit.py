@@ -30,6 +30,7 @@ import os
 import numpy as np
 
 from common.files import atomic_write_text
+from experiments.tasks import IDENTIFIED_CONFOUNDED
 from robots import get_robot
 
 #: The candidate grids (module docstring), by what they fit: each a dict term -> values (None: the
@@ -173,7 +174,7 @@ def _report(path: str, terms: dict, extra: dict | None = None) -> str:
 
 def fit_walk_terms(real_recordings: list, reports: list[str], theta, out_dir: str, executor, *,
                        seeds: list[int], seconds: float, grid: str | dict = "actuation", robot_name: str = "nao",
-                       identified_confounded: bool = False) -> dict:
+                       identified_confounded: bool = IDENTIFIED_CONFOUNDED) -> dict:
     """Fit the terms of ``grid`` in the identified sim of ``reports`` to real walks of the gait ``theta``.
 
     Args:
@@ -187,7 +188,7 @@ def fit_walk_terms(real_recordings: list, reports: list[str], theta, out_dir: st
         seconds: walk length [s].
         grid: what is fitted: a name of :data:`GRIDS` or such a dict (:func:`candidates`).
         identified_confounded: also build in the contact terms confounded with the uneven ground
-            (``sysid.identified.confounded_with_ground``; the identified world's default leaves them out).
+            (``sysid.identified.confounded_with_ground``; default ``experiments.tasks.IDENTIFIED_CONFOUNDED``).
 
     Returns:
         The saved result: ``{"terms": the chosen terms (:func:`candidates` labels), "walkfit":
