@@ -62,7 +62,12 @@ name the world that builds them in plain ``identified`` / ``hybrid`` (:func:`can
 ``walkfit=actuation`` (torque-limit and leg kp scales, latency) or ``walkfit=ground`` (latency and the
 RMS height of the uneven ground): those terms fitted to the draw's real walks of θ0, the walks SGAT
 is grounded on, by simulated moments of the leg tracking errors and the torso's sway
-(:mod:`experiments.walkfit`; thirteenth round), over the diagnosis's values.
+(:mod:`experiments.walkfit`; thirteenth round), over the diagnosis's values; ``servo=air`` or
+``servo=stepping``: one kp scale common to every servo (``pd_gain_all``) fitted to the draw's
+fixed-base (in-air) or stepping logs on top of the diagnosis's model, whether or not the diagnosis's
+selection would keep it (:meth:`Fidelity._servo_fits`; fifteenth round); ``servo=staged``: the
+in-air fit, then the stepping logs diagnosed again with it under them (bottom-up, as the diagnosis
+stages the in-air model under the stepping logs).
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
@@ -99,8 +104,8 @@ from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
 from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, IDENTIFY_BUDGET_S,
                                    REAL_WALKS, SIM_WALKS)
-from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, identify_real,
-                                  record_excitation_task)
+from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, fit_servo_gain,
+                                  identify_real, record_excitation_task)
 from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
 from experiments.tasks import IDENTIFIED_CONFOUNDED, fit_grounding_task
 from experiments.walkfit import GRIDS as WALKFIT_GRIDS
@@ -108,6 +113,10 @@ from sgat.grounding import GroundingConfig
 from robots import ROBOT_NAMES, get_robot
 from walk_engine import params_for
 
+#: The ``servo=`` variants (:meth:`Fidelity._servo_fits`): the common servo stiffness fitted to the
+#: in-air logs (``air``), the same followed by the stepping diagnosis again on top of it (``staged``),
+#: or fitted to the stepping logs (``stepping``).
+SERVO_LOGS = ("air", "staged", "stepping")
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
@@ -115,7 +124,8 @@ DEFAULT_WORLDS = KINDS[:-1]
 DETERMINISTIC_KINDS = ("sim", "gat")
 #: The phases of a run, in run order, whose wall time ``fidelity.json`` reports (``phases_s``): where a
 #: run's time goes (the README's default run: the diagnoses and the world episodes, on busy cores).
-PHASES = ("real trials", "excitation logs", "diagnoses", "grounding walks", "walk fits", "fits", "world episodes",
+PHASES = ("real trials", "excitation logs", "diagnoses", "servo fits", "grounding walks", "walk fits", "fits",
+          "world episodes",
           "teacher forcing")
 #: Purposes of the seed streams (the first key after the run seed). ``_CAL`` drew the engine-gap
 #: calibration's seed until that became one constant (``experiments.identify.ENGINE_GAP_SEED``, seed
@@ -137,7 +147,7 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 #: every cached world keeps its meaning.
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
-                  "oracle_engine": "pybullet"}
+                  "oracle_engine": "pybullet", "servo": ""}
 
 
 @dataclass(frozen=True)
@@ -161,6 +171,7 @@ class WorldSpec:
     oracle_mean: bool = False  # oracle: the real world with its effects fixed at their mean (experiments.tasks.mean_profile)
     walkfit: str = ""  # identified / hybrid: terms fitted to the real walks of θ0 (a grid of experiments.walkfit.GRIDS)
     oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
+    servo: str = ""  # identified / hybrid: a kp scale common to every servo fitted to the "air" or "stepping" logs
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -234,6 +245,11 @@ def parse_world(text: str) -> WorldSpec:
                     raise ValueError(f"world {text!r}: unknown option value walkfit={v!r} "
                                      f"({' or '.join(WALKFIT_GRIDS)}; 0: none)")
                 kw["walkfit"] = "" if v == "0" else v
+            elif kind in ("identified", "hybrid") and k == "servo":
+                if v not in (*SERVO_LOGS, "0"):
+                    raise ValueError(f"world {text!r}: unknown option value servo={v!r} "
+                                     f"({' or '.join(SERVO_LOGS)}; 0: none)")
+                kw["servo"] = "" if v == "0" else v
             elif kind == "oracle" and k == "mean":
                 kw["oracle_mean"] = bool(int(v))
             elif kind == "oracle" and k == "engine":
@@ -578,16 +594,18 @@ class Fidelity:
                 "n_fixed": cfg.identify_fixed_logs, "n_floating": stepping, "seconds": cfg.identify_seconds,
                 "fixed_dir": os.path.join(root, "fixed")}
 
-    def _identify(self, draw: int, stepping: int) -> dict:
-        """Draw ``draw``'s identification from ``stepping`` stepping logs (:meth:`_identify_args`). The
+    def _identify(self, draw: int, stepping: int, base_terms: dict | None = None, suffix: str = "") -> dict:
+        """Draw ``draw``'s identification from ``stepping`` stepping logs (:meth:`_identify_args`; with
+        ``base_terms`` under the stepping diagnosis, in the folder with ``suffix`` added). The
         stepping diagnosis's time budget grows with its logs (``--identify-budget`` per 3 logs):
         with the budget of 3 logs, 2 of 3 diagnoses of 9 logs ran out before the uneven-ground stage
         and left the ground out."""
         cfg = self.cfg
-        return identify_real(**self._identify_args(draw, stepping), calibration=self._calibration,
-                             time_budget_s=cfg.identify_budget_s,
+        args = self._identify_args(draw, stepping)
+        args["out_dir"] += suffix
+        return identify_real(**args, calibration=self._calibration, time_budget_s=cfg.identify_budget_s,
                              stepping_budget_s=cfg.identify_budget_s * max(1.0, stepping / max(1, cfg.identify_floating_logs)),
-                             progress=None)
+                             base_terms=base_terms, progress=None)
 
     def _record_excitation(self, counts: list[int]) -> None:
         """Record the excitation logs of every identification still to be made side by side on the
@@ -640,6 +658,67 @@ class Fidelity:
                 out[d, stepping, conf, n, grid] = {"path": fit["path"], "real_paths": real[d, n]}
         return out
 
+    def _servo_fits(self, idents: dict) -> dict:
+        """The common servo stiffness of every ``servo=`` world, per draw: one kp scale for every joint
+        (``pd_gain_all``) fitted to the draw's fixed-base (``air``: over the in-air diagnosis's model)
+        or stepping logs (``stepping``: over the whole identified model) by
+        :func:`experiments.identify.fit_servo_gain` (the refit alone, no screening or selection: the
+        diagnosis does not keep the term, whose removal changes its held-out cost by less than its
+        margin), written as a report that overrides the diagnosis (``identified/d<draw>/servo_*``).
+
+        Returns:
+            ``{(draw, stepping logs, confounded, logs): report path}``.
+
+        Raises:
+            ValueError: a ``servo=stepping`` world with no stepping logs (``stepping=0``).
+        """
+        want = sorted({(self._stepping(s), s.identified_confounded, "stepping" if s.servo == "stepping" else "air")
+                       for s in self.specs if s.servo})
+        out = {}
+        for d in range(self.cfg.data_seeds):
+            for stepping, conf, which in want:
+                args = self._identify_args(d, stepping)
+                if which == "air":  # the draw's one fixed-base stage, whatever the stepping logs
+                    reports = [os.path.join(args["fixed_dir"], "report.json")]
+                    logs, cal = os.path.join(args["fixed_dir"], "logs"), self._calibration.get("fixed")
+                    path = os.path.join(os.path.dirname(args["fixed_dir"]), "servo_air", "report.json")
+                else:
+                    if stepping < 1:
+                        raise ValueError("servo=stepping needs stepping logs (stepping >= 1)")
+                    reports = idents[d, stepping]["reports"]
+                    logs, cal = os.path.join(args["out_dir"], "floating", "logs"), self._calibration.get("floating")
+                    path = os.path.join(args["out_dir"], "servo_fit" + ("" if conf else "x"), "report.json")
+                if not os.path.exists(path):
+                    t0 = time.perf_counter()
+                    with self._phase("servo fits"):
+                        v = fit_servo_gain(reports, logs, cal, path, confounded=conf)
+                    self._say(f"servo fit ({which}) draw {d}: kp x{v['value']:.3f} (held-out cost "
+                              f"{v['heldout_cost_before']:.0f} -> {v['heldout_cost_after']:.0f}; {time.perf_counter() - t0:.0f} s)")
+                out[d, stepping, conf, which] = path
+        return out
+
+    def _staged(self, servofits: dict) -> dict:
+        """The identifications of every ``servo=staged`` world, per draw: the draw's stepping logs
+        diagnosed again (:func:`identify_real` with the in-air servo fit of :meth:`_servo_fits` under
+        them, ``base_terms``) in ``identified/d<draw>_servo`` (its fixed-base stage is the draw's own).
+
+        Returns:
+            ``{(draw, stepping logs, confounded): identify_real's result}``.
+        """
+        from sysid.identified import load_identified  # lazy: loads the engines
+
+        want = sorted({(self._stepping(s), s.identified_confounded) for s in self.specs if s.servo == "staged"})
+        out = {}
+        for d in range(self.cfg.data_seeds):
+            for stepping, conf in want:
+                terms, _ = load_identified([servofits[d, stepping, conf, "air"]])
+                t0 = time.perf_counter()
+                with self._phase("diagnoses"):
+                    out[d, stepping, conf] = r = self._identify(d, stepping, terms, "_servo")
+                self._say(f"identified draw {d} again on the in-air servo fit: ground Sq "
+                          f"{1000 * r['terrain_rms_height']:.2f} mm ({time.perf_counter() - t0:.0f} s)")
+        return out
+
     def _mean_physics(self) -> str:
         """The report of the real world's mean physics for the identified sim (``oracle:mean=1:
         engine=mujoco``; :func:`experiments.tasks.mean_physics_report`), written once into the run."""
@@ -685,19 +764,25 @@ class Fidelity:
                                         for k in r.get("time_budget_reached", [])))
             self._say(f"identification done ({time.perf_counter() - t0:.0f} s)")
         walkfits = self._walk_fits(idents)
+        servofits = self._servo_fits(idents)
+        staged = self._staged(servofits)
         fits = []
         for d in range(cfg.data_seeds):
             for s in self.specs:
                 info: dict = {"transformer": None, "identified": None, "real_walks": 0, "real_seconds": 0.0,
                               "excitation_logs": 0, "excitation_seconds": 0.0}
                 if s.needs_identification:
-                    idn = idents[d, self._stepping(s)]
+                    idn = staged[d, self._stepping(s), s.identified_confounded] if s.servo == "staged" \
+                        else idents[d, self._stepping(s)]
                     effects, reports = idn["effects"], list(idn["reports"])
+                    if s.servo:  # the common servo stiffness fitted to the in-air or stepping logs
+                        reports.append(servofits[d, self._stepping(s), s.identified_confounded,
+                                                 "stepping" if s.servo == "stepping" else "air"])
                     if s.walkfit:  # the terms fitted to the real walks override the diagnosis's
                         wf = walkfits[d, self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit]
                         reports.append(wf["path"])
                         info["real_paths"] = wf["real_paths"]
-                    if not s.identified_confounded or s.walkfit:  # the terms this world builds in
+                    if not s.identified_confounded or s.walkfit or s.servo:  # the terms this world builds in
                         from sysid.identified import load_identified  # lazy: loads the engines
 
                         terms, rms = load_identified(reports, s.identified_confounded)
@@ -719,6 +804,8 @@ class Fidelity:
                         base += "x"  # ... or on one without the contact terms confounded with the ground
                     if s.kind == "hybrid" and s.walkfit:
                         base += f"w{s.walkfit}"  # ... or on one with terms fitted to the real walks
+                    if s.kind == "hybrid" and s.servo:
+                        base += {"stepping": "s", "air": "a", "staged": "g"}[s.servo]  # ... or with the servo stiffness fitted
                     sim = self._walks("identified" if s.kind == "hybrid" else "sim",
                                       _seeds(cfg.seed, _GROUND_SIM, d, n=s.sim_walks),
                                       f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)

@@ -243,7 +243,8 @@ def excitation_tasks(out_dir: str, *, seed: int, profile="real", n_fixed: int = 
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
                   n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 60.0, rounds: int = 2,
-                  fixed_dir: str | None = None, stepping_budget_s: float | None = None, progress=None) -> dict:
+                  fixed_dir: str | None = None, stepping_budget_s: float | None = None, base_terms: dict | None = None,
+                  progress=None) -> dict:
     """Excite the real world and diagnose it: the reports the identified sim is built from.
 
     Args:
@@ -263,6 +264,9 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
         stepping_budget_s: time budget of the stepping-log diagnosis (default ``time_budget_s``): more
             logs take longer to screen, and a diagnosis whose budget runs out before its
             uneven-ground stage leaves the ground out (its report says so).
+        base_terms: Term -> value added to the fixed-base stage's model under the stepping diagnosis
+            (e.g. a common servo stiffness fitted to the in-air logs, :func:`fit_servo_gain`); the
+            stepping report carries them in its ``base_model``.
 
     Returns:
         ``{"reports": [report.json paths, fixed first], "logs": n, "seconds": recorded seconds,
@@ -290,6 +294,8 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
                     cal = json.load(f)
             fams = IDENTIFY_FIXED_FAMILIES if kind == "fixed" else None
             budget = stepping_budget_s if kind == "floating" and stepping_budget_s is not None else time_budget_s
+            if kind == "floating" and base_terms:
+                base = {**(base or {}), **base_terms}
             rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=budget,
                            families=fams,
                            progress=lambda s, k=kind: say(f"identify {kind}: {s}"), use_ground_truth=USE_GROUND_TRUTH)
@@ -309,6 +315,60 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
     return {"reports": reports, "logs": n_logs, "seconds": secs,
             "effects": {t.label(): v for t, v in sorted(terms.items())}, "terrain_rms_height": rms,
             "time_budget_reached": budget_hit, "wall_s": time.perf_counter() - t0}
+
+
+#: Start value of the common servo stiffness fit (:func:`fit_servo_gain`), x kp.
+SERVO_GAIN_START = 0.95
+
+
+def fit_servo_gain(reports, logs_dir: str, calibration: str | None, out_path: str, *, confounded: bool) -> dict:
+    """Fit one kp scale common to every servo (``pd_gain_all``) to a draw's excitation logs, with the
+    diagnosis's identified model under it, and write it as a report that overrides that model
+    (``sysid.identified.load_identified`` reads reports in order).
+
+    The diagnosis screens the family on request only and, screened, does not keep it on these logs
+    (removing it changes the held-out cost by less than the selection margin); this is the refit alone
+    (:func:`sysid.diagnose.fit_terms`), a fidelity variant (``identified:servo=air`` on the fixed-base
+    logs, ``identified:servo=stepping`` on the stepping logs).
+
+    Args:
+        reports: the ``report.json`` paths whose model goes under the fit (in the air: the fixed-base
+            diagnosis's; stepping: the draw's whole identification, fixed base first).
+        logs_dir: the logs to fit (fixed-base or floating-base, as the reports').
+        calibration: the engine-gap calibration file of that base kind (None: none).
+        out_path: the report to write.
+        confounded: build in the contact terms confounded with the uneven ground under the fit
+            (``sysid.identified.confounded_with_ground``).
+
+    Returns:
+        ``{"value": fitted scale, "heldout_cost_before", "heldout_cost_after", "path"}``; the report
+        is reused when it exists.
+
+    Raises:
+        FileNotFoundError: no logs in ``logs_dir``; what :func:`sysid.diagnose.fit_terms` raises.
+    """
+    if os.path.exists(out_path):
+        with open(out_path) as f:
+            rep = json.load(f)
+        return {"value": rep["model"]["pd_gain_all"], **rep["servo_fit"], "path": out_path}
+    from sysid.candidates import Term  # lazy: loads the engines
+    from sysid.data import load_logs  # lazy: loads the engines
+    from sysid.diagnose import fit_terms  # lazy: loads the engines and scipy
+    from sysid.identified import load_identified  # lazy: loads the engines
+
+    terms, _ = load_identified(reports, confounded)
+    logs = load_logs(logs_dir, use_ground_truth=USE_GROUND_TRUTH)
+    cal = None
+    if calibration:
+        with open(calibration) as f:
+            cal = json.load(f)
+    t = Term("pd_gain_all")
+    fit = fit_terms(logs, {t: SERVO_GAIN_START}, calibration=cal, base_model=terms, use_ground_truth=USE_GROUND_TRUTH)
+    info = {"heldout_cost_before": fit["heldout_cost_before"], "heldout_cost_after": fit["heldout_cost_after"]}
+    os.makedirs(os.path.dirname(out_path) or ".", exist_ok=True)
+    atomic_write_text(out_path, json.dumps({"model": {t.label(): float(fit["values"][t])}, "base_model": {},
+                                            "effects": [], "servo_fit": info}, indent=1))
+    return {"value": float(fit["values"][t]), **info, "path": out_path}
 
 
 if __name__ == "__main__":  # python -m experiments.identify --engine-gap

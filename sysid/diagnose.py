@@ -419,6 +419,41 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     return report
 
 
+def fit_terms(logs: list[Log], start: dict, *, calibration: dict | None = None, base_model: dict | None = None,
+              robot=None, use_ground_truth: bool = False) -> dict:
+    """Fit given terms to ``logs`` on top of a base model, without screening or selection: the refit
+    (bounded least squares, :func:`sysid.identify.refit`) of a diagnosis asked about named terms only.
+
+    The logs are split and replayed as :func:`diagnose` replays them (training and held-out logs split
+    by trajectory; floating-base logs in :data:`WINDOW_S` windows; the calibration's baseline model
+    and ``base_model`` under every replay).
+
+    Args:
+        logs: recordings of the real robot (>= 2 for a held-out split).
+        start: Term -> start value of the terms to fit (each within its family's bounds).
+        calibration, base_model, robot, use_ground_truth: as for :func:`diagnose`.
+
+    Returns:
+        ``{"values": Term -> fitted value, "heldout_cost_before": C without the terms,
+        "heldout_cost_after": C with them}`` (C: the diagnosis's held-out cost, Σ_channels
+        mean((e/floor)²)).
+
+    Raises:
+        ValueError: ``start`` is empty or names a family that is not a candidate family; what
+            :func:`diagnose` raises for the logs.
+    """
+    if not start:
+        raise ValueError("fit_terms needs at least one term to fit")
+    robot = _robot_of(logs, robot)
+    logs, _ = _replay_logs(logs, use_ground_truth)
+    setup = _prepare(logs, sorted({t.family for t in start}), calibration, base_model, lambda s: None)
+    base = _baseline(logs, setup, calibration, robot)
+    problem = Problem(logs, setup.train, setup.heldout, base.floor, setup.with_imu, base=setup.base_model)
+    fit = refit(problem, dict(start))
+    c = problem.cost([{}, fit.values], "heldout")
+    return {"values": dict(fit.values), "heldout_cost_before": float(c[0]), "heldout_cost_after": float(c[1])}
+
+
 # ------------------------------------------------------------------------------------------ stages
 @dataclass
 class _Clock:

@@ -178,6 +178,11 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
             a = spec.actuator(t.target)
             a.gainprm[0] = a.gainprm[0] * v
             a.biasprm[1] = a.biasprm[1] * v
+        elif f == "pd_gain_all":
+            for n in robot.joint_names:
+                a = spec.actuator(n)
+                a.gainprm[0] = a.gainprm[0] * v
+                a.biasprm[1] = a.biasprm[1] * v
         elif f == "torque_constant":
             a = spec.actuator(t.target)
             a.gainprm[0] = a.gainprm[0] * v

@@ -169,6 +169,77 @@ def test_a_walk_fitted_identified_world_adds_the_fitted_actuation_to_its_draws_r
         assert fits[d][0] == fid._seeds(run.cfg.seed, fid._GROUND_REAL, d, n=4)  # SGAT's grounding walks of the draw
 
 
+def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_reports(tmp_path, monkeypatch):
+    """``identified:servo=air`` / ``servo=stepping``: per draw, one kp scale for every servo fitted to
+    the draw's in-air logs over the in-air diagnosis (one fit per draw, whatever the stepping logs) or
+    to its stepping logs over the whole identification (no confounded contact terms under it by
+    default) is one more report over the diagnosis's; ``servo=staged`` diagnoses the stepping logs
+    again with the in-air fit under them (a folder of its own, the draw's fixed-base stage). The
+    option leaves every other world's cache key alone."""
+    import experiments.fidelity as fid
+
+    calls = []
+
+    def fake_identify(out_dir, *, n_fixed, n_floating, fixed_dir, base_terms=None, **kw):
+        calls.append((os.path.relpath(out_dir, tmp_path), os.path.relpath(fixed_dir, tmp_path),
+                      {t.label(): v for t, v in (base_terms or {}).items()}))
+        reps = [os.path.join(fixed_dir, "report.json"), os.path.join(out_dir, "floating", "report.json")]
+        for rep in reps:
+            os.makedirs(os.path.dirname(rep), exist_ok=True)
+            with open(rep, "w") as f:
+                json.dump({"model": {"latency": 0.02}, "base_model": {}, "effects": []}, f)
+        return {"reports": reps, "logs": n_fixed + n_floating, "seconds": 36.0, "effects": {"latency": 0.02},
+                "terrain_rms_height": 0.0, "wall_s": 0.0}
+
+    fits = []
+
+    def fake_fit(reports, logs_dir, calibration, out_path, *, confounded):
+        fits.append(([os.path.relpath(r, tmp_path) for r in reports], os.path.relpath(logs_dir, tmp_path), calibration,
+                     confounded))
+        os.makedirs(os.path.dirname(out_path), exist_ok=True)
+        with open(out_path, "w") as f:
+            json.dump({"model": {"pd_gain_all": 0.9}, "base_model": {}, "effects": []}, f)
+        return {"value": 0.9, "heldout_cost_before": 10.0, "heldout_cost_after": 8.0, "path": out_path}
+
+    monkeypatch.setattr(fid, "identify_real", fake_identify)
+    monkeypatch.setattr(fid, "record_excitation_task", lambda t: [])
+    monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": "cal_fixed.json", "floating": "cal_floating.json"})
+    monkeypatch.setattr(fid, "fit_servo_gain", fake_fit)
+    assert parse_world("hybrid:servo=air").servo == "air" and not parse_world("hybrid").servo
+    assert parse_world("identified:servo=0").key == parse_world("identified").key == "identified-ab4e2aa64c"
+    assert len({parse_world(f"identified:servo={v}").key for v in ("air", "staged", "stepping", "0")}) == 4
+    with pytest.raises(ValueError, match="unknown option"):
+        parse_world("sgat:servo=air")
+    with pytest.raises(ValueError, match="air or staged or stepping"):
+        parse_world("identified:servo=1")
+    worlds = ("identified", "identified:servo=air", "identified:servo=air:stepping=6", "identified:servo=stepping",
+              "identified:servo=staged")
+    run = fid.Fidelity(FidelityConfig(worlds=worlds, data_seeds=2, seconds=1.0), str(tmp_path), executor=SerialExecutor())
+    prep = run.prepare()
+    air = [f for f in fits if f[2] == "cal_fixed.json"]
+    assert [f[:2] for f in air] == [([f"identified/d{d}/fixed/report.json"], f"identified/d{d}/fixed/logs") for d in (0, 1)]
+    assert [f[1:] for f in fits if f not in air] == [(f"identified/d{d}/floating/logs", "cal_floating.json", False)
+                                                     for d in (0, 1)]
+    for d in (0, 1):
+        plain = prep["identified"][d]
+        for w, where in (("identified:servo=air", "servo_air"), ("identified:servo=air:stepping=6", "servo_air"),
+                         ("identified:servo=stepping", "servo_fitx")):
+            assert prep[w][d]["identified"][-1].endswith(os.path.join(f"d{d}", where, "report.json"))
+            assert prep[w][d]["effects"] == {"latency": 0.02, "pd_gain_all": 0.9}
+        assert prep["identified:servo=stepping"][d]["identified"][:-1] == plain["identified"]
+        assert plain["effects"] == {"latency": 0.02}
+        staged = prep["identified:servo=staged"][d]["identified"]
+        assert [os.path.relpath(p, tmp_path) for p in staged] == [f"identified/d{d}/fixed/report.json",
+                                                                  f"identified/d{d}_servo/floating/report.json",
+                                                                  f"identified/d{d}/servo_air/report.json"]
+    assert sorted(c for c in calls if c[0].endswith("_servo")) == [
+        (f"identified/d{d}_servo", f"identified/d{d}/fixed", {"pd_gain_all": 0.9}) for d in (0, 1)]
+    assert all(c[2] == {} for c in calls if not c[0].endswith("_servo"))
+    with pytest.raises(ValueError, match="stepping logs"):
+        fid.Fidelity(FidelityConfig(worlds=("identified:servo=stepping:stepping=0",), data_seeds=1, seconds=1.0),
+                     str(tmp_path / "b"), executor=SerialExecutor()).prepare()
+
+
 def test_more_episodes_per_gait_extend_a_run_as_a_fresh_run_would_walk_them(tmp_path, capsys):
     """A run resumed with another --episodes walks only the episodes it lacks, and its result is a
     fresh run's with that count: the first k episode seeds of a gait are those of a k-episode run."""
@@ -281,7 +352,7 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     from experiments.fidelity import PHASES
 
     ph, ph2 = res["phases_s"], res2["phases_s"]
-    assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses", "walk fits")]  # no identified world here
+    assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses", "servo fits", "walk fits")]  # no identified world here
     assert all(v > 0 for v in ph.values()) and sum(ph.values()) <= res["wall_s"]
     assert list(ph2) == list(ph) and all(ph2[k] >= ph[k] for k in ph) and ph2["world episodes"] > ph["world episodes"]
     assert ph2["teacher forcing"] == ph["teacher forcing"]  # resumed from replay.json: nothing teacher-forced again

@@ -81,3 +81,30 @@ def test_excitation_logs_recorded_ahead_are_the_ones_identify_real_uses(tmp_path
         ident.identify_real(str(tmp_path / "d0"), time_budget_s=1.0, **kw)
     assert seen == ["excite_000", "excite_001"]
     assert [os.stat(p).st_mtime_ns for p in paths] == before  # not recorded again
+
+
+def test_base_terms_go_under_the_stepping_diagnosis_only(tmp_path, monkeypatch):
+    """``identify_real(base_terms=...)`` (``identified:servo=staged``): the terms are added to the
+    in-air model under the stepping-log diagnosis; the in-air stage (its report here already on disk,
+    shared with the draw's plain identification) is neither diagnosed again nor given them."""
+    import json
+    import types
+
+    from sysid.candidates import Term
+
+    fixed = tmp_path / "d0" / "fixed"
+    fixed.mkdir(parents=True)
+    (fixed / "report.json").write_text(json.dumps({"model": {"latency": 0.02}, "base_model": {}, "effects": []}))
+    monkeypatch.setattr(ident, "_recorded", lambda task: ["x.parquet"])
+    monkeypatch.setattr("sysid.data.load_logs", lambda *a, **k: [types.SimpleNamespace(seconds=6.0, name="x")])
+    seen = []
+
+    def fake_diagnose(logs, *, base_model, **k):
+        seen.append({t.label(): v for t, v in base_model.items()})
+        raise RuntimeError("stop")
+
+    monkeypatch.setattr("sysid.diagnose.diagnose", fake_diagnose)
+    with pytest.raises(RuntimeError, match="stop"):
+        ident.identify_real(str(tmp_path / "d0_servo"), seed=7, n_fixed=2, n_floating=1, fixed_dir=str(fixed),
+                            base_terms={Term("pd_gain_all"): 0.92})
+    assert seen == [{"latency": 0.02, "pd_gain_all": 0.92}]

@@ -20,6 +20,7 @@ CASES = [
     ({Term("coulomb_friction", "LHipPitch"): 0.2}, 0.10),
     ({Term("viscous_damping", "RHipRoll"): 0.25}, 0.10),
     ({Term("pd_gain", "LAnklePitch"): 0.6}, 0.05),
+    ({Term("pd_gain_all"): 0.9}, 0.05),  # every servo 10 % soft: one scale, opt-in
     ({Term("torque_limit"): 0.6}, 0.05),
     ({Term("link_mass", "r_ankle"): 1.7}, 0.10),
     ({Term("armature", "LKneePitch"): 0.008}, 0.15),
@@ -170,3 +171,43 @@ def test_parallel_spring_scales_with_each_joints_kp():
     kp = float(g1.kp[g1.joint_index(["left_knee_joint"])[0]])
     assert term_probe(g1_knee, g1) == pytest.approx(0.03 * kp) and term_bounds(g1_knee, g1) == (0.0, 0.5 * kp)
     assert family_for("parallel_spring", g1).probe == pytest.approx(fam.probe * 880.0 / 30.0)
+
+
+def test_fit_terms_fits_named_terms_without_screening():
+    """``sysid.diagnose.fit_terms``: the refit alone of the terms asked about, on the diagnosis's split:
+    a kp 8 % low on every servo is recovered on top of a known base model (a latency), and the
+    held-out cost falls to the floor; an empty request is refused."""
+    from sysid.diagnose import fit_terms
+
+    truth = {Term("latency"): 0.015, Term("pd_gain_all"): 0.92}
+    logs = synthetic_logs(truth, n_logs=2, seconds=3.0, seed=3, traj_seed=41,
+                          segments=("holds", "ramps", "steps", "reversals", "chirp"))
+    fit = fit_terms(logs, {Term("pd_gain_all"): 0.97}, base_model={Term("latency"): 0.015})
+    assert fit["values"][Term("pd_gain_all")] == pytest.approx(0.92, abs=0.005)
+    assert fit["heldout_cost_after"] < 0.2 * fit["heldout_cost_before"]
+    with pytest.raises(ValueError, match="at least one term"):
+        fit_terms(logs, {})
+
+
+def test_a_common_kp_scale_scales_every_servo_in_the_replay_and_in_the_exported_model():
+    """``pd_gain_all`` x0.9: every actuator's kp (gainprm[0] and -biasprm[1]) is 0.9 of the nominal's,
+    kd untouched, in the replay model (``apply_terms``) and in the MJCF ``sgatwalk diagnose`` writes."""
+    import copy
+
+    import mujoco
+
+    from sysid.candidates import apply_terms
+    from sysid.model import Structure, replay_model
+    from sysid.report import export_mjcf
+
+    rm = replay_model(Structure(fixed_base=True, physics_dt=0.001, robot="nao_h25"))
+    m = copy.copy(rm.model)
+    apply_terms(rm, m, {Term("pd_gain_all"): 0.9})
+    np.testing.assert_allclose(m.actuator_gainprm[rm.act, 0], 0.9 * rm.model.actuator_gainprm[rm.act, 0])
+    np.testing.assert_allclose(m.actuator_biasprm[rm.act, 1], 0.9 * rm.model.actuator_biasprm[rm.act, 1])
+    np.testing.assert_array_equal(m.actuator_biasprm[rm.act, 2], rm.model.actuator_biasprm[rm.act, 2])
+    nominal = mujoco.MjModel.from_xml_string(export_mjcf({}, True, 0.001))
+    scaled = mujoco.MjModel.from_xml_string(export_mjcf({Term("pd_gain_all"): 0.9}, True, 0.001))
+    assert nominal.nu == scaled.nu == 24
+    np.testing.assert_allclose(scaled.actuator_gainprm[:, 0], 0.9 * nominal.actuator_gainprm[:, 0])
+    np.testing.assert_array_equal(scaled.actuator_biasprm[:, 2], nominal.actuator_biasprm[:, 2])
