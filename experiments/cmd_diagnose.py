@@ -49,7 +49,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--families", help="comma list of candidate families (default: actuator families for fixed-base "
                    "logs, contact families (foot_friction, ground_compliance) for floating-base logs); "
                    "torque_constant (a servo error scaling kp and kd together), parallel_spring (a passive "
-                   "-k q toward the zero angle) and pd_gain_all (one kp scale common to every servo) are screened only "
+                   "-k q toward the zero angle), pd_gain_all (one kp scale common to every servo), coulomb_friction_all and "
+                   "viscous_damping_all (one dry / viscous friction on every joint) are screened only "
                    "when listed here; +NAME adds to the default")
     p.add_argument("--base-report", type=A.in_file, metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
                    "(bottom-up staging: diagnose fixed-base logs first, then stepping logs with their report)")

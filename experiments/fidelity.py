@@ -67,7 +67,9 @@ is grounded on, by simulated moments of the leg tracking errors and the torso's 
 fixed-base (in-air) or stepping logs on top of the diagnosis's model, whether or not the diagnosis's
 selection would keep it (:meth:`Fidelity._servo_fits`; fifteenth round); ``servo=staged``: the
 in-air fit, then the stepping logs diagnosed again with it under them (bottom-up, as the diagnosis
-stages the in-air model under the stepping logs).
+stages the in-air model under the stepping logs); ``servo=refit``: as ``staged``, with the common kp
+fitted jointly with one dry and one viscous friction common to every joint and every term of the
+in-air model (the in-air latency had taken up the lag of the joints' friction; sixteenth round).
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
@@ -115,8 +117,12 @@ from walk_engine import params_for
 
 #: The ``servo=`` variants (:meth:`Fidelity._servo_fits`): the common servo stiffness fitted to the
 #: in-air logs (``air``), the same followed by the stepping diagnosis again on top of it (``staged``),
-#: or fitted to the stepping logs (``stepping``).
-SERVO_LOGS = ("air", "staged", "stepping")
+#: fitted to the stepping logs (``stepping``), or fitted to the in-air logs jointly with the joints'
+#: common friction and every term of the in-air model, then the stepping diagnosis again on top
+#: (``refit``; sixteenth round).
+SERVO_LOGS = ("air", "staged", "stepping", "refit")
+#: The ``servo=`` variants whose stepping logs are diagnosed again on top of the in-air fit.
+STAGED_SERVO = ("staged", "refit")
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
@@ -125,8 +131,7 @@ DETERMINISTIC_KINDS = ("sim", "gat")
 #: The phases of a run, in run order, whose wall time ``fidelity.json`` reports (``phases_s``): where a
 #: run's time goes (the README's default run: the diagnoses and the world episodes, on busy cores).
 PHASES = ("real trials", "excitation logs", "diagnoses", "servo fits", "grounding walks", "walk fits", "fits",
-          "world episodes",
-          "teacher forcing")
+          "world episodes", "teacher forcing")
 #: Purposes of the seed streams (the first key after the run seed). ``_CAL`` drew the engine-gap
 #: calibration's seed until that became one constant (``experiments.identify.ENGINE_GAP_SEED``, seed
 #: 0's draw); it keeps its place so the streams after it keep their values.
@@ -171,7 +176,7 @@ class WorldSpec:
     oracle_mean: bool = False  # oracle: the real world with its effects fixed at their mean (experiments.tasks.mean_profile)
     walkfit: str = ""  # identified / hybrid: terms fitted to the real walks of θ0 (a grid of experiments.walkfit.GRIDS)
     oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
-    servo: str = ""  # identified / hybrid: a kp scale common to every servo fitted to the "air" or "stepping" logs
+    servo: str = ""  # identified / hybrid: a kp scale common to every servo (one of SERVO_LOGS; "": none)
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -189,6 +194,14 @@ class WorldSpec:
                 d.pop(k)
         d["grounding"] = self.grounding.to_dict() if self.grounding else None
         return f"{self.kind}-{hashlib.sha1(json.dumps(d, sort_keys=True).encode()).hexdigest()[:10]}"
+
+    @property
+    def servo_fit(self) -> str:
+        """This world's fit of the common servo stiffness (:meth:`Fidelity._servo_fits`): ``"stepping"``
+        (to the stepping logs), ``"air"`` (to the in-air logs: ``servo=air`` and ``servo=staged``),
+        ``"air_refit"`` (to the in-air logs, jointly with the in-air model's terms: ``servo=refit``) or
+        ``""`` (no ``servo=`` option)."""
+        return {"": "", "stepping": "stepping", "refit": "air_refit"}.get(self.servo, "air")
 
     @property
     def grounded(self) -> bool:
@@ -664,7 +677,8 @@ class Fidelity:
         or stepping logs (``stepping``: over the whole identified model) by
         :func:`experiments.identify.fit_servo_gain` (the refit alone, no screening or selection: the
         diagnosis does not keep the term, whose removal changes its held-out cost by less than its
-        margin), written as a report that overrides the diagnosis (``identified/d<draw>/servo_*``).
+        margin; ``air_refit``: jointly with every term of the in-air model), written as a report that
+        overrides the diagnosis (``identified/d<draw>/servo_*``).
 
         Returns:
             ``{(draw, stepping logs, confounded, logs): report path}``.
@@ -672,16 +686,15 @@ class Fidelity:
         Raises:
             ValueError: a ``servo=stepping`` world with no stepping logs (``stepping=0``).
         """
-        want = sorted({(self._stepping(s), s.identified_confounded, "stepping" if s.servo == "stepping" else "air")
-                       for s in self.specs if s.servo})
+        want = sorted({(self._stepping(s), s.identified_confounded, s.servo_fit) for s in self.specs if s.servo})
         out = {}
         for d in range(self.cfg.data_seeds):
             for stepping, conf, which in want:
                 args = self._identify_args(d, stepping)
-                if which == "air":  # the draw's one fixed-base stage, whatever the stepping logs
+                if which != "stepping":  # the draw's one fixed-base stage, whatever the stepping logs
                     reports = [os.path.join(args["fixed_dir"], "report.json")]
                     logs, cal = os.path.join(args["fixed_dir"], "logs"), self._calibration.get("fixed")
-                    path = os.path.join(os.path.dirname(args["fixed_dir"]), "servo_air", "report.json")
+                    path = os.path.join(os.path.dirname(args["fixed_dir"]), f"servo_{which}", "report.json")
                 else:
                     if stepping < 1:
                         raise ValueError("servo=stepping needs stepping logs (stepping >= 1)")
@@ -691,31 +704,39 @@ class Fidelity:
                 if not os.path.exists(path):
                     t0 = time.perf_counter()
                     with self._phase("servo fits"):
-                        v = fit_servo_gain(reports, logs, cal, path, confounded=conf)
-                    self._say(f"servo fit ({which}) draw {d}: kp x{v['value']:.3f} (held-out cost "
+                        v = fit_servo_gain(reports, logs, cal, path, confounded=conf, refit=which == "air_refit")
+                    from sysid.candidates import FAMILIES  # lazy: loads the engines
+
+                    moved = "".join(f", {k} {FAMILIES[k].fmt(a)} -> {FAMILIES[k].fmt(b)}"
+                                    for k, (a, b) in v.get("refitted", {}).items()
+                                    if k in ("latency", "coulomb_friction_all", "viscous_damping_all"))
+                    self._say(f"servo fit ({which}) draw {d}: kp x{v['value']:.3f}{moved} (held-out cost "
                               f"{v['heldout_cost_before']:.0f} -> {v['heldout_cost_after']:.0f}; {time.perf_counter() - t0:.0f} s)")
                 out[d, stepping, conf, which] = path
         return out
 
     def _staged(self, servofits: dict) -> dict:
-        """The identifications of every ``servo=staged`` world, per draw: the draw's stepping logs
-        diagnosed again (:func:`identify_real` with the in-air servo fit of :meth:`_servo_fits` under
-        them, ``base_terms``) in ``identified/d<draw>_servo`` (its fixed-base stage is the draw's own).
+        """The identifications of every ``servo=staged`` and ``servo=refit`` world, per draw: the draw's
+        stepping logs diagnosed again (:func:`identify_real` with the in-air servo fit of
+        :meth:`_servo_fits` under them, ``base_terms``) in ``identified/d<draw>_servo`` (``refit``:
+        ``_servorefit``; the fixed-base stage is the draw's own).
 
         Returns:
-            ``{(draw, stepping logs, confounded): identify_real's result}``.
+            ``{(draw, stepping logs, confounded, servo fit): identify_real's result}``.
         """
         from sysid.identified import load_identified  # lazy: loads the engines
 
-        want = sorted({(self._stepping(s), s.identified_confounded) for s in self.specs if s.servo == "staged"})
+        want = sorted({(self._stepping(s), s.identified_confounded, s.servo_fit) for s in self.specs
+                       if s.servo in STAGED_SERVO})
         out = {}
         for d in range(self.cfg.data_seeds):
-            for stepping, conf in want:
-                terms, _ = load_identified([servofits[d, stepping, conf, "air"]])
+            for stepping, conf, which in want:
+                terms, _ = load_identified([servofits[d, stepping, conf, which]])
                 t0 = time.perf_counter()
                 with self._phase("diagnoses"):
-                    out[d, stepping, conf] = r = self._identify(d, stepping, terms, "_servo")
-                self._say(f"identified draw {d} again on the in-air servo fit: ground Sq "
+                    out[d, stepping, conf, which] = r = self._identify(
+                        d, stepping, terms, "_servo" + ("" if which == "air" else "refit"))
+                self._say(f"identified draw {d} again on the in-air servo fit ({which}): ground Sq "
                           f"{1000 * r['terrain_rms_height']:.2f} mm ({time.perf_counter() - t0:.0f} s)")
         return out
 
@@ -772,12 +793,13 @@ class Fidelity:
                 info: dict = {"transformer": None, "identified": None, "real_walks": 0, "real_seconds": 0.0,
                               "excitation_logs": 0, "excitation_seconds": 0.0}
                 if s.needs_identification:
-                    idn = staged[d, self._stepping(s), s.identified_confounded] if s.servo == "staged" \
-                        else idents[d, self._stepping(s)]
+                    idn = staged[d, self._stepping(s), s.identified_confounded, s.servo_fit] \
+                        if s.servo in STAGED_SERVO else idents[d, self._stepping(s)]
                     effects, reports = idn["effects"], list(idn["reports"])
-                    if s.servo:  # the common servo stiffness fitted to the in-air or stepping logs
-                        reports.append(servofits[d, self._stepping(s), s.identified_confounded,
-                                                 "stepping" if s.servo == "stepping" else "air"])
+                    if s.servo:  # the common servo stiffness fitted to the in-air or stepping logs; a staged
+                        # world's stepping diagnosis was made on top of it, so its report comes after
+                        fit = servofits[d, self._stepping(s), s.identified_confounded, s.servo_fit]
+                        reports.insert(1 if s.servo in STAGED_SERVO else len(reports), fit)
                     if s.walkfit:  # the terms fitted to the real walks override the diagnosis's
                         wf = walkfits[d, self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit]
                         reports.append(wf["path"])
@@ -805,7 +827,7 @@ class Fidelity:
                     if s.kind == "hybrid" and s.walkfit:
                         base += f"w{s.walkfit}"  # ... or on one with terms fitted to the real walks
                     if s.kind == "hybrid" and s.servo:
-                        base += {"stepping": "s", "air": "a", "staged": "g"}[s.servo]  # ... or with the servo stiffness fitted
+                        base += {"stepping": "s", "air": "a", "staged": "g", "refit": "r"}[s.servo]  # ... or with the servo stiffness fitted
                     sim = self._walks("identified" if s.kind == "hybrid" else "sim",
                                       _seeds(cfg.seed, _GROUND_SIM, d, n=s.sim_walks),
                                       f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)

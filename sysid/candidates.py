@@ -9,8 +9,10 @@ family              scope      unit      MuJoCo augmentation                    
 ==================  =========  ========  ===========================================  ============
 latency             global     s         ``actuator_delay`` (history buffers, linear)  10, 30 ms
 backlash            joint      rad       series play hinge, range ±gap/2               0.02, 0.05
-coulomb_friction    joint      N m       ``dof_frictionloss``                          0.05, 0.2
+coulomb_friction    joint      N m       ``dof_frictionloss`` (added)                  0.05, 0.2
+coulomb_friction_all global    N m       the same, one value on every joint            0.05
 viscous_damping     joint      N m s/rad ``dof_damping`` (added)                       0.05
+viscous_damping_all global     N m s/rad the same, one value on every joint            0.01
 pd_gain             joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
 pd_gain_all         global     x kp      the same, one scale for every joint          x0.9
 torque_constant     joint      x kp, kd  ``actuator_gainprm[0]``, ``biasprm[1:3]``      x0.85
@@ -40,8 +42,18 @@ servo changes as √(kp) would not (a kp-only error, ``pd_gain``, keeps kd). A c
 voltage or motor batch, the servos' stiffness below the datasheet's). Per-joint ``pd_gain`` terms
 compete joint by joint with friction and latency for the residual of the few joints screening
 flags; one common scale pools every joint's evidence, so a few percent shows where no single
-joint's would. It is opt-in (:data:`OPTIONAL_FAMILIES`); the identified training world screens it
-(``experiments.identify``).
+joint's would. It is opt-in (:data:`OPTIONAL_FAMILIES`); the ``servo=`` variants of the identified
+training world fit it without screening (``experiments.identify.fit_servo_gain``).
+
+``coulomb_friction_all`` and ``viscous_damping_all`` are the same for joint friction: one dry
+friction torque and one viscous coefficient on every joint, added to any per-joint term of the
+family (every joint of a gear train has some). Each joint's friction makes it trail its command by
+about (b q̇ + F_c sign q̇) / kp, a lag the single global latency is the only other term able to
+produce: on in-air logs of servos with 0.02-0.06 N m of dry and 0.005-0.02 N m s/rad of viscous
+friction on every joint and a 15 ms delay, a latency fitted without them comes out near 25 ms,
+most of the excess from the light arm joints (kp 1-8 N m/rad) whose friction no single term of the
+screening pays for. Fitted with the latency and ``pd_gain_all`` (``identified:servo=refit``), each
+takes its own share. Opt-in, like ``pd_gain_all``.
 
 ``parallel_spring`` is a passive elastic element across the joint, in parallel with the servo
 (cable harnesses and seals that resist bending, a counterbalance spring): a torque τ = -k q that
@@ -88,10 +100,9 @@ from envs.mujoco_world import GROUND_TIMECONST
 from robots import RobotModel, get_robot
 
 #: Every family name the report may use (issue 8).
-FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "viscous_damping", "pd_gain", "pd_gain_all", "torque_constant",
-                "torque_limit",
-                "link_mass", "armature", "joint_compliance", "parallel_spring", "foot_friction", "ground_compliance",
-                "terrain_roughness", "sensor_bias")
+FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "coulomb_friction_all", "viscous_damping", "viscous_damping_all",
+                "pd_gain", "pd_gain_all", "torque_constant", "torque_limit", "link_mass", "armature", "joint_compliance",
+                "parallel_spring", "foot_friction", "ground_compliance", "terrain_roughness", "sensor_bias")
 
 
 @dataclass(frozen=True)
@@ -154,8 +165,12 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            min_effect=0.002),
     Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
            probe2=0.2, min_effect=0.01, scale="effort"),
+    Family("coulomb_friction_all", "Coulomb (dry) joint friction common to every joint", "global", "N m", 0.0, 0.0,
+           0.4, 0.05, smooth=False, min_effect=0.005, scale="effort"),
     Family("viscous_damping", "viscous joint damping", "joint", "N m s/rad", 0.0, 0.0, 0.6, 0.05, min_effect=0.005,
            scale="kd"),
+    Family("viscous_damping_all", "viscous joint damping common to every joint", "global", "N m s/rad", 0.0, 0.0, 0.3,
+           0.01, min_effect=0.002, scale="kd"),
     Family("pd_gain", "servo stiffness (kp) mismatch", "joint", "x kp", 1.0, 0.3, 2.0, 0.85, min_effect=0.03),
     Family("pd_gain_all", "servo stiffness (kp) mismatch common to every joint", "global", "x kp", 1.0, 0.3, 2.0, 0.9,
            min_effect=0.02),
@@ -199,8 +214,9 @@ PARALLEL_SPRING_KP = {"probe": 0.03, "hi": 0.5, "min_effect": 0.005}
 #: ``--diagnose-families +parallel_spring``). Listed, it is found as itself (``tests/test_sysid_families.py``).
 #: ``pd_gain_all``: added in the fifteenth fidelity round for the identified training world, which fits it
 #: without screening (``experiments.identify.fit_servo_gain``); the blind benchmark was not rerun with it
-#: screened, so the default stays as it was validated there.
-OPTIONAL_FAMILIES = ("torque_constant", "parallel_spring", "pd_gain_all")
+#: screened, so the default stays as it was validated there. ``coulomb_friction_all``,
+#: ``viscous_damping_all``: added in the sixteenth round for the same world, on the same terms.
+OPTIONAL_FAMILIES = ("torque_constant", "parallel_spring", "pd_gain_all", "coulomb_friction_all", "viscous_damping_all")
 #: Families screened by default on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact and n not in OPTIONAL_FAMILIES)
 #: Families screened by default on floating-base (standing/stepping) logs: bottom-up staging
@@ -440,9 +456,13 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
         if f == "latency":
             m.actuator_delay[:] = v
         elif f == "coulomb_friction":
-            m.dof_frictionloss[rm.dadr[jidx[tg]]] = v
+            m.dof_frictionloss[rm.dadr[jidx[tg]]] += v
+        elif f == "coulomb_friction_all":  # every joint, adding to per-joint terms
+            m.dof_frictionloss[rm.dadr] += v
         elif f == "viscous_damping":
             m.dof_damping[rm.dadr[jidx[tg]]] += v
+        elif f == "viscous_damping_all":
+            m.dof_damping[rm.dadr] += v
         elif f == "armature":
             m.dof_armature[rm.dadr[jidx[tg]]] += v
         elif f == "pd_gain":  # relative to the copy's (nominal) gains, so it composes with torque_constant

@@ -165,13 +165,15 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
         if f == "latency":
             for a in spec.actuators:
                 a.delay = v
-        elif f == "coulomb_friction":
-            spec.joint(t.target).frictionloss = v
-        elif f == "viscous_damping":
-            j = spec.joint(t.target)
-            d = list(j.damping)
-            d[0] += v
-            j.damping = d
+        elif f in ("coulomb_friction", "coulomb_friction_all"):
+            for n in ([t.target] if f == "coulomb_friction" else robot.joint_names):
+                spec.joint(n).frictionloss = spec.joint(n).frictionloss + v
+        elif f in ("viscous_damping", "viscous_damping_all"):
+            for n in ([t.target] if f == "viscous_damping" else robot.joint_names):
+                j = spec.joint(n)
+                d = list(j.damping)
+                d[0] += v
+                j.damping = d
         elif f == "armature":
             spec.joint(t.target).armature = spec.joint(t.target).armature + v
         elif f == "pd_gain":

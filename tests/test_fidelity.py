@@ -174,8 +174,9 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
     the draw's in-air logs over the in-air diagnosis (one fit per draw, whatever the stepping logs) or
     to its stepping logs over the whole identification (no confounded contact terms under it by
     default) is one more report over the diagnosis's; ``servo=staged`` diagnoses the stepping logs
-    again with the in-air fit under them (a folder of its own, the draw's fixed-base stage). The
-    option leaves every other world's cache key alone."""
+    again with the in-air fit under them (a folder of its own, the draw's fixed-base stage; the fit's
+    report between the two stages'), ``servo=refit`` the same on the in-air fit that refits the in-air
+    model's terms too (another fit and folder). The option leaves every other world's cache key alone."""
     import experiments.fidelity as fid
 
     calls = []
@@ -193,13 +194,15 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
 
     fits = []
 
-    def fake_fit(reports, logs_dir, calibration, out_path, *, confounded):
+    def fake_fit(reports, logs_dir, calibration, out_path, *, confounded, refit=False):
         fits.append(([os.path.relpath(r, tmp_path) for r in reports], os.path.relpath(logs_dir, tmp_path), calibration,
-                     confounded))
+                     confounded, refit))
+        model = {"pd_gain_all": 0.9, **({"latency": 0.015} if refit else {})}
         os.makedirs(os.path.dirname(out_path), exist_ok=True)
         with open(out_path, "w") as f:
-            json.dump({"model": {"pd_gain_all": 0.9}, "base_model": {}, "effects": []}, f)
-        return {"value": 0.9, "heldout_cost_before": 10.0, "heldout_cost_after": 8.0, "path": out_path}
+            json.dump({"model": model, "base_model": {}, "effects": []}, f)
+        return {"value": 0.9, "heldout_cost_before": 10.0, "heldout_cost_after": 8.0, "path": out_path,
+                **({"refitted": {"latency": [0.02, 0.015]}} if refit else {})}
 
     monkeypatch.setattr(fid, "identify_real", fake_identify)
     monkeypatch.setattr(fid, "record_excitation_task", lambda t: [])
@@ -207,18 +210,19 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
     monkeypatch.setattr(fid, "fit_servo_gain", fake_fit)
     assert parse_world("hybrid:servo=air").servo == "air" and not parse_world("hybrid").servo
     assert parse_world("identified:servo=0").key == parse_world("identified").key == "identified-ab4e2aa64c"
-    assert len({parse_world(f"identified:servo={v}").key for v in ("air", "staged", "stepping", "0")}) == 4
+    assert len({parse_world(f"identified:servo={v}").key for v in ("air", "staged", "stepping", "refit", "0")}) == 5
     with pytest.raises(ValueError, match="unknown option"):
         parse_world("sgat:servo=air")
-    with pytest.raises(ValueError, match="air or staged or stepping"):
+    with pytest.raises(ValueError, match="air or staged or stepping or refit"):
         parse_world("identified:servo=1")
     worlds = ("identified", "identified:servo=air", "identified:servo=air:stepping=6", "identified:servo=stepping",
-              "identified:servo=staged")
+              "identified:servo=staged", "identified:servo=refit")
     run = fid.Fidelity(FidelityConfig(worlds=worlds, data_seeds=2, seconds=1.0), str(tmp_path), executor=SerialExecutor())
     prep = run.prepare()
     air = [f for f in fits if f[2] == "cal_fixed.json"]
-    assert [f[:2] for f in air] == [([f"identified/d{d}/fixed/report.json"], f"identified/d{d}/fixed/logs") for d in (0, 1)]
-    assert [f[1:] for f in fits if f not in air] == [(f"identified/d{d}/floating/logs", "cal_floating.json", False)
+    assert [f[:2] + f[4:] for f in air] == [([f"identified/d{d}/fixed/report.json"], f"identified/d{d}/fixed/logs", r)
+                                            for d in (0, 1) for r in (False, True)]
+    assert [f[1:] for f in fits if f not in air] == [(f"identified/d{d}/floating/logs", "cal_floating.json", False, False)
                                                      for d in (0, 1)]
     for d in (0, 1):
         plain = prep["identified"][d]
@@ -228,13 +232,18 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
             assert prep[w][d]["effects"] == {"latency": 0.02, "pd_gain_all": 0.9}
         assert prep["identified:servo=stepping"][d]["identified"][:-1] == plain["identified"]
         assert plain["effects"] == {"latency": 0.02}
-        staged = prep["identified:servo=staged"][d]["identified"]
-        assert [os.path.relpath(p, tmp_path) for p in staged] == [f"identified/d{d}/fixed/report.json",
-                                                                  f"identified/d{d}_servo/floating/report.json",
-                                                                  f"identified/d{d}/servo_air/report.json"]
-    assert sorted(c for c in calls if c[0].endswith("_servo")) == [
-        (f"identified/d{d}_servo", f"identified/d{d}/fixed", {"pd_gain_all": 0.9}) for d in (0, 1)]
-    assert all(c[2] == {} for c in calls if not c[0].endswith("_servo"))
+        for w, fit, folder in (("staged", "air", "servo"), ("refit", "air_refit", "servorefit")):
+            staged = prep[f"identified:servo={w}"][d]["identified"]
+            assert [os.path.relpath(p, tmp_path) for p in staged] == [f"identified/d{d}/fixed/report.json",
+                                                                      f"identified/d{d}/servo_{fit}/report.json",
+                                                                      f"identified/d{d}_{folder}/floating/report.json"]
+        # the stepping diagnosis (its fake model: latency 0.02) overrides the refitted in-air latency under it
+        assert prep["identified:servo=refit"][d]["effects"] == {"latency": 0.02, "pd_gain_all": 0.9}
+    assert sorted(c for c in calls if "_servo" in c[0]) == sorted(
+        [(f"identified/d{d}_servo", f"identified/d{d}/fixed", {"pd_gain_all": 0.9}) for d in (0, 1)]
+        + [(f"identified/d{d}_servorefit", f"identified/d{d}/fixed", {"pd_gain_all": 0.9, "latency": 0.015})
+           for d in (0, 1)])
+    assert all(c[2] == {} for c in calls if "_servo" not in c[0])
     with pytest.raises(ValueError, match="stepping logs"):
         fid.Fidelity(FidelityConfig(worlds=("identified:servo=stepping:stepping=0",), data_seeds=1, seconds=1.0),
                      str(tmp_path / "b"), executor=SerialExecutor()).prepare()

@@ -211,3 +211,56 @@ def test_a_common_kp_scale_scales_every_servo_in_the_replay_and_in_the_exported_
     assert nominal.nu == scaled.nu == 24
     np.testing.assert_allclose(scaled.actuator_gainprm[:, 0], 0.9 * nominal.actuator_gainprm[:, 0])
     np.testing.assert_array_equal(scaled.actuator_biasprm[:, 2], nominal.actuator_biasprm[:, 2])
+
+
+def test_joint_friction_fitted_alone_goes_into_the_latency_and_the_common_families_give_it_back():
+    """The sixteenth fidelity round's premise (``identified:servo=refit``): on in-air logs of joints with
+    dry and viscous friction on every joint and a 15 ms delay, a latency fitted alone comes out longer
+    than the delay (friction makes every joint trail its command); fitted jointly with one common
+    friction of each kind and the common kp scale from that biased start, the latency, both frictions
+    and the kp come back to the truth, and the held-out cost falls below the latency-alone fit's."""
+    from sysid.diagnose import fit_terms
+
+    lat, kp = Term("latency"), Term("pd_gain_all")
+    dry, visc = Term("coulomb_friction_all"), Term("viscous_damping_all")
+    truth = {lat: 0.015, dry: 0.04, visc: 0.012, kp: 0.95}
+    logs = synthetic_logs(truth, n_logs=2, seconds=3.0, seed=3, traj_seed=41,
+                          segments=("holds", "ramps", "steps", "reversals", "chirp"))
+    alone = fit_terms(logs, {lat: 0.010})
+    assert alone["values"][lat] > 0.018
+    joint = fit_terms(logs, {lat: alone["values"][lat], kp: 1.0, dry: 0.02, visc: 0.005})
+    assert joint["values"][lat] == pytest.approx(0.015, abs=0.001)
+    assert joint["values"][dry] == pytest.approx(0.04, abs=0.008)
+    assert joint["values"][visc] == pytest.approx(0.012, abs=0.004)
+    assert joint["values"][kp] == pytest.approx(0.95, abs=0.02)
+    assert joint["heldout_cost_after"] < 0.2 * alone["heldout_cost_after"]
+
+
+def test_common_friction_adds_to_every_joint_in_the_replay_and_in_the_exported_model():
+    """``coulomb_friction_all`` / ``viscous_damping_all``: the same friction added to every joint's
+    ``dof_frictionloss`` / ``dof_damping`` (on top of a per-joint term of the family), in the replay model
+    and in the MJCF ``sgatwalk diagnose`` writes."""
+    import copy
+
+    import mujoco
+
+    from sysid.candidates import apply_terms
+    from sysid.model import Structure, replay_model
+    from sysid.report import export_mjcf
+
+    rm = replay_model(Structure(fixed_base=True, physics_dt=0.001, robot="nao_h25"))
+    m = copy.copy(rm.model)
+    knee = rm.robot.joint_names.index("LKneePitch")
+    apply_terms(rm, m, {Term("coulomb_friction_all"): 0.03, Term("coulomb_friction", "LKneePitch"): 0.05,
+                        Term("viscous_damping_all"): 0.01})
+    want = np.full(len(rm.dadr), 0.03)
+    want[knee] += 0.05
+    np.testing.assert_allclose(m.dof_frictionloss[rm.dadr], want)
+    np.testing.assert_allclose(m.dof_damping[rm.dadr], rm.model.dof_damping[rm.dadr] + 0.01)
+    nominal = mujoco.MjModel.from_xml_string(export_mjcf({}, True, 0.001))
+    both = mujoco.MjModel.from_xml_string(export_mjcf({Term("coulomb_friction_all"): 0.03,
+                                                       Term("viscous_damping_all"): 0.01}, True, 0.001))
+    for n in rm.robot.joint_names:
+        j = mujoco.mj_name2id(both, mujoco.mjtObj.mjOBJ_JOINT, n)
+        assert both.dof_frictionloss[both.jnt_dofadr[j]] == pytest.approx(0.03)
+        assert both.dof_damping[both.jnt_dofadr[j]] == pytest.approx(nominal.dof_damping[nominal.jnt_dofadr[j]] + 0.01)
