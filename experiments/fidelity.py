@@ -800,6 +800,8 @@ class Fidelity:
                         # world's stepping diagnosis was made on top of it, so its report comes after
                         fit = servofits[d, self._stepping(s), s.identified_confounded, s.servo_fit]
                         reports.insert(1 if s.servo in STAGED_SERVO else len(reports), fit)
+                        with open(fit) as f:  # its held-out costs (and what a refit moved)
+                            info["servo_fit"] = json.load(f).get("servo_fit")
                     if s.walkfit:  # the terms fitted to the real walks override the diagnosis's
                         wf = walkfits[d, self._stepping(s), s.identified_confounded, s.real_walks, s.walkfit]
                         reports.append(wf["path"])
@@ -1001,6 +1003,7 @@ class Fidelity:
                     "excitation_logs": info["excitation_logs"], "excitation_seconds": info["excitation_seconds"],
                     **({"effects": info.get("effects"), "terrain_rms_height": info.get("terrain_rms_height")}
                        if spec.needs_identification else {}),
+                    **({"servo_fit": info["servo_fit"]} if info.get("servo_fit") else {}),
                 })
             out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
                                         "data_gaits": spec.data_gaits if spec.grounded else None,

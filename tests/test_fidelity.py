@@ -200,7 +200,8 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
         model = {"pd_gain_all": 0.9, **({"latency": 0.015} if refit else {})}
         os.makedirs(os.path.dirname(out_path), exist_ok=True)
         with open(out_path, "w") as f:
-            json.dump({"model": model, "base_model": {}, "effects": []}, f)
+            json.dump({"model": model, "base_model": {}, "effects": [],
+                       "servo_fit": {"heldout_cost_before": 10.0, "heldout_cost_after": 8.0}}, f)
         return {"value": 0.9, "heldout_cost_before": 10.0, "heldout_cost_after": 8.0, "path": out_path,
                 **({"refitted": {"latency": [0.02, 0.015]}} if refit else {})}
 
@@ -230,6 +231,7 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
                          ("identified:servo=stepping", "servo_fitx")):
             assert prep[w][d]["identified"][-1].endswith(os.path.join(f"d{d}", where, "report.json"))
             assert prep[w][d]["effects"] == {"latency": 0.02, "pd_gain_all": 0.9}
+            assert prep[w][d]["servo_fit"] == {"heldout_cost_before": 10.0, "heldout_cost_after": 8.0}
         assert prep["identified:servo=stepping"][d]["identified"][:-1] == plain["identified"]
         assert plain["effects"] == {"latency": 0.02}
         for w, fit, folder in (("staged", "air", "servo"), ("refit", "air_refit", "servorefit")):
