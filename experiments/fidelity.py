@@ -681,7 +681,8 @@ class Fidelity:
         overrides the diagnosis (``identified/d<draw>/servo_*``).
 
         Returns:
-            ``{(draw, stepping logs, confounded, logs): report path}``.
+            ``{(draw, stepping logs, confounded, servo fit): report path}`` (the fit as
+            :attr:`WorldSpec.servo_fit` names it).
 
         Raises:
             ValueError: a ``servo=stepping`` world with no stepping logs (``stepping=0``).

@@ -4,30 +4,30 @@ A *family* is one kind of missing physics; a *term* is a family at one joint or 
 Every term has a physical value; its nominal value is what the plain sim has. Families and their
 MuJoCo handles (MuJoCo documentation: XML reference, ``mjModel`` fields; Modeling, "Backlash"):
 
-==================  =========  ========  ===========================================  ============
-family              scope      unit      MuJoCo augmentation                          probe (Δ)
-==================  =========  ========  ===========================================  ============
-latency             global     s         ``actuator_delay`` (history buffers, linear)  10, 30 ms
-backlash            joint      rad       series play hinge, range ±gap/2               0.02, 0.05
-coulomb_friction    joint      N m       ``dof_frictionloss`` (added)                  0.05, 0.2
-coulomb_friction_all global    N m       the same, one value on every joint            0.05
-viscous_damping     joint      N m s/rad ``dof_damping`` (added)                       0.05
-viscous_damping_all global     N m s/rad the same, one value on every joint            0.01
-pd_gain             joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
-pd_gain_all         global     x kp      the same, one scale for every joint          x0.9
-torque_constant     joint      x kp, kd  ``actuator_gainprm[0]``, ``biasprm[1:3]``      x0.85
-torque_limit        global     x effort  ``actuator_forcerange`` (all joints)          x0.75
-link_mass           link       x mass    ``body_mass``, ``body_inertia`` + mj_setConst  x1.3
-                               (every link, the root (torso) included)
-armature            joint      kg m^2    ``dof_armature`` (added)                      0.002
-sensor_bias         joint      rad       measured angle offset (replay starts at q-b)  0.005
-foot_friction       global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
-ground_compliance   global     s         ground ``geom_solref[0]`` (time constant)      0.01 -> 0.025
-joint_compliance    joint      rad/(N m) series spring hinge, ``jnt_stiffness`` = 1/c    0.18/kp
-parallel_spring     joint      N m/rad   ``jnt_stiffness`` (added; ``springref`` 0)   0.03 kp
-terrain_roughness   global     m         random heightfields (a distribution, fitted   (stochastic:
-                                         by :mod:`sysid.roughness`)                    no column)
-==================  =========  ========  ===========================================  ============
+====================  =========  ========  ===========================================  ============
+family                scope      unit      MuJoCo augmentation                          probe (Δ)
+====================  =========  ========  ===========================================  ============
+latency               global     s         ``actuator_delay`` (history buffers, linear)  10, 30 ms
+backlash              joint      rad       series play hinge, range ±gap/2               0.02, 0.05
+coulomb_friction      joint      N m       ``dof_frictionloss`` (added)                  0.05, 0.2
+coulomb_friction_all  global     N m       the same, one value on every joint            0.05
+viscous_damping       joint      N m s/rad ``dof_damping`` (added)                       0.05
+viscous_damping_all   global     N m s/rad the same, one value on every joint            0.01
+pd_gain               joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
+pd_gain_all           global     x kp      the same, one scale for every joint          x0.9
+torque_constant       joint      x kp, kd  ``actuator_gainprm[0]``, ``biasprm[1:3]``      x0.85
+torque_limit          global     x effort  ``actuator_forcerange`` (all joints)          x0.75
+link_mass             link       x mass    ``body_mass``, ``body_inertia`` + mj_setConst  x1.3
+                                 (every link, the root (torso) included)
+armature              joint      kg m^2    ``dof_armature`` (added)                      0.002
+sensor_bias           joint      rad       measured angle offset (replay starts at q-b)  0.005
+foot_friction         global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
+ground_compliance     global     s         ground ``geom_solref[0]`` (time constant)      0.01 -> 0.025
+joint_compliance      joint      rad/(N m) series spring hinge, ``jnt_stiffness`` = 1/c    0.18/kp
+parallel_spring       joint      N m/rad   ``jnt_stiffness`` (added; ``springref`` 0)   0.03 kp
+terrain_roughness     global     m         random heightfields (a distribution, fitted   (stochastic:
+                                           by :mod:`sysid.roughness`)                    no column)
+====================  =========  ========  ===========================================  ============
 
 ``joint_compliance`` is the flexible-joint model (Spong 1987): a spring of compliance c between
 the servo's motor, whose PD loop closes on the motor angle, and the output the encoder reads.
