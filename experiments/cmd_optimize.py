@@ -8,7 +8,8 @@ paper's Table I (speed mean ± std in cm/s, falls out of 10) with the θ0 row fi
 The run directory holds config.yaml, generations.csv, evals.parquet, cma_state.pkl (replaced
 atomically after every generation), models/, thetas/ (best θ per method and step as JSON),
 data/ (the recordings used for grounding), fitness.png, table.txt and results.json.
-``--resume RUN_DIR`` continues a killed run exactly where it stopped.
+``--resume RUN_DIR`` continues a killed run exactly where it stopped; ``--resume RUN_DIR --methods M``
+adds the methods M to a run (on its seeds and real data) and runs them.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import sys
 import time
 
 from experiments.executors import make_executor
-from experiments.optimize import METHODS, PRESETS, OptimizeConfig, Optimizer
+from experiments.optimize import METHODS, PRESETS, OptimizeConfig, Optimizer, method_names
 import experiments.argtypes as A
 
 
@@ -28,8 +29,10 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("optimize", help="SGAT grounding + CMA-ES gait optimization (the main job)",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = OptimizeConfig()
-    p.add_argument("--methods", default="sgat", help=f"comma list of {', '.join(METHODS)} (default sgat; identified and "
-                   "hybrid first identify the real world from excitation logs, ~3 min)")
+    p.add_argument("--methods", help=f"comma list of {', '.join(METHODS)} (default sgat; identified and "
+                   "hybrid first identify the real world from excitation logs, ~3 min); sgat+ane, gat+ane, identified+ane "
+                   "or hybrid+ane: that method's world with the ANE's noise (--ane-sigma) added; with --resume: "
+                   "methods to add to the run")
     p.add_argument("--preset", choices=sorted(PRESETS), default="quick",
                    help="quick (default; README: measured time) or paper (population 150, 2 grounding steps)")
     p.add_argument("--grounding-steps", type=A.count(1, 100), help=f"grounding steps (default {d.grounding_steps})")
@@ -97,7 +100,7 @@ def config_from_args(args) -> OptimizeConfig:
         v = getattr(args, name, None)
         if v is not None and name != "methods":
             kw[name] = v
-    kw["methods"] = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    kw["methods"] = _methods(args.methods or "sgat")
     cfg = OptimizeConfig(**kw)
     cfg.validate()
     if cfg.params and not os.path.exists(cfg.params):
@@ -105,7 +108,17 @@ def config_from_args(args) -> OptimizeConfig:
     return cfg
 
 
+def _methods(text: str) -> tuple:
+    return tuple(m.strip() for m in text.split(",") if m.strip())
+
+
 def run(args) -> dict:
+    add = ()
+    if args.resume and args.methods:
+        add = _methods(args.methods)
+        bad = [m for m in add if m not in method_names()]
+        if bad:
+            raise ValueError(f"unknown method(s) {bad}; choose from {', '.join(method_names())}")
     if args.resume:
         cfg, run_dir = OptimizeConfig(), args.resume
         if not os.path.isdir(run_dir):
@@ -120,7 +133,7 @@ def run(args) -> dict:
     ex = make_executor(args.workers, args.ray_address)
     t0 = time.perf_counter()
     try:
-        res = Optimizer(cfg, run_dir, ex, progress=not args.json, log=log, rerun=args.rerun).run(resume=bool(args.resume))
+        res = Optimizer(cfg, run_dir, ex, progress=not args.json, log=log, rerun=args.rerun).run(resume=bool(args.resume), add_methods=add)
     finally:
         ex.close()
     res["wall_s"] = time.perf_counter() - t0

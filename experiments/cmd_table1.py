@@ -26,7 +26,9 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("table1", help="Table I with power: methods x optimization seeds on paired real trials",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     d = Table1Config()
-    p.add_argument("--methods", default=",".join(d.methods), help=f"comma list (default {','.join(d.methods)})")
+    p.add_argument("--methods", default=",".join(d.methods), help=f"comma list (default {','.join(d.methods)}); also "
+                   "identified, sgat+ane, gat+ane, identified+ane, hybrid+ane (that method's world with the ANE's noise "
+                   "added); more methods given to a run directory are added to it, nothing done is redone")
     p.add_argument("--seeds", type=A.count(1, 100), default=d.seeds, help=f"optimization seeds per method (default {d.seeds})")
     p.add_argument("--trials", type=A.count(2, 10000), default=d.trials, help=f"paired real trials per gait (default {d.trials})")
     p.add_argument("--seed", type=A.seed, default=d.seed, help="seed of the real trial seeds (default 0)")

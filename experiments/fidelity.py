@@ -70,6 +70,9 @@ in-air fit, then the stepping logs diagnosed again with it under them (bottom-up
 stages the in-air model under the stepping logs); ``servo=refit``: as ``staged``, with the common kp
 fitted jointly with one dry and one viscous friction common to every joint and every term of the
 in-air model (the in-air latency had taken up the lag of the joints' friction; sixteenth round).
+Of ``gat``, ``sgat``, ``identified`` and ``hybrid``: ``ane`` (σ [rad]: the ANE's Gaussian noise on
+the leg targets added to that world's episodes, the training world of ``sgatwalk optimize --methods
+sgat+ane``; seventeenth round).
 
 Per world and draw: Spearman ρ between world and real fitness over the gaits (with a 90 % bootstrap
 interval over the paired real trials), mean absolute error and bias (world − real) of the fitness,
@@ -152,7 +155,7 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 #: every cached world keeps its meaning.
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
-                  "oracle_engine": "pybullet", "servo": ""}
+                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0}
 
 
 @dataclass(frozen=True)
@@ -177,6 +180,7 @@ class WorldSpec:
     walkfit: str = ""  # identified / hybrid: terms fitted to the real walks of θ0 (a grid of experiments.walkfit.GRIDS)
     oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
     servo: str = ""  # identified / hybrid: a kp scale common to every servo (one of SERVO_LOGS; "": none)
+    envelope: float = 0.0  # gat / sgat / identified / hybrid: the ANE's noise [rad] added to the world's leg targets
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -217,7 +221,7 @@ class WorldSpec:
         the world's answer: the sim (MuJoCo is deterministic) and GAT on it (deterministic models, an
         ensemble's members averaged: ``sgat.ActionTransformer.transform``). ``tests/test_fidelity.py``
         checks it on episodes with different seeds."""
-        return self.kind in DETERMINISTIC_KINDS
+        return self.kind in DETERMINISTIC_KINDS and not self.envelope
 
     @property
     def per_draw(self) -> bool:
@@ -263,6 +267,10 @@ def parse_world(text: str) -> WorldSpec:
                     raise ValueError(f"world {text!r}: unknown option value servo={v!r} "
                                      f"({' or '.join(SERVO_LOGS)}; 0: none)")
                 kw["servo"] = "" if v == "0" else v
+            elif kind in ("gat", "sgat", "identified", "hybrid") and k == "ane":
+                kw["envelope"] = float(v)
+                if not (np.isfinite(kw["envelope"]) and kw["envelope"] >= 0):
+                    raise ValueError(f"world {text!r}: bad value for ane: {v!r} (a noise std >= 0 [rad])")
             elif kind == "oracle" and k == "mean":
                 kw["oracle_mean"] = bool(int(v))
             elif kind == "oracle" and k == "engine":
@@ -887,6 +895,8 @@ class Fidelity:
             base.update(world="grounded", transformer=info["transformer"])
             if spec.kind == "hybrid":
                 base.update(identified=info["identified"], identified_confounded=spec.identified_confounded)
+        if spec.envelope:  # the noise envelope on top (sgatwalk optimize --methods sgat+ane)
+            base["action_noise"] = spec.envelope
         return [{**base, "theta": g["theta"], "seed": s, "key": f"w|{spec.key}|d{draw}|{g['name']}|e{e}"}
                 for g in gaits for e, s in enumerate(seeds)]
 

@@ -39,6 +39,11 @@ learns only what the physics library could not name), ``real`` (CMA-ES directly 
 the upper bound, and slow). ``identified`` and ``hybrid`` share one identification per run, done
 first (``experiments.identify``: engine-gap calibration, fixed-base and stepping excitation logs of
 the real world, two diagnoses); its logs count as real data in ``results.json``'s ``real_data``.
+``sgat+ane``, ``gat+ane``, ``identified+ane`` and ``hybrid+ane`` train in the world of their base
+method with the ANE's noise (``ane_sigma``) added to the leg targets it applies: the grounding is
+the base method's (the same data, fit and seeds), only the world CMA-ES and the choice of θ_{i+1}
+see is noisier (robust optimization in a grounded world; the action-noise envelope: Jakobi et al.,
+ECAL 1995).
 
 Everything random comes from ``numpy.random.SeedSequence`` keyed by (seed, purpose, step,
 generation), never from worker state, so the executor does not change results, and a run killed
@@ -82,6 +87,27 @@ from walk_engine.params import NAMES as PARAM_NAMES
 METHODS = ("sgat", "gat", "none", "ane", "identified", "hybrid", "real")
 #: Methods that ground the sim with a learned action transformer.
 GROUNDED = ("sgat", "gat", "hybrid")
+#: A method name ``<base>+ane`` trains in ``<base>``'s world with the ANE noise (``ane_sigma``) added.
+ANE_SUFFIX = "+ane"
+#: The base methods that take :data:`ANE_SUFFIX` (the sim's own is ``ane``; the real world takes none).
+ENVELOPED = ("sgat", "gat", "identified", "hybrid")
+
+
+def base_method(method: str) -> str:
+    """The method whose grounding and world ``method`` uses: ``"sgat"`` for ``"sgat+ane"``, else itself."""
+    return method[:-len(ANE_SUFFIX)] if method.endswith(ANE_SUFFIX) else method
+
+
+def method_names() -> tuple:
+    """Every method name :class:`OptimizeConfig` accepts: :data:`METHODS` and ``<base>+ane``."""
+    return METHODS + tuple(m + ANE_SUFFIX for m in ENVELOPED)
+
+
+def uses_identification(method: str) -> bool:
+    """Whether ``method`` trains in the identified sim (``identified``, ``hybrid``, and their ``+ane``)."""
+    return base_method(method) in ("identified", "hybrid")
+
+
 STATE_FILE = "cma_state.pkl"
 
 
@@ -129,11 +155,13 @@ class OptimizeConfig:
         """Raises ValueError naming the bad setting."""
         if self.robot not in ROBOT_NAMES:
             raise ValueError(f"unknown robot {self.robot!r}; choose from {', '.join(ROBOT_NAMES)}")
-        if self.robot != "nao" and any(m in ("identified", "hybrid") for m in self.methods):
-            raise ValueError("methods identified and hybrid model the NAO only (sgatwalk diagnose identifies the NAO)")
-        bad = [m for m in self.methods if m not in METHODS]
+        bad = [m for m in self.methods if m not in method_names()]
         if bad or not self.methods:
-            raise ValueError(f"unknown method(s) {bad or '(none given)'}; choose from {', '.join(METHODS)}")
+            raise ValueError(f"unknown method(s) {bad or '(none given)'}; choose from {', '.join(method_names())}")
+        if len(set(self.methods)) != len(self.methods):
+            raise ValueError(f"a method named twice in {list(self.methods)}")
+        if self.robot != "nao" and any(uses_identification(m) for m in self.methods):
+            raise ValueError("methods identified and hybrid model the NAO only (sgatwalk diagnose identifies the NAO)")
         for name in ("grounding_steps", "real_episodes", "sim_episodes", "popsize", "generations",
                      "episodes_per_candidate", "select_episodes", "history", "model_epochs", "ensemble"):
             if int(getattr(self, name)) < 1:
@@ -304,6 +332,7 @@ class Optimizer:
     def grounding_config(self, method: str):
         """The model settings (``sgat.grounding.GroundingConfig``) of ``method``'s grounding steps."""
         cfg = self.cfg
+        method = base_method(method)
         alpha = cfg.hybrid_alpha if method == "hybrid" else cfg.alpha
         return GroundingConfig(alpha=alpha, method="sgat" if method == "hybrid" else method, hidden=tuple(cfg.hidden),
                                ensemble=cfg.ensemble,
@@ -319,7 +348,7 @@ class Optimizer:
             return out
         real, sim = [], []
         sim_world, sim_kw = "sim", {"action_noise": cfg.exploration_noise}
-        if method == "hybrid":  # the transformer grounds the identified sim: its inverse model is of that sim
+        if base_method(method) == "hybrid":  # the transformer grounds the identified sim: its inverse model is of that sim
             sim_world, sim_kw["identified"] = "identified", self.state["identification"]["reports"]
             sim_kw["identified_confounded"] = bool(cfg.identified_confounded)
         for j, th in self._data_thetas(method, step, theta):
@@ -351,18 +380,27 @@ class Optimizer:
         return [(j, thetas[j - 1]) for j in range(1, step)] + [(step, np.asarray(theta))]
 
     def _world_kw(self, method: str, step: int) -> tuple[str, dict]:
-        if method in GROUNDED:
+        """The training world of ``method`` at grounding step ``step``: an ``experiments.tasks`` world
+        name and the task keys that build it (a ``<base>+ane`` method: its base's, with ``action_noise``)."""
+        world, kw = self._base_world_kw(method, step)
+        if method.endswith(ANE_SUFFIX):
+            kw["action_noise"] = self.cfg.ane_sigma
+        return world, kw
+
+    def _base_world_kw(self, method: str, step: int) -> tuple[str, dict]:
+        base = base_method(method)
+        if base in GROUNDED:
             kw = {"transformer": os.path.join(self.run_dir, "models", f"{method}_step{step}")}
-            if method == "hybrid":
+            if base == "hybrid":
                 kw.update(identified=self.state["identification"]["reports"],
                           identified_confounded=bool(self.cfg.identified_confounded))
             return "grounded", kw
-        if method == "identified":
+        if base == "identified":
             return "identified", {"identified": self.state["identification"]["reports"],
                                   "identified_confounded": bool(self.cfg.identified_confounded)}
-        if method == "ane":
+        if base == "ane":
             return "sim", {"action_noise": self.cfg.ane_sigma}
-        return ("real" if method == "real" else "sim"), {}
+        return ("real" if base == "real" else "sim"), {}
 
     def _cma(self, method: str, step: int, prog: dict) -> None:
         import cma  # lazy: cma
@@ -486,13 +524,31 @@ class Optimizer:
         log_rollouts_to_rrd(recs, os.path.join(self.run_dir, "rerun", f"{name}.rrd"))
 
     # ---------------------------------------------------------------- driver
-    def run(self, resume: bool = False) -> dict:
+    def run(self, resume: bool = False, add_methods=()) -> dict:
+        """Run the optimization, or with ``resume`` continue the run saved in the run directory (its own
+        settings; ``add_methods``: methods it does not have yet, added to it and run on its seeds, real
+        grounding walks and identification, so a finished run grows without redoing anything).
+
+        Raises:
+            ValueError: a new run over a saved one, or an unknown method in ``add_methods``.
+            FileNotFoundError, CheckpointError: ``resume`` without a readable checkpoint.
+        """
         import cma  # lazy: cma
 
         if resume:
             self.state = self.load_state(self.run_dir)
             self.cfg = config_from_state(self.state["config"])
             self.log(f"resuming {self.run_dir}")
+            new = [m for m in dict.fromkeys(add_methods) if m not in self.cfg.methods]
+            if new:
+                cfg = dataclasses.replace(self.cfg, methods=self.cfg.methods + tuple(new))
+                cfg.validate()
+                self.cfg, self.state["config"] = cfg, cfg.to_dict()
+                for m in new:
+                    self.state["progress"][m] = {**new_progress(self.state["theta0"]), "es": None, "gen": 0}
+                self.log(f"adding method(s) {', '.join(new)} to {self.run_dir}")
+                self._write_config()
+                self._save()
         else:
             if os.path.exists(self.state_path):
                 raise ValueError(f"{self.run_dir!r} already holds a run; use --resume {self.run_dir} or another --out")
@@ -504,7 +560,7 @@ class Optimizer:
             self._write_config()
             self._save()
         cfg = self.cfg
-        if any(m in ("identified", "hybrid") for m in cfg.methods) and not self.state.get("identification"):
+        if any(uses_identification(m) for m in cfg.methods) and not self.state.get("identification"):
             self.state["identification"] = self._identify()
             self._save()
         if not any(r["method"] == "theta0" for r in self.state["rows"]):
@@ -513,7 +569,7 @@ class Optimizer:
             self._save()
         for method in cfg.methods:  # Algorithm 1 per method (sgat.algorithm), checkpointed after every stage
             grounding_loop(self.state["progress"][method], cfg.grounding_steps,
-                           ground=lambda i, theta, m=method: self._fit(m, i, theta) if m in GROUNDED else None,
+                           ground=lambda i, theta, m=method: self._fit(m, i, theta) if base_method(m) in GROUNDED else None,
                            improve=lambda i, theta, model, prog, m=method: self._improve(m, i, prog),
                            evaluate=lambda i, theta, prog, m=method: self._record_step(m, i, theta, prog),
                            save=self._save)
@@ -560,7 +616,7 @@ class Optimizer:
         ident = self.state.get("identification") or {}
         for method in self.cfg.methods:
             used = self.state.get("real_used", {}).get(method, {})
-            uses_id = method in ("identified", "hybrid")
+            uses_id = uses_identification(method)
             out[method] = {"walks": len(used), "walk_seconds": float(sum(used.values())),
                            "excitation_logs": ident.get("logs", 0) if uses_id else 0,
                            "excitation_seconds": ident.get("seconds", 0.0) if uses_id else 0.0}

@@ -287,13 +287,15 @@ def _table1(res: dict) -> str:
         said = "–" if r.get("predicted_fitness") is None else f"{r['predicted_fitness']:.1f}"
         lines.append(f"| {name} | {step} | {r['n']} | {r['speed_mean']:.2f} ± {r['speed_se']:.2f} | {r['falls']}/{r['n']} "
                      f"| [{lo:.2f}, {hi:.2f}] | {r['fitness_mean']:.2f} ± {r['fitness_se']:.2f} | {said} |")
-    lines += ["", "| step | comparison | fitness difference (paired permutation p) | falls: only a / only b (McNemar p) |",
-              "|---|---|---|---|"]
+    per_seed = all(t.get("per_seed_diff") for t in res["tests"])  # saved since the seventeenth round
+    lines += ["", "| step | comparison | fitness difference (paired permutation p) | falls: only a / only b (McNemar p) |"
+              + (" per optimization seed |" if per_seed else ""), "|---|---|---|---|" + ("---|" if per_seed else "")]
     for t in res["tests"]:
         f, x = t["fitness"], t["falls"]
         lines.append(f"| {t['step']} | {t['a'].upper()} vs {'θ0' if t['b'] == 'theta0' else t['b'].upper()} | "
                      f"{f['mean_diff']:+.2f} ± {f['se_diff']:.2f} (p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} "
-                     f"(p = {x['p_value']:.2g}) |")
+                     f"(p = {x['p_value']:.2g}) |" + (" " + ", ".join(f"{d:+.1f}" for d in t["per_seed_diff"]) + " |"
+                                                      if per_seed else ""))
     if res.get("baseline"):
         b = res["baseline"]
         lines += ["", f"Against the baseline run (`{b.get('command') or b['path']}`; the same optimization seeds and "

@@ -12,14 +12,18 @@ every resulting gait scored on the same paired real trials, and paired tests bet
    gait it chose (the optimizer's selection score): how much a method's world flattered its choice. Paired tests at each step (``experiments.stats``):
    a permutation test on fitness and McNemar's exact test on falls, pairs = (seed, trial); for
    SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?), and every
-   method vs θ0.
+   method vs θ0; a method trained with the action-noise envelope on top of its grounding
+   (``sgat+ane``, ``hybrid+ane``, ...: ``experiments.optimize``) also against its base method (what
+   the noise adds) and against ANE (what the grounding adds to the noise).
 
 The result keeps every gait's real trials (``trials``: fitness and falls per trial seed), so a later
 run on the same trial seeds can be paired with it trial by trial: with ``baseline`` (an earlier
 run's ``table1.json``, e.g. another grounding setting) every (method, step) both runs have is tested
 against the baseline's gait of the same optimization seed on the same trials, and a method the
 baseline lacks against each of the baseline's methods (:func:`compare_runs`). Everything resumes: the
-optimization runs from their checkpoints, the evaluation from ``episodes.jsonl``.
+optimization runs from their checkpoints, the evaluation from ``episodes.jsonl``; given more
+methods, a finished run adds them to every seed's optimization run (its real grounding walks and
+identification reused) and walks only the new gaits.
 """
 
 from __future__ import annotations
@@ -38,8 +42,21 @@ from common.files import WallClock, atomic_write_text, jsonable
 from experiments.episodes import EpisodeLog
 from experiments.stats import mcnemar_test, paired_permutation_test, wilson_interval
 
-#: Comparisons tested at every grounding step (a, b): "a vs b".
+#: Comparisons tested at every grounding step (a, b): "a vs b" (and :func:`comparisons` adds those of
+#: the ``<base>+ane`` methods).
 COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"), ("hybrid", "ane"))
+
+
+def comparisons(methods) -> list[tuple[str, str]]:
+    """The (a, b) pairs tested between ``methods``: :data:`COMPARISONS`, then for every ``<base>+ane``
+    method (``experiments.optimize.ANE_SUFFIX``) ``(m, base)`` -- what the noise adds to the
+    grounding -- and ``(m, "ane")`` -- what the grounding adds to the noise; only pairs of methods run."""
+    from experiments.optimize import ANE_SUFFIX, base_method  # lazy: loads torch and the engines
+
+    pairs = list(COMPARISONS) + [(m, b) for m in methods if m.endswith(ANE_SUFFIX) for b in (base_method(m), "ane")]
+    return [(a, b) for a, b in pairs if a in methods and b in methods]
+
+
 _EVAL = 31
 
 
@@ -55,12 +72,12 @@ class Table1Config:
     baseline: str | None = None  # an earlier run's table1.json to pair every row with (compare_runs)
 
     def validate(self) -> None:
-        from experiments.optimize import METHODS, OptimizeConfig  # lazy: loads torch and the engines; keeps sgatwalk --help fast
+        from experiments.optimize import OptimizeConfig, method_names  # lazy: loads torch and the engines; keeps sgatwalk --help fast
 
-        bad = [m for m in self.methods if m not in METHODS or m == "real"]
+        bad = [m for m in self.methods if m not in method_names() or m == "real"]
         if bad or not self.methods:
             raise ValueError(f"unknown method(s) {bad or '(none)'}; choose from "
-                             f"{', '.join(m for m in METHODS if m != 'real')}")
+                             f"{', '.join(m for m in method_names() if m != 'real')}")
         if self.seeds < 1 or self.trials < 2:
             raise ValueError(f"need >= 1 optimization seed and >= 2 trials, got {self.seeds}, {self.trials}")
         if self.seed < 0:
@@ -90,8 +107,8 @@ class Table1:
         self.log(f"[table1 {time.perf_counter() - self.t0:7.1f} s] {msg}")
 
     def _check_config(self) -> None:
-        """Claim the run directory (``experiments.episodes.EpisodeLog``); more seeds reuse what was done."""
-        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=("seeds", "baseline"),
+        """Claim the run directory (``experiments.episodes.EpisodeLog``); more seeds or methods reuse what was done."""
+        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=("seeds", "baseline", "methods"),
                                say=self._say)
         self._episodes = self._log.done
 
@@ -102,7 +119,7 @@ class Table1:
         cfg = OptimizeConfig(**{**self.cfg.optimize, "methods": tuple(self.cfg.methods), "seed": s, "eval_trials": 0})
         opt = Optimizer(cfg, run, self.ex, progress=self.progress, log=lambda m: self._say(f"seed {s} {m}"))
         t0 = time.perf_counter()
-        res = opt.run(resume=os.path.exists(opt.state_path))
+        res = opt.run(resume=os.path.exists(opt.state_path), add_methods=self.cfg.methods)
         self._say(f"optimization seed {s} done ({time.perf_counter() - t0:.0f} s)")
         res["theta0"] = opt.state["theta0"]
         return res
@@ -172,13 +189,16 @@ class Table1:
             fb = np.concatenate([self._vec(k, "fitness") for k in b_keys])
             xa = np.concatenate([self._vec(k, "fell") for k in a_keys])
             xb = np.concatenate([self._vec(k, "fell") for k in b_keys])
-            return {"fitness": paired_permutation_test(fa, fb, seed=cfg.seed), "falls": mcnemar_test(xa, xb)}
+            # the mean difference per optimization seed: the tests pair trials, so they say whether these
+            # gaits differ; whether the methods do rests on how many seeds agree
+            per = [float(np.mean(self._vec(ka, "fitness") - self._vec(kb, "fitness"))) for ka, kb in zip(a_keys, b_keys)]
+            return {"fitness": paired_permutation_test(fa, fb, seed=cfg.seed), "falls": mcnemar_test(xa, xb),
+                    "per_seed_diff": per}
 
         for st in steps:
-            for a, b in COMPARISONS:
-                if a in cfg.methods and b in cfg.methods:
-                    tests.append({"step": st, "a": a, "b": b, **paired([f"{a}|{st}|{s}" for s in range(cfg.seeds)],
-                                                                       [f"{b}|{st}|{s}" for s in range(cfg.seeds)])})
+            for a, b in comparisons(cfg.methods):
+                tests.append({"step": st, "a": a, "b": b, **paired([f"{a}|{st}|{s}" for s in range(cfg.seeds)],
+                                                                   [f"{b}|{st}|{s}" for s in range(cfg.seeds)])})
             for m in cfg.methods:
                 tests.append({"step": st, "a": m, "b": "theta0", **paired([f"{m}|{st}|{s}" for s in range(cfg.seeds)],
                                                                           ["theta0"] * cfg.seeds)})
@@ -275,8 +295,21 @@ def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:
     return out
 
 
+def seed_agreement(test: dict) -> str:
+    """``"; fitter on k of n optimization seeds"`` for a test whose per-seed differences were kept
+    (``per_seed_diff``, more than one seed), in the direction of its mean difference; else ``""``.
+    The permutation test pairs trials, so it tells whether these gaits differ; a method-level claim
+    also needs the seeds to agree (with 3 seeds a sign-flip test over seeds cannot go below p = 0.25)."""
+    per = test.get("per_seed_diff") or []
+    if len(per) < 2:
+        return ""
+    up = test["fitness"]["mean_diff"] >= 0
+    k = sum((d > 0) if up else (d < 0) for d in per)
+    return f"; {test['a'].upper() if up else test['b'].upper()} fitter on {k} of {len(per)} optimization seeds"
+
+
 def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:
-    """One sentence per tested comparison, in words, whichever way it falls."""
+    """One sentence per tested comparison, in words, whichever way it falls (with :func:`seed_agreement`)."""
     out = []
     for t in tests:
         if t["b"] == "theta0":
@@ -287,10 +320,11 @@ def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[st
             word = "beats" if d > 0 else "is worse than"
             out.append(f"step {t['step']}: {t['a'].upper()} {word} {t['b'].upper()} on fitness by {d:+.1f} "
                        f"(paired permutation p = {f['p_value']:.3g}; falls {x['only_a']} vs {x['only_b']} discordant, "
-                       f"McNemar p = {x['p_value']:.3g})")
+                       f"McNemar p = {x['p_value']:.3g}{seed_agreement(t)})")
         else:
             out.append(f"step {t['step']}: no significant difference between {t['a'].upper()} and {t['b'].upper()} "
-                       f"(fitness {d:+.1f} ± {f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g})")
+                       f"(fitness {d:+.1f} ± {f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g}"
+                       f"{seed_agreement(t)})")
     return out
 
 
@@ -313,8 +347,10 @@ def format_table(res: dict) -> str:
     lines.append("paired tests (pairs = seed x trial): fitness by permutation, falls by McNemar")
     for t in res["tests"]:
         f, x = t["fitness"], t["falls"]
-        lines.append(f"  step {t['step']}: {t['a']:>8s} vs {t['b']:<8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
-                     f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})")
+        per = " ".join(f"{d:+.1f}" for d in t.get("per_seed_diff") or [])
+        lines.append(f"  step {t['step']}: {t['a']:>10s} vs {t['b']:<10s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
+                     f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})"
+                     + (f"  per seed {per}" if per else ""))
     if res.get("baseline"):
         lines += ["", f"against the baseline {res['baseline']['path']} (same gait seeds and trials; a = this run):"]
         for t in res["baseline"]["tests"]:

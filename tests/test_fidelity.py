@@ -427,6 +427,17 @@ def test_table1_resumes_after_sigkill(tmp_path):
     sg = tr["sgat|1|0"]["fitness"] + tr["sgat|1|1"]["fitness"]
     assert np.mean(sg) == pytest.approx(a["rows"][1]["fitness_mean"], abs=1e-3)
     assert sum(tr["sgat|1|0"]["fell"] + tr["sgat|1|1"]["fell"]) == a["rows"][1]["falls"]
+    # each test keeps its mean difference per optimization seed (equal trials per seed: they average to the pooled one)
+    for t in a["tests"]:
+        assert len(t["per_seed_diff"]) == 2
+        assert np.mean(t["per_seed_diff"]) == pytest.approx(t["fitness"]["mean_diff"], abs=1e-3)
+    from experiments.table1 import seed_agreement
+
+    t = {"a": "sgat", "b": "gat", "fitness": {"mean_diff": -2.0}, "per_seed_diff": [-3.0, 1.0, -4.0]}
+    assert seed_agreement(t) == "; GAT fitter on 2 of 3 optimization seeds"
+    assert seed_agreement({**t, "fitness": {"mean_diff": 0.5}, "per_seed_diff": [1.0, 0.5, -1.0]}) == \
+        "; SGAT fitter on 2 of 3 optimization seeds"
+    assert seed_agreement({**t, "per_seed_diff": [-2.0]}) == seed_agreement({"a": "x", "b": "y", "fitness": {}}) == ""
     run = tmp_path / "killed"
     cmd = [sys.executable, "-m", "experiments.cli", "table1", *T1, "--out", str(run), "--json"]
     proc = subprocess.Popen(cmd, cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT), stdout=subprocess.DEVNULL,
@@ -449,6 +460,32 @@ def test_table1_resumes_after_sigkill(tmp_path):
     assert {(t["method"], t["step"]) for t in c["baseline"]["tests"]} == {("sgat", 1), ("none", 1)}
     assert all(t["fitness"]["mean_diff"] == 0 and t["falls"]["only_a"] == t["falls"]["only_b"] == 0
                for t in c["baseline"]["tests"])
+
+
+def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
+    """More methods given to a finished Table I run: every seed's optimization run gains them (its real
+    grounding walks reused), only the new gaits walk the real trials, the old rows stay as they were,
+    and a noise-enveloped method is tested against its base method and against ANE."""
+    from experiments.table1 import comparisons
+
+    assert comparisons(("sgat", "gat", "ane", "sgat+ane", "hybrid+ane")) == [  # only pairs of methods run: no hybrid
+        ("sgat", "gat"), ("sgat+ane", "sgat"), ("sgat+ane", "ane"), ("hybrid+ane", "ane")]
+    args = ["--seeds", "1", "--trials", "3", "--popsize", "3", "--generations", "2", "--grounding-steps", "1",
+            "--seconds", "0.8", "--workers", "1"]
+    run = tmp_path / "t1"
+    assert main(["table1", "--methods", "sgat,ane", *args, "--out", str(run), "--json"]) == 0
+    a = json.loads((run / "table1.json").read_text())
+    walked = (run / "episodes.jsonl").read_text().splitlines()
+    real = sorted(p.name for p in (run / "opt_seed0" / "data").glob("real_*"))
+    assert main(["table1", "--methods", "sgat,ane,sgat+ane", *args, "--out", str(run), "--json"]) == 0
+    b = json.loads((run / "table1.json").read_text())
+    assert b["rows"][:3] == a["rows"] and b["rows"][3]["method"] == "sgat+ane" and b["rows"][3]["n"] == 3
+    now = (run / "episodes.jsonl").read_text().splitlines()
+    assert now[:len(walked)] == walked and len(now) == len(walked) + 3  # 3 trials of the one new gait
+    assert all(json.loads(x)["key"].startswith("sgat+ane|1|0|t") for x in now[len(walked):])
+    assert sorted(p.name for p in (run / "opt_seed0" / "data").glob("real_*")) == real
+    assert {(t["a"], t["b"]) for t in b["tests"]} - {(t["a"], t["b"]) for t in a["tests"]} == {
+        ("sgat+ane", "sgat"), ("sgat+ane", "ane"), ("sgat+ane", "theta0")}
 
 
 def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
@@ -541,6 +578,29 @@ def test_the_oracle_world_walks_the_real_world_on_fresh_seeds_per_draw(tmp_path)
     from experiments.fidelity import _REAL, _seeds
 
     assert not set(seeds0) & set(_seeds(cfg.seed, _REAL, n=cfg.real_trials))  # not the real trials' seeds
+
+
+def test_a_noise_enveloped_world_adds_the_ane_noise_to_its_episodes_only(tmp_path):
+    """``sgat:ane=0.05`` (``optimize --methods sgat+ane``): the world's episodes carry the noise, its
+    grounding is SGAT's; a GAT world with it is no longer deterministic; the plain worlds keep their
+    cache keys (the option hashes only when set)."""
+    from experiments.fidelity import Fidelity
+
+    w, g = parse_world("sgat:ane=0.05"), parse_world("gat:ane=0.03")
+    assert (w.envelope, w.grounding, w.kind) == (0.05, parse_world("sgat").grounding, "sgat")
+    assert parse_world("gat").deterministic and not g.deterministic and parse_world("hybrid:ane=0.05").envelope == 0.05
+    assert parse_world("sgat:ane=0").key == parse_world("sgat").key == "sgat-5b13614641" != w.key
+    for bad, words in [("sim:ane=0.05", "unknown option"), ("ane:ane=0.05", "unknown option"), ("sgat:ane=-1", "bad value"),
+                       ("identified:ane=x", "bad value")]:
+        with pytest.raises(ValueError, match=words):
+            parse_world(bad)
+    cfg = FidelityConfig(worlds=("sgat", "sgat:ane=0.05", "gat:ane=0.03"), gaits=2, real_trials=2, episodes=3)
+    run = Fidelity(cfg, str(tmp_path), executor=None)
+    gaits = [{"name": "a", "theta": [0.0]}, {"name": "b", "theta": [1.0]}]
+    plain, noisy, gat = (run._world_tasks(s, 0, {"transformer": "m"}, gaits) for s in run.specs)
+    assert all("action_noise" not in t for t in plain) and {t["action_noise"] for t in noisy} == {0.05}
+    assert [t["seed"] for t in plain] == [t["seed"] for t in noisy]  # the same episode seeds: paired
+    assert len(gat) == 2 * 3 and {t["action_noise"] for t in gat} == {0.03}  # every episode, not one per gait
 
 
 def test_the_mean_oracle_walks_the_real_world_at_the_middle_of_every_effect_range(tmp_path):

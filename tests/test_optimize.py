@@ -122,6 +122,51 @@ def test_bad_input(tmp_path, capsys):
         Optimizer.load_state(str(old))
     assert main(["optimize", "--params", str(tmp_path / "none.json"), "--out", str(tmp_path / "y")]) == 2
     assert "no such file" in capsys.readouterr().err
+    # the noise envelope goes on a grounded or identified world only (the sim's own is ane), once per method
+    assert main(["optimize", "--methods", "none+ane", "--out", str(tmp_path / "x")]) == 2
+    assert "unknown method(s) ['none+ane']" in capsys.readouterr().err
+    assert main(["optimize", "--methods", "sgat,sgat", "--out", str(tmp_path / "x")]) == 2
+    assert "named twice" in capsys.readouterr().err
+    assert main(["optimize", "--robot", "g1", "--methods", "hybrid+ane", "--out", str(tmp_path / "x")]) == 2
+    assert "NAO only" in capsys.readouterr().err
+
+
+def test_a_noise_enveloped_method_trains_its_base_grounding_in_a_noisier_world(tmp_path, capsys):
+    """``sgat+ane``: the grounding is SGAT's (the same walks, fit and seeds: the same transformer), the
+    training world that grounded sim with the ANE's noise on the leg targets, so its CMA-ES sees other
+    fitnesses; added to a finished run with ``--resume --methods``, it reuses the run's real data and
+    leaves the run's SGAT rows as they were."""
+    import torch
+
+    from experiments.optimize import OptimizeConfig, base_method, uses_identification
+
+    assert (base_method("hybrid+ane"), base_method("sgat"), uses_identification("identified+ane")) == \
+        ("hybrid", "sgat", True)
+    opt = Optimizer(OptimizeConfig(methods=("sgat", "sgat+ane"), ane_sigma=0.07), str(tmp_path / "w"), None)
+    assert opt._world_kw("sgat", 1) == ("grounded", {"transformer": str(tmp_path / "w" / "models" / "sgat_step1")})
+    assert opt._world_kw("sgat+ane", 2) == ("grounded", {"transformer": str(tmp_path / "w" / "models" / "sgat+ane_step2"),
+                                                        "action_noise": 0.07})
+    assert opt.grounding_config("sgat+ane") == opt.grounding_config("sgat")
+    out = tmp_path / "run"
+    assert main(["optimize", *TINY, "--methods", "sgat", "--out", str(out), "--json"]) == 0
+    before = json.loads(capsys.readouterr().out)
+    real_files = sorted(p.name for p in (out / "data").glob("real_*"))
+    assert main(["optimize", "--resume", str(out), "--methods", "sgat+ane", "--json"]) == 0
+    after = json.loads(capsys.readouterr().out)
+    assert after["rows"][:2] == before["rows"] and [r["method"] for r in after["rows"]] == ["theta0", "sgat", "sgat+ane"]
+    assert sorted(p.name for p in (out / "data").glob("real_*")) == real_files  # no new real walk
+    def tensors(x):  # every tensor of a saved model, in order
+        return [t for v in x.values() for t in tensors(v)] if isinstance(x, dict) else [x] if torch.is_tensor(x) else []
+    a = tensors(torch.load(out / "models" / "sgat_step1" / "forward_0.pt"))
+    b = tensors(torch.load(out / "models" / "sgat+ane_step1" / "forward_0.pt"))
+    assert a and len(a) == len(b) and all(torch.equal(x, y) for x, y in zip(a, b))
+    import pyarrow.parquet as pq
+
+    ev = pq.read_table(out / "evals.parquet").to_pylist()
+    gen0 = {m: [e["fitness"] for e in ev if e["method"] == m and e["gen"] == 0] for m in ("sgat", "sgat+ane")}
+    assert gen0["sgat"] != gen0["sgat+ane"]  # the same first candidates (CMA-ES seeds), a noisier world
+    assert main(["optimize", "--resume", str(out), "--methods", "magic"]) == 2
+    assert "unknown method(s) ['magic']" in capsys.readouterr().err
 
 
 def test_wrong_shape_weights_are_rejected(tmp_path):
