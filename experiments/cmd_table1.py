@@ -53,6 +53,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--confounded-terms", dest="identified_confounded", action="store_true", default=None,
                    help="hybrid: also build in the contact terms the diagnosis could not tell apart from the uneven "
                         "ground (default: optimize's, off)")
+    p.add_argument("--ane-sigma", type=A.real(0.0, 1.0, unit="rad"),
+                   help="the ANE's noise [rad], of ane and of every <method>+ane (default: optimize's, 0.05)")
     p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
                    "pair every row with it (e.g. another grounding setting)")
     p.add_argument("--out", type=A.out_dir, default=os.path.join("runs", "table1"), help="run directory (default runs/table1)")
@@ -70,7 +72,8 @@ def optimize_overrides(args) -> dict:
                              ("history", args.history), ("command_history", args.command_history),
                              ("matched", args.matched), ("local_inverse", args.local_inverse),
                              ("zero_init", args.zero_init), ("shadow", args.shadow),
-                             ("identified_confounded", args.identified_confounded)) if v is not None}
+                             ("identified_confounded", args.identified_confounded), ("ane_sigma", args.ane_sigma))
+            if v is not None}
 
 
 def run(args) -> dict:

@@ -298,15 +298,17 @@ def _table1(res: dict) -> str:
                                                       if per_seed else ""))
     if res.get("baseline"):
         b = res["baseline"]
+        bper = all(t.get("per_seed_diff") for t in b["tests"])  # saved since the seventeenth round
         lines += ["", f"Against the baseline run (`{b.get('command') or b['path']}`; the same optimization seeds and "
                   "real trials, pairs = seed × trial; a difference > 0: this run's gaits are fitter):", "",
-                  "| step | method | fitness difference (paired permutation p) | falls: only this run / only the baseline (McNemar p) |",
-                  "|---|---|---|---|"]
+                  "| step | method | fitness difference (paired permutation p) | falls: only this run / only the baseline (McNemar p) |"
+                  + (" per optimization seed |" if bper else ""), "|---|---|---|---|" + ("---|" if bper else "")]
         for t in b["tests"]:
             f, x = t["fitness"], t["falls"]
             vs = f" vs the baseline's {t['baseline_method'].upper()}" if t.get("baseline_method") else ""
+            per = " " + ", ".join(f"{d:+.1f}" for d in t["per_seed_diff"]) + " |" if bper else ""
             lines.append(f"| {t['step']} | {t['method'].upper()}{vs} | {f['mean_diff']:+.2f} ± {f['se_diff']:.2f} "
-                         f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |")
+                         f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |{per}")
     if res["verdict"]:
         lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
     if res.get("wall_s"):

@@ -241,7 +241,9 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
     (method, step) both runs have, the gaits of the optimization seeds both ran, each walked on the
     same real trial seeds; pairs = (seed, trial). A method of this run that the baseline lacks (a
     hybrid-only run against an SGAT-only one) is compared with each of the baseline's methods at the
-    same step and seed instead (``baseline_method``). ``mean_diff`` > 0: this run's gaits are fitter.
+    same step and seed instead (``baseline_method``); a ``<base>+ane`` method also with the baseline's
+    base method and ANE (as :func:`comparisons` pairs them within a run: e.g. another noise level
+    against the baseline's). ``mean_diff`` > 0: this run's gaits are fitter.
 
     Returns:
         ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar}]``, with
@@ -263,7 +265,7 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
     groups: dict[tuple, list[tuple[str, str]]] = {}
     for k in sorted((k for k in a if k != "theta0"), key=parse):
         m, st, s = parse(k)
-        for mb in ([m] if m in b_methods else b_methods):
+        for mb in _baseline_partners(m, b_methods):
             if f"{mb}|{st}|{s}" in b:
                 groups.setdefault((m, mb, st), []).append((k, f"{mb}|{st}|{s}"))
     out = []
@@ -274,8 +276,19 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
         xb = np.concatenate([b[kb]["fell"] for _, kb in pairs])
         out.append({"method": m, "step": st, "seeds": [parse(ka)[2] for ka, _ in pairs],
                     **({"baseline_method": mb} if mb != m else {}),
-                    "fitness": paired_permutation_test(fa, fb, seed=seed), "falls": mcnemar_test(xa, xb)})
+                    "fitness": paired_permutation_test(fa, fb, seed=seed), "falls": mcnemar_test(xa, xb),
+                    "per_seed_diff": [float(np.mean(np.subtract(a[ka]["fitness"], b[kb]["fitness"]))) for ka, kb in pairs]})
     return out
+
+
+def _baseline_partners(m: str, b_methods: list[str]) -> list[str]:
+    """The baseline's methods a method ``m`` of this run is tested against (:func:`compare_runs`)."""
+    if m not in b_methods:
+        return list(b_methods)
+    from experiments.optimize import ANE_SUFFIX, base_method  # lazy: loads torch and the engines
+
+    extra = [base_method(m), "ane"] if m.endswith(ANE_SUFFIX) else []
+    return [m] + [b for b in extra if b in b_methods]
 
 
 def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:
@@ -285,19 +298,21 @@ def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:
         f, x = t["fitness"], t["falls"]
         name = f"step {t['step']}: {t['method'].upper()} of this run"
         theirs = f"the baseline's {t['baseline_method'].upper()}" if t.get("baseline_method") else "the baseline's"
+        agree = seed_agreement(t, "this run's", theirs)
         if f["p_value"] < alpha:
             out.append(f"{name} {'beats' if f['mean_diff'] > 0 else 'is worse than'} {theirs} on fitness by "
                        f"{f['mean_diff']:+.1f} (paired permutation p = {f['p_value']:.3g}; falls {x['only_a']} vs "
-                       f"{x['only_b']} discordant, McNemar p = {x['p_value']:.3g})")
+                       f"{x['only_b']} discordant, McNemar p = {x['p_value']:.3g}{agree})")
         else:
             out.append(f"{name}: no significant difference from {theirs} (fitness {f['mean_diff']:+.1f} ± "
-                       f"{f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g})")
+                       f"{f['se_diff']:.1f}, p = {f['p_value']:.2g}; McNemar p = {x['p_value']:.2g}{agree})")
     return out
 
 
-def seed_agreement(test: dict) -> str:
-    """``"; fitter on k of n optimization seeds"`` for a test whose per-seed differences were kept
+def seed_agreement(test: dict, a: str | None = None, b: str | None = None) -> str:
+    """``"; A fitter on k of n optimization seeds"`` for a test whose per-seed differences were kept
     (``per_seed_diff``, more than one seed), in the direction of its mean difference; else ``""``.
+    ``a``, ``b``: the names of the two sides (default the test's ``a`` and ``b`` in capitals).
     The permutation test pairs trials, so it tells whether these gaits differ; a method-level claim
     also needs the seeds to agree (with 3 seeds a sign-flip test over seeds cannot go below p = 0.25)."""
     per = test.get("per_seed_diff") or []
@@ -305,7 +320,8 @@ def seed_agreement(test: dict) -> str:
         return ""
     up = test["fitness"]["mean_diff"] >= 0
     k = sum((d > 0) if up else (d < 0) for d in per)
-    return f"; {test['a'].upper() if up else test['b'].upper()} fitter on {k} of {len(per)} optimization seeds"
+    a, b = a or test["a"].upper(), b or test["b"].upper()
+    return f"; {a if up else b} fitter on {k} of {len(per)} optimization seeds"
 
 
 def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:

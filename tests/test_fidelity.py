@@ -491,7 +491,7 @@ def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
 def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
     """compare_runs pairs (method, step, seed) gaits trial by trial: a run whose every trial is 1 point
     fitter than the baseline's and falls once less shows exactly that; runs on other trials are refused."""
-    from experiments.table1 import Table1Config, compare_runs, load_baseline
+    from experiments.table1 import Table1Config, baseline_verdict, compare_runs, load_baseline
 
     rng = np.random.default_rng(3)
     base = {"theta0": {"fitness": [1.0, 2.0], "fell": [0, 1]}}
@@ -506,12 +506,19 @@ def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
     assert (g["method"], g["baseline_method"], g["step"], g["seeds"]) == ("gat", "sgat", 1, [0])
     assert g["fitness"]["mean_diff"] == pytest.approx(-np.mean(base["sgat|1|0"]["fitness"]))
     assert (g["falls"]["only_a"], g["falls"]["only_b"]) == (0, 10)  # GAT never fell, the baseline's SGAT always
-    from experiments.table1 import baseline_verdict
     assert baseline_verdict([g])[0].startswith("step 1: GAT of this run") and "the baseline's SGAT" in baseline_verdict([g])[0]
     assert t["fitness"]["mean_diff"] == pytest.approx(1.0) and t["fitness"]["p_value"] < 1e-3
     assert (t["falls"]["only_a"], t["falls"]["only_b"]) == (0, 1)
     with pytest.raises(ValueError, match="θ0"):
         compare_runs({"trials": {**run, "theta0": {"fitness": [0.0, 2.0], "fell": [0, 1]}}}, {"trials": base})
+    # a noise-enveloped method both runs have (another noise level): against the baseline's own, its base and ANE
+    b2 = {**base, **{f"{m}|1|{s}": {"fitness": [float(i + s)] * 10, "fell": [0] * 10}
+                     for i, m in enumerate(("ane", "sgat+ane")) for s in range(2)}}
+    r2 = {"theta0": base["theta0"], **{f"sgat+ane|1|{s}": {"fitness": [5.0 + s] * 10, "fell": [0] * 10} for s in range(2)}}
+    got = {t.get("baseline_method", t["method"]): t for t in compare_runs({"trials": r2}, {"trials": b2})}
+    assert set(got) == {"sgat+ane", "sgat", "ane"} and got["sgat+ane"]["method"] == "sgat+ane"
+    assert got["ane"]["per_seed_diff"] == [5.0, 5.0] and got["sgat+ane"]["per_seed_diff"] == [4.0, 4.0]
+    assert baseline_verdict([got["ane"]])[0].endswith("this run's fitter on 2 of 2 optimization seeds)")
     path = tmp_path / "t.json"
     path.write_text(json.dumps({"command": "x", "result": {"config": {"seed": 0, "trials": 30}, "rows": [], "trials": base}}))
     assert load_baseline(str(path), Table1Config())["command"] == "x"

@@ -260,6 +260,7 @@ def test_identified_worlds_leave_the_confounded_contact_terms_out_unless_asked_a
     cmd_table1.register(ap1.add_subparsers())
     assert cmd_table1.optimize_overrides(ap1.parse_args(["table1", "--confounded-terms"])) == {"identified_confounded": True}
     assert cmd_table1.optimize_overrides(ap1.parse_args(["table1"])) == {}
+    assert cmd_table1.optimize_overrides(ap1.parse_args(["table1", "--ane-sigma", "0.025"])) == {"ane_sigma": 0.025}
     opt.cfg = OptimizeConfig(methods=("identified",), identified_confounded=True)
     assert opt._world_kw("identified", 1)[1]["identified_confounded"] is True
     # a run state saved before the field existed resumes as it began; a new one as it was saved
