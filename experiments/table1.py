@@ -372,8 +372,10 @@ def format_table(res: dict) -> str:
         for t in res["baseline"]["tests"]:
             f, x = t["fitness"], t["falls"]
             vs = f"{t['method']} vs {t['baseline_method']}" if t.get("baseline_method") else t["method"]
+            per = " ".join(f"{d:+.1f}" for d in t.get("per_seed_diff") or [])
             lines.append(f"  step {t['step']}: {vs:>8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
-                         f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})")
+                         f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})"
+                         + (f"  per seed {per}" if per else ""))
     lines.append("")
     lines += [f"verdict: {v}" for v in res["verdict"]]
     return "\n".join(lines)
