@@ -21,7 +21,7 @@ import sys
 import time
 
 from experiments.executors import make_executor
-from experiments.optimize import METHODS, PRESETS, OptimizeConfig, Optimizer, method_names
+from experiments.optimize import METHODS, PRESETS, OptimizeConfig, Optimizer
 import experiments.argtypes as A
 
 
@@ -113,12 +113,7 @@ def _methods(text: str) -> tuple:
 
 
 def run(args) -> dict:
-    add = ()
-    if args.resume and args.methods:
-        add = _methods(args.methods)
-        bad = [m for m in add if m not in method_names()]
-        if bad:
-            raise ValueError(f"unknown method(s) {bad}; choose from {', '.join(method_names())}")
+    add = _methods(args.methods) if args.resume and args.methods else ()  # checked by OptimizeConfig.validate
     if args.resume:
         cfg, run_dir = OptimizeConfig(), args.resume
         if not os.path.isdir(run_dir):

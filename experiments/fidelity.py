@@ -270,7 +270,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind in ("gat", "sgat", "identified", "hybrid") and k == "ane":
                 kw["envelope"] = float(v)
                 if not (np.isfinite(kw["envelope"]) and kw["envelope"] >= 0):
-                    raise ValueError(f"world {text!r}: bad value for ane: {v!r} (a noise std >= 0 [rad])")
+                    raise ValueError(v)  # reported as a bad value of ane below
             elif kind == "oracle" and k == "mean":
                 kw["oracle_mean"] = bool(int(v))
             elif kind == "oracle" and k == "engine":

@@ -274,6 +274,11 @@ def _compare(res: dict) -> str:
     return "\n".join(lines).rstrip()
 
 
+def _per_seed_cell(test: dict) -> str:
+    """A Table I test's fitness difference per optimization seed, as a Markdown cell."""
+    return " " + ", ".join(f"{d:+.1f}" for d in test["per_seed_diff"]) + " |"
+
+
 def _table1(res: dict) -> str:
     c = res["config"]
     lines = [f"{c['seeds']} optimization seeds per method; every gait on the same {c['trials']} paired real trials "
@@ -294,8 +299,7 @@ def _table1(res: dict) -> str:
         f, x = t["fitness"], t["falls"]
         lines.append(f"| {t['step']} | {t['a'].upper()} vs {'θ0' if t['b'] == 'theta0' else t['b'].upper()} | "
                      f"{f['mean_diff']:+.2f} ± {f['se_diff']:.2f} (p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} "
-                     f"(p = {x['p_value']:.2g}) |" + (" " + ", ".join(f"{d:+.1f}" for d in t["per_seed_diff"]) + " |"
-                                                      if per_seed else ""))
+                     f"(p = {x['p_value']:.2g}) |" + (_per_seed_cell(t) if per_seed else ""))
     if res.get("baseline"):
         b = res["baseline"]
         bper = all(t.get("per_seed_diff") for t in b["tests"])  # saved since the seventeenth round
@@ -306,9 +310,9 @@ def _table1(res: dict) -> str:
         for t in b["tests"]:
             f, x = t["fitness"], t["falls"]
             vs = f" vs the baseline's {t['baseline_method'].upper()}" if t.get("baseline_method") else ""
-            per = " " + ", ".join(f"{d:+.1f}" for d in t["per_seed_diff"]) + " |" if bper else ""
             lines.append(f"| {t['step']} | {t['method'].upper()}{vs} | {f['mean_diff']:+.2f} ± {f['se_diff']:.2f} "
-                         f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |{per}")
+                         f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |"
+                         + (_per_seed_cell(t) if bper else ""))
     if res["verdict"]:
         lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
     if res.get("wall_s"):

@@ -47,13 +47,19 @@ from experiments.stats import mcnemar_test, paired_permutation_test, wilson_inte
 COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"), ("hybrid", "ane"))
 
 
-def comparisons(methods) -> list[tuple[str, str]]:
-    """The (a, b) pairs tested between ``methods``: :data:`COMPARISONS`, then for every ``<base>+ane``
-    method (``experiments.optimize.ANE_SUFFIX``) ``(m, base)`` -- what the noise adds to the
-    grounding -- and ``(m, "ane")`` -- what the grounding adds to the noise; only pairs of methods run."""
+def noise_partners(method: str) -> tuple:
+    """What a ``<base>+ane`` method (``experiments.optimize.ANE_SUFFIX``) is tested against besides
+    itself: ``(base, "ane")`` -- what the noise adds to the grounding, what the grounding adds to the
+    noise; ``()`` for any other method."""
     from experiments.optimize import ANE_SUFFIX, base_method  # lazy: loads torch and the engines
 
-    pairs = list(COMPARISONS) + [(m, b) for m in methods if m.endswith(ANE_SUFFIX) for b in (base_method(m), "ane")]
+    return (base_method(method), "ane") if method.endswith(ANE_SUFFIX) else ()
+
+
+def comparisons(methods) -> list[tuple[str, str]]:
+    """The (a, b) pairs tested between ``methods``: :data:`COMPARISONS`, then ``(m, b)`` for every
+    ``b`` of :func:`noise_partners` of each method ``m``; only pairs of methods run."""
+    pairs = list(COMPARISONS) + [(m, b) for m in methods for b in noise_partners(m)]
     return [(a, b) for a, b in pairs if a in methods and b in methods]
 
 
@@ -246,7 +252,8 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
     against the baseline's). ``mean_diff`` > 0: this run's gaits are fitter.
 
     Returns:
-        ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar}]``, with
+        ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar, "per_seed_diff":
+        this run's mean fitness minus the baseline's per seed}]``, with
         ``"baseline_method"`` where the baseline's method differs; θ0 is checked, not tested: the
         same gait on the same trials must give the same results.
 
@@ -285,10 +292,7 @@ def _baseline_partners(m: str, b_methods: list[str]) -> list[str]:
     """The baseline's methods a method ``m`` of this run is tested against (:func:`compare_runs`)."""
     if m not in b_methods:
         return list(b_methods)
-    from experiments.optimize import ANE_SUFFIX, base_method  # lazy: loads torch and the engines
-
-    extra = [base_method(m), "ane"] if m.endswith(ANE_SUFFIX) else []
-    return [m] + [b for b in extra if b in b_methods]
+    return [m] + [b for b in noise_partners(m) if b in b_methods]
 
 
 def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:
@@ -344,6 +348,11 @@ def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[st
     return out
 
 
+def _per_seed_text(test: dict) -> str:
+    per = test.get("per_seed_diff") or []
+    return "  per seed " + " ".join(f"{d:+.1f}" for d in per) if per else ""
+
+
 def format_table(res: dict) -> str:
     """Table I: a row per method and step, pooled over the optimization seeds."""
     c = res["config"]
@@ -363,19 +372,17 @@ def format_table(res: dict) -> str:
     lines.append("paired tests (pairs = seed x trial): fitness by permutation, falls by McNemar")
     for t in res["tests"]:
         f, x = t["fitness"], t["falls"]
-        per = " ".join(f"{d:+.1f}" for d in t.get("per_seed_diff") or [])
         lines.append(f"  step {t['step']}: {t['a']:>10s} vs {t['b']:<10s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
                      f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})"
-                     + (f"  per seed {per}" if per else ""))
+                     + _per_seed_text(t))
     if res.get("baseline"):
         lines += ["", f"against the baseline {res['baseline']['path']} (same gait seeds and trials; a = this run):"]
         for t in res["baseline"]["tests"]:
             f, x = t["fitness"], t["falls"]
             vs = f"{t['method']} vs {t['baseline_method']}" if t.get("baseline_method") else t["method"]
-            per = " ".join(f"{d:+.1f}" for d in t.get("per_seed_diff") or [])
             lines.append(f"  step {t['step']}: {vs:>8s} fitness {f['mean_diff']:+6.2f} ± {f['se_diff']:4.2f} "
                          f"(p {f['p_value']:.3g})  falls {x['only_a']:>2d} vs {x['only_b']:<2d} (p {x['p_value']:.3g})"
-                         + (f"  per seed {per}" if per else ""))
+                         + _per_seed_text(t))
     lines.append("")
     lines += [f"verdict: {v}" for v in res["verdict"]]
     return "\n".join(lines)
