@@ -11,7 +11,8 @@ Usage:
   --methods sgat --json`` and saves its JSON with the command line as ``docs/results/NAME.json``;
 * ``python -m experiments.readme`` rewrites README.md from the saved results;
 * ``python -m experiments.readme --check`` exits 1 (naming the blocks) when the README and the saved
-  results disagree (``tests/test_readme.py`` runs it).
+  results disagree, or (naming them) when a relative link leads nowhere: an in-page anchor no heading
+  or ``<a id>`` gives, or a missing file (``tests/test_readme.py`` runs it).
 """
 
 from __future__ import annotations
@@ -274,9 +275,23 @@ def _compare(res: dict) -> str:
     return "\n".join(lines).rstrip()
 
 
-def _per_seed_cell(test: dict) -> str:
-    """A Table I test's fitness difference per optimization seed, as a Markdown cell."""
-    return " " + ", ".join(f"{d:+.1f}" for d in test["per_seed_diff"]) + " |"
+def _per_seed_cell(test: dict, seed_level: bool = False) -> str:
+    """A Table I test's fitness difference per optimization seed, as a Markdown cell; with
+    ``seed_level`` a second cell, the t-test over the seeds (mean [95 % interval], p)."""
+    cell = " " + ", ".join(f"{d:+.1f}" for d in test["per_seed_diff"]) + " |"
+    if seed_level:
+        sl = test.get("seed_level")
+        cell += (f" {sl['mean_diff']:+.1f} [{sl['ci'][0]:+.1f}, {sl['ci'][1]:+.1f}] (p = {sl['p_value']:.2g}) |"
+                 if sl else " – |")
+    return cell
+
+
+def _test_header(first: str, per_seed: bool, seed_level: bool) -> list[str]:
+    """The header rows of a Table I test table: ``first`` (its columns up to the falls) and, as the
+    result holds them, the per-seed differences and the t-test over seeds."""
+    extra = (" per optimization seed |" if per_seed else "") + (" over seeds: mean [95 % t-interval] (p) |"
+                                                                 if seed_level else "")
+    return [first + extra, "|---|---|---|---|" + "---|" * (per_seed + seed_level)]
 
 
 def _table1(res: dict) -> str:
@@ -293,26 +308,28 @@ def _table1(res: dict) -> str:
         lines.append(f"| {name} | {step} | {r['n']} | {r['speed_mean']:.2f} ± {r['speed_se']:.2f} | {r['falls']}/{r['n']} "
                      f"| [{lo:.2f}, {hi:.2f}] | {r['fitness_mean']:.2f} ± {r['fitness_se']:.2f} | {said} |")
     per_seed = all(t.get("per_seed_diff") for t in res["tests"])  # saved since the seventeenth round
-    lines += ["", "| step | comparison | fitness difference (paired permutation p) | falls: only a / only b (McNemar p) |"
-              + (" per optimization seed |" if per_seed else ""), "|---|---|---|---|" + ("---|" if per_seed else "")]
+    sl = per_seed and all("seed_level" in t for t in res["tests"])  # saved since the eighteenth round
+    lines += [""] + _test_header("| step | comparison | fitness difference (paired permutation p) | falls: only a / only b "
+                                 "(McNemar p) |", per_seed, sl)
     for t in res["tests"]:
         f, x = t["fitness"], t["falls"]
         lines.append(f"| {t['step']} | {t['a'].upper()} vs {'θ0' if t['b'] == 'theta0' else t['b'].upper()} | "
                      f"{f['mean_diff']:+.2f} ± {f['se_diff']:.2f} (p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} "
-                     f"(p = {x['p_value']:.2g}) |" + (_per_seed_cell(t) if per_seed else ""))
+                     f"(p = {x['p_value']:.2g}) |" + (_per_seed_cell(t, sl) if per_seed else ""))
     if res.get("baseline"):
         b = res["baseline"]
         bper = all(t.get("per_seed_diff") for t in b["tests"])  # saved since the seventeenth round
+        bsl = bper and all("seed_level" in t for t in b["tests"])
         lines += ["", f"Against the baseline run (`{b.get('command') or b['path']}`; the same optimization seeds and "
-                  "real trials, pairs = seed × trial; a difference > 0: this run's gaits are fitter):", "",
-                  "| step | method | fitness difference (paired permutation p) | falls: only this run / only the baseline (McNemar p) |"
-                  + (" per optimization seed |" if bper else ""), "|---|---|---|---|" + ("---|" if bper else "")]
+                  "real trials, pairs = seed × trial; a difference > 0: this run's gaits are fitter):", ""]
+        lines += _test_header("| step | method | fitness difference (paired permutation p) | falls: only this run / only "
+                              "the baseline (McNemar p) |", bper, bsl)
         for t in b["tests"]:
             f, x = t["fitness"], t["falls"]
             vs = f" vs the baseline's {t['baseline_method'].upper()}" if t.get("baseline_method") else ""
             lines.append(f"| {t['step']} | {t['method'].upper()}{vs} | {f['mean_diff']:+.2f} ± {f['se_diff']:.2f} "
                          f"(p = {f['p_value']:.2g}) | {x['only_a']} / {x['only_b']} (p = {x['p_value']:.2g}) |"
-                         + (_per_seed_cell(t) if bper else ""))
+                         + (_per_seed_cell(t, bsl) if bper else ""))
     if res["verdict"]:
         lines += ["", "Verdict, as the command prints it:", ""] + [f"* {v}" for v in res["verdict"]]
     if res.get("wall_s"):
@@ -421,7 +438,7 @@ def _benchwalk(res: dict) -> str:
 
 
 def _benchtext(res: dict) -> str:
-    """A benchmark whose printed lines say it all (``bench_grounding.py``, ``bench_rerun.py``)."""
+    """A benchmark whose printed lines say it all (``bench_grounding.py``, ``bench_rerun.py``, ``bench_ground.py``)."""
     return f"```text\n{res['text']}\n```"
 
 def _blind(res: dict) -> str:
@@ -466,7 +483,7 @@ def _blind(res: dict) -> str:
 
 RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "compare": _compare, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext,
-             "benchlatency": _benchtext}
+             "benchlatency": _benchtext, "benchground": _benchtext}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:
@@ -511,6 +528,56 @@ def run_and_save(name: str, args: list[str]) -> str:
     return save(name, "sgatwalk " + " ".join(args), result, machine=machine)
 
 
+_FENCE = re.compile(r"^(```|~~~)")
+_HEADING = re.compile(r"^(#{1,6})\s+(.*?)\s*#*\s*$")
+_ANCHOR_TAG = re.compile(r'<a\s+(?:id|name)="([^"]+)"')
+_LINK = re.compile(r"\]\(([^)\s]+)\)")
+
+
+def github_slug(heading: str) -> str:
+    """The anchor GitHub gives a Markdown heading: lower case, every character but letters, digits,
+    ``-``, ``_`` and spaces dropped (backticks, punctuation, dashes such as "—"), spaces turned into
+    ``-`` (GitHub Flavored Markdown, "Section links"; its ``github-slugger`` package)."""
+    s = heading.strip().lower()
+    s = "".join(c for c in s if c.isalnum() or c in "-_ ")
+    return s.replace(" ", "-")
+
+
+def anchors(text: str) -> set[str]:
+    """Every in-page anchor of a Markdown text: heading slugs (repeats get ``-1``, ``-2``, ... as on
+    GitHub) and explicit ``<a id="...">`` tags; headings inside code fences do not count."""
+    out, seen, fenced = set(), {}, False
+    for line in text.splitlines():
+        if _FENCE.match(line):
+            fenced = not fenced
+            continue
+        if fenced:
+            continue
+        out.update(_ANCHOR_TAG.findall(line))
+        m = _HEADING.match(line)
+        if m:
+            slug = github_slug(m.group(2))
+            n = seen.get(slug, 0)
+            seen[slug] = n + 1
+            out.add(slug if n == 0 else f"{slug}-{n}")
+    return out
+
+
+def broken_links(text: str, root: str = ROOT) -> list[str]:
+    """Relative links of a Markdown text that lead nowhere: ``(#anchor)`` without that anchor in the text
+    (:func:`anchors`) and ``(path)`` / ``(path#anchor)`` without the file under ``root``. Web links
+    (``scheme://``) and ``mailto:`` are not checked. Returns the link targets, in order, once each."""
+    have = anchors(text)
+    bad: list[str] = []
+    for target in _LINK.findall(text):
+        if "://" in target or target.startswith("mailto:") or target in bad:
+            continue
+        path, _, frag = target.partition("#")
+        if (not path and frag not in have) or (path and not os.path.exists(os.path.join(root, path))):
+            bad.append(target)
+    return bad
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ["run"]:
@@ -521,20 +588,25 @@ def main(argv=None) -> int:
         print(run_and_save(argv[1], argv[k + 1:]))
         return 0
     ap = argparse.ArgumentParser(description="render docs/results/*.json into README.md")
-    ap.add_argument("--check", action="store_true", help="exit 1 if README.md differs from the rendering")
+    ap.add_argument("--check", action="store_true", help="exit 1 if README.md differs from the rendering or links to what is not there")
     ap.add_argument("--readme", default=os.path.join(ROOT, "README.md"))
     args = ap.parse_args(argv)
     with open(args.readme) as f:
         text = f.read()
     new = render(text)
     if args.check:
+        rc = 0
         if new != text:
             names = [m.group("name") for m in _BLOCK.finditer(text)
                      if render(m.group(0)) != m.group(0)]
             print(f"README.md is stale in block(s): {', '.join(names) or '?'}; run python -m experiments.readme",
                   file=sys.stderr)
-            return 1
-        return 0
+            rc = 1
+        bad = broken_links(text, os.path.dirname(os.path.abspath(args.readme)))
+        if bad:
+            print(f"README.md links to what is not there: {', '.join(bad)}", file=sys.stderr)
+            rc = 1
+        return rc
     if new != text:
         atomic_write_text(args.readme, new)
     return 0

@@ -40,7 +40,7 @@ import numpy as np
 from common.defaults import EPISODE_SECONDS
 from common.files import WallClock, atomic_write_text, jsonable
 from experiments.episodes import EpisodeLog
-from experiments.stats import mcnemar_test, paired_permutation_test, wilson_interval
+from experiments.stats import mcnemar_test, paired_permutation_test, seed_level_test, wilson_interval
 
 #: Comparisons tested at every grounding step (a, b): "a vs b" (and :func:`comparisons` adds those of
 #: the ``<base>+ane`` methods).
@@ -199,7 +199,7 @@ class Table1:
             # gaits differ; whether the methods do rests on how many seeds agree
             per = [float(np.mean(self._vec(ka, "fitness") - self._vec(kb, "fitness"))) for ka, kb in zip(a_keys, b_keys)]
             return {"fitness": paired_permutation_test(fa, fb, seed=cfg.seed), "falls": mcnemar_test(xa, xb),
-                    "per_seed_diff": per}
+                    "per_seed_diff": per, "seed_level": seed_level_test(per)}
 
         for st in steps:
             for a, b in comparisons(cfg.methods):
@@ -253,7 +253,8 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
 
     Returns:
         ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar, "per_seed_diff":
-        this run's mean fitness minus the baseline's per seed}]``, with
+        this run's mean fitness minus the baseline's per seed, "seed_level": the t-test over those
+        (:func:`experiments.stats.seed_level_test`)}]``, with
         ``"baseline_method"`` where the baseline's method differs; θ0 is checked, not tested: the
         same gait on the same trials must give the same results.
 
@@ -281,10 +282,11 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
         fb = np.concatenate([b[kb]["fitness"] for _, kb in pairs])
         xa = np.concatenate([a[ka]["fell"] for ka, _ in pairs])
         xb = np.concatenate([b[kb]["fell"] for _, kb in pairs])
+        per = [float(np.mean(np.subtract(a[ka]["fitness"], b[kb]["fitness"]))) for ka, kb in pairs]
         out.append({"method": m, "step": st, "seeds": [parse(ka)[2] for ka, _ in pairs],
                     **({"baseline_method": mb} if mb != m else {}),
                     "fitness": paired_permutation_test(fa, fb, seed=seed), "falls": mcnemar_test(xa, xb),
-                    "per_seed_diff": [float(np.mean(np.subtract(a[ka]["fitness"], b[kb]["fitness"]))) for ka, kb in pairs]})
+                    "per_seed_diff": per, "seed_level": seed_level_test(per)})
     return out
 
 
@@ -318,14 +320,26 @@ def seed_agreement(test: dict, a: str | None = None, b: str | None = None) -> st
     (``per_seed_diff``, more than one seed), in the direction of its mean difference; else ``""``.
     ``a``, ``b``: the names of the two sides (default the test's ``a`` and ``b`` in capitals).
     The permutation test pairs trials, so it tells whether these gaits differ; a method-level claim
-    also needs the seeds to agree (with 3 seeds a sign-flip test over seeds cannot go below p = 0.25)."""
+    also needs the seeds to agree (with 3 seeds a sign-flip test over seeds cannot go below p = 0.25),
+    so the t-test over seeds follows where the test kept one (``seed_level``: its 95 % interval is
+    where the difference of another seed's runs would lie around)."""
     per = test.get("per_seed_diff") or []
     if len(per) < 2:
         return ""
     up = test["fitness"]["mean_diff"] >= 0
     k = sum((d > 0) if up else (d < 0) for d in per)
     a, b = a or test["a"].upper(), b or test["b"].upper()
-    return f"; {a if up else b} fitter on {k} of {len(per)} optimization seeds"
+    return f"; {a if up else b} fitter on {k} of {len(per)} optimization seeds" + _seed_level_text(test, ", ")
+
+
+def _seed_level_text(test: dict, sep: str) -> str:
+    """The t-test over optimization seeds (``seed_level``, saved since the eighteenth round) in words:
+    ``"over seeds +5.0 [-2.1, +12.1], t-test p = 0.08"``; ``""`` without one."""
+    sl = test.get("seed_level")
+    if not sl:
+        return ""
+    lo, hi = sl["ci"]
+    return f"{sep}over seeds {sl['mean_diff']:+.1f} [{lo:+.1f}, {hi:+.1f}], t-test p = {sl['p_value']:.2g}"
 
 
 def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:
@@ -350,7 +364,7 @@ def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[st
 
 def _per_seed_text(test: dict) -> str:
     per = test.get("per_seed_diff") or []
-    return "  per seed " + " ".join(f"{d:+.1f}" for d in per) if per else ""
+    return ("  per seed " + " ".join(f"{d:+.1f}" for d in per) + _seed_level_text(test, "; ")) if per else ""
 
 
 def format_table(res: dict) -> str:

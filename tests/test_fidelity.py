@@ -428,13 +428,19 @@ def test_table1_resumes_after_sigkill(tmp_path):
     assert np.mean(sg) == pytest.approx(a["rows"][1]["fitness_mean"], abs=1e-3)
     assert sum(tr["sgat|1|0"]["fell"] + tr["sgat|1|1"]["fell"]) == a["rows"][1]["falls"]
     # each test keeps its mean difference per optimization seed (equal trials per seed: they average to the pooled one)
+    # ... and the t-test over them (seeds as the units of a method-level claim)
     for t in a["tests"]:
         assert len(t["per_seed_diff"]) == 2
         assert np.mean(t["per_seed_diff"]) == pytest.approx(t["fitness"]["mean_diff"], abs=1e-3)
+        sl = t["seed_level"]
+        assert sl is None or (sl["n_seeds"] == 2 and sl["mean_diff"] == pytest.approx(np.mean(t["per_seed_diff"]))
+                              and sl["ci"][0] <= sl["mean_diff"] <= sl["ci"][1])
     from experiments.table1 import seed_agreement
 
     t = {"a": "sgat", "b": "gat", "fitness": {"mean_diff": -2.0}, "per_seed_diff": [-3.0, 1.0, -4.0]}
     assert seed_agreement(t) == "; GAT fitter on 2 of 3 optimization seeds"
+    t_sl = {**t, "seed_level": {"mean_diff": -2.0, "ci": [-9.6, 5.6], "p_value": 0.33}}
+    assert seed_agreement(t_sl) == "; GAT fitter on 2 of 3 optimization seeds, over seeds -2.0 [-9.6, +5.6], t-test p = 0.33"
     assert seed_agreement({**t, "fitness": {"mean_diff": 0.5}, "per_seed_diff": [1.0, 0.5, -1.0]}) == \
         "; SGAT fitter on 2 of 3 optimization seeds"
     assert seed_agreement({**t, "per_seed_diff": [-2.0]}) == seed_agreement({"a": "x", "b": "y", "fitness": {}}) == ""

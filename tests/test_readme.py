@@ -27,6 +27,33 @@ def test_render_fills_a_block_from_its_results_file(tmp_path):
     with pytest.raises(KeyError):
         readme.render("<!-- results:nope -->\n<!-- /results:nope -->", results_dir=str(tmp_path))
     json.loads((tmp_path / "table1-x.json").read_text())
+    # tests saved with their per-seed differences and the t-test over seeds get a column each
+    f = {"mean_diff": 1.0, "se_diff": 0.5, "p_value": 0.04}
+    x = {"only_a": 1, "only_b": 3, "p_value": 0.6}
+    res["tests"] = [{"step": 1, "a": "sgat", "b": "gat", "fitness": f, "falls": x, "per_seed_diff": [2.0, 0.5, 0.5],
+                     "seed_level": {"mean_diff": 1.0, "ci": [-0.86, 2.86], "p_value": 0.18}},
+                    {"step": 1, "a": "sgat", "b": "theta0", "fitness": f, "falls": x, "per_seed_diff": [1.0, 1.0, 1.0],
+                     "seed_level": None}]
+    readme.save("table1-x", "sgatwalk table1 --seeds 3", res, results_dir=str(tmp_path))
+    out = readme.render(text, results_dir=str(tmp_path))
+    assert "| per optimization seed | over seeds: mean [95 % t-interval] (p) |" in out
+    assert "| +2.0, +0.5, +0.5 | +1.0 [-0.9, +2.9] (p = 0.18) |" in out and "| +1.0, +1.0, +1.0 | – |" in out
+
+
+def test_link_check_finds_anchors_that_no_heading_gives(tmp_path):
+    """The README check catches a link to a deleted heading (the Table I section lost its heading
+    once and five links pointed nowhere): GitHub's slugs, repeated headings, ``<a id>`` tags,
+    headings in code fences not counted, and links to files that are not there."""
+    assert readme.github_slug("`sgatwalk table1` — the paper's Table I with power") == \
+        "sgatwalk-table1--the-papers-table-i-with-power"
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "a.png").write_bytes(b"")
+    text = ("# Top\n## Same\n## Same\n```bash\n# not a heading\n```\n<a id=\"tag\"></a>**x**\n"
+            "[a](#top) [b](#same-1) [c](#tag) [d](docs/a.png) [e](https://example.org/x) [f](#same-2) "
+            "[g](#not-a-heading) [h](docs/b.png#x) [f again](#same-2)\n")
+    assert readme.anchors(text) == {"top", "same", "same-1", "tag"}
+    assert readme.broken_links(text, str(tmp_path)) == ["#same-2", "#not-a-heading", "docs/b.png#x"]
+    assert readme.broken_links(readme.render(open(readme.os.path.join(readme.ROOT, "README.md")).read())) == []
 
 
 def _world(kind, rhos, briers, bias=1.0, spread=2.0):

@@ -32,6 +32,27 @@ def test_paired_permutation_exact_hand_computed():
         S.paired_permutation_test([1, 2, 3], [1, 2])
 
 
+def test_seed_level_t_test_hand_computed():
+    # d = (3.1, 5.0, 7.2): mean 5.1, sd sqrt(((-2)^2 + 0.1^2 + 2.1^2) / 2) = sqrt(4.21), se = sd / sqrt(3);
+    # t = mean / se on 2 degrees of freedom; t(0.975, 2) = 4.302653 (Student's table); two-sided p of
+    # t = 4.3052 on 2 df is 2 (1 - F(t)) = 1 - t / sqrt(t^2 + 2) (the closed form for 2 df)
+    r = S.seed_level_test([3.1, 5.0, 7.2])
+    se = math.sqrt(4.21) / math.sqrt(3)
+    assert r["n_seeds"] == 3 and r["df"] == 2 and r["mean_diff"] == pytest.approx(5.1)
+    assert r["t"] == pytest.approx(5.1 / se)
+    assert r["ci"] == pytest.approx([5.1 - 4.302653 * se, 5.1 + 4.302653 * se], abs=1e-5)
+    assert r["p_value"] == pytest.approx(1 - r["t"] / math.sqrt(r["t"] ** 2 + 2))
+    assert 0.049 < r["p_value"] < 0.05  # the interval just excludes 0
+    # seeds that disagree: the interval holds 0 whatever the trial-level test said
+    r2 = S.seed_level_test([17.4, -19.7, 10.5])
+    assert r2["ci"][0] < 0 < r2["ci"][1] and r2["p_value"] > 0.5
+    assert S.seed_level_test([2.0]) is None and S.seed_level_test([1.5, 1.5, 1.5]) is None
+    with pytest.raises(ValueError):
+        S.seed_level_test([1.0, float("nan")])
+    with pytest.raises(ValueError):
+        S.seed_level_test([1.0, 2.0], confidence=1.0)
+
+
 def test_mcnemar_hand_computed():
     # 4 pairs where only the first fell, 1 where only the second: P(X <= 1 or X >= 4), X ~ B(5, 1/2)
     # = (1 + 5 + 5 + 1) / 32

@@ -1,0 +1,135 @@
+"""What uneven ground costs the MuJoCo sim: a walk of θ0 on the plane, on a flat heightfield and on the
+identified world's random ground, side by side.
+
+The identified sim (``sysid.identified``, the base of the ``identified`` and ``hybrid`` training
+worlds) walks on a Gaussian random surface of the RMS height the diagnosis fitted (about 3 mm;
+``terrain.gaussian`` with its 8 cm correlation radius, 4 cm cells). MuJoCo collides a box with a
+heightfield prism by prism and keeps up to ``mjMAXCONPAIR`` (50) contacts per geom pair (MuJoCo
+documentation, XML reference, ``hfield``), where a box on a plane gets at most 4 (its corners); MJX
+and MuJoCo Warp cull a heightfield pair to 4 contacts, the CPU engine does not. Each contact adds
+rows to the constraint problem, so the sole on the ground costs more than the robot.
+
+Per ground, interleaved over ``--repeats`` rounds of ``--episodes`` walks of θ0 (7.5 s, the
+episode seeds shared by every ground), the plain sim (``envs.NaoSimEnv``, no grounding, no effects):
+
+* contacts and constraint rows per control step (``MjData.ncon``, ``nefc``), means over the steps;
+* MuJoCo's own timer of ``mj_step`` (``mjTIMER_STEP``) per physics step [µs], and the wall time of
+  ``env.step`` per control step [µs] (10 physics steps, PD, sensors, fall check) with the walk engine;
+* the ratio of each to the plane's (1.0 = as cheap as the plane).
+
+Prints a table (medians over the rounds) or, with ``--json``, one JSON object; ``--save NAME`` also
+writes ``docs/results/NAME.json`` for the README (with the load average).
+
+Usage: ``python benchmarks/bench_ground.py [--episodes 4] [--repeats 3] [--rms 0.00285] [--save benchground]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import gymnasium as gym  # noqa: E402
+import mujoco  # noqa: E402
+
+from envs import NaoSimEnv  # noqa: E402
+from experiments.fitness import run_walk  # noqa: E402
+from sysid.roughness import CORRELATION_RADIUS  # noqa: E402
+from terrain import gaussian  # noqa: E402
+from walk_engine import GaitParams  # noqa: E402
+
+
+class _Counted(gym.Wrapper):
+    """Counts contacts and constraint rows after every control step and times ``env.step``."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.steps = self.ncon = self.nefc = 0
+        self.step_s = 0.0
+
+    def step(self, action):
+        t = time.perf_counter()
+        out = self.env.step(action)
+        self.step_s += time.perf_counter() - t
+        d = self.env.unwrapped.data
+        self.steps += 1
+        self.ncon += int(d.ncon)
+        self.nefc += int(d.nefc)
+        return out
+
+
+def measure(terrain, seeds: list[int], seconds: float) -> dict:
+    """Walk θ0 once per seed on ``terrain`` (None: the plane; a Heightfield: the same one every
+    episode) in the plain sim; returns the per-step means and timings of the walks together."""
+    env = _Counted(NaoSimEnv(terrain=terrain))
+    falls, phys_us, phys_n = 0, 0.0, 0
+    for s in seeds:
+        _, res = run_walk(GaitParams(), seed=s, seconds=seconds, env=env)
+        falls += bool(res.fell)
+        tm = env.unwrapped.data.timer[int(mujoco.mjtTimer.mjTIMER_STEP)]  # reset with the episode's data
+        phys_us += tm.duration * 1e6
+        phys_n += tm.number
+    return {"episodes": len(seeds), "falls": falls, "control_steps": env.steps,
+            "contacts": env.ncon / env.steps, "constraint_rows": env.nefc / env.steps,
+            "mj_step_us": phys_us / max(phys_n, 1), "env_step_us": 1e6 * env.step_s / env.steps}
+
+
+def grounds(rms: float, seed: int) -> dict:
+    """The grounds compared: the sim's plane, a flat heightfield and the identified random ground."""
+    return {"plane": None,
+            "flat heightfield": gaussian(seed, 0.0, CORRELATION_RADIUS),
+            f"random ground, Sq {1000 * rms:.2f} mm": gaussian(seed, rms, CORRELATION_RADIUS)}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--episodes", type=int, default=4, help="walks per ground and round (default 4)")
+    ap.add_argument("--repeats", type=int, default=3, help="interleaved rounds (default 3)")
+    ap.add_argument("--rms", type=float, default=0.00285,
+                    help="RMS height of the random ground [m] (default 0.00285: a diagnosis of Table I's seed 0)")
+    ap.add_argument("--seconds", type=float, default=7.5)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the random ground and the episodes")
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json")
+    args = ap.parse_args(argv)
+    if args.episodes < 1 or args.repeats < 1 or not args.rms > 0 or not args.seconds > 0:
+        ap.error("--episodes and --repeats must be >= 1, --rms and --seconds > 0")
+    load0 = os.getloadavg()[0]
+    gs = grounds(args.rms, args.seed)
+    seeds = [args.seed + i for i in range(args.episodes)]
+    runs: dict[str, list[dict]] = {k: [] for k in gs}
+    for r in range(args.repeats):
+        for name, terrain in gs.items():
+            runs[name].append(measure(terrain, seeds, args.seconds))
+            print(f"[bench_ground] round {r + 1}/{args.repeats}: {name} done", file=sys.stderr, flush=True)
+    out = {"episodes": args.episodes, "repeats": args.repeats, "rms_height": args.rms, "seconds": args.seconds,
+           "grounds": {}}
+    base = None
+    for name, rs in runs.items():
+        med = {k: statistics.median(x[k] for x in rs) for k in ("contacts", "constraint_rows", "mj_step_us", "env_step_us")}
+        base = base or med
+        out["grounds"][name] = {**med, "falls": rs[0]["falls"], "episodes": rs[0]["episodes"],
+                                "mj_step_ratio": med["mj_step_us"] / base["mj_step_us"],
+                                "env_step_ratio": med["env_step_us"] / base["env_step_us"]}
+    head = (f"{'ground':26s} {'falls':>7s} {'contacts':>8s} {'rows':>6s} {'mj_step [us]':>12s} {'x plane':>7s} "
+            f"{'env.step [us]':>13s} {'x plane':>7s}")
+    lines = [head, "-" * len(head)]
+    for name, g in out["grounds"].items():
+        lines.append(f"{name:26s} {g['falls']:>3d}/{g['episodes']:<3d} {g['contacts']:8.1f} {g['constraint_rows']:6.0f} "
+                     f"{g['mj_step_us']:12.0f} {g['mj_step_ratio']:7.2f} {g['env_step_us']:13.0f} {g['env_step_ratio']:7.2f}")
+    out["text"] = "\n".join(lines)
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        save_benchmark(args.save, "benchmarks/bench_ground.py", list(argv if argv is not None else sys.argv[1:]), out, load0)
+    print(json.dumps(out) if args.json else out["text"], flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
