@@ -7,7 +7,7 @@ worlds) walks on a Gaussian random surface of the RMS height the diagnosis fitte
 heightfield prism by prism and keeps up to ``mjMAXCONPAIR`` (50) contacts per geom pair (MuJoCo
 documentation, XML reference, ``hfield``), where a box on a plane gets at most 4 (its corners); MJX
 and MuJoCo Warp cull a heightfield pair to 4 contacts, the CPU engine does not. Each contact adds
-rows to the constraint problem, so the sole on the ground costs more than the robot.
+rows (three with friction) to the constraint problem that every physics step solves.
 
 Per ground, interleaved over ``--repeats`` rounds of ``--episodes`` walks of θ0 (7.5 s, the
 episode seeds shared by every ground), the plain sim (``envs.NaoSimEnv``, no grounding, no effects):

@@ -33,6 +33,7 @@ from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
 from experiments.fidelity import (episodes_rows, fidelity_targets, first_world, format_phases, ranking_target,
                                   replay_totals)
+from experiments.table1 import seed_level_interval
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
@@ -281,8 +282,7 @@ def _per_seed_cell(test: dict, seed_level: bool = False) -> str:
     cell = " " + ", ".join(f"{d:+.1f}" for d in test["per_seed_diff"]) + " |"
     if seed_level:
         sl = test.get("seed_level")
-        cell += (f" {sl['mean_diff']:+.1f} [{sl['ci'][0]:+.1f}, {sl['ci'][1]:+.1f}] (p = {sl['p_value']:.2g}) |"
-                 if sl else " – |")
+        cell += f" {seed_level_interval(sl)} (p = {sl['p_value']:.2g}) |" if sl else " – |"
     return cell
 
 

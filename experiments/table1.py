@@ -332,14 +332,18 @@ def seed_agreement(test: dict, a: str | None = None, b: str | None = None) -> st
     return f"; {a if up else b} fitter on {k} of {len(per)} optimization seeds" + _seed_level_text(test, ", ")
 
 
+def seed_level_interval(sl: dict) -> str:
+    """A t-test over optimization seeds (a test's ``seed_level``) as ``"+5.0 [-2.1, +12.1]"``: the mean
+    difference and its 95 % t-interval (the text, table and README cell share it)."""
+    lo, hi = sl["ci"]
+    return f"{sl['mean_diff']:+.1f} [{lo:+.1f}, {hi:+.1f}]"
+
+
 def _seed_level_text(test: dict, sep: str) -> str:
     """The t-test over optimization seeds (``seed_level``, saved since the eighteenth round) in words:
     ``"over seeds +5.0 [-2.1, +12.1], t-test p = 0.08"``; ``""`` without one."""
     sl = test.get("seed_level")
-    if not sl:
-        return ""
-    lo, hi = sl["ci"]
-    return f"{sep}over seeds {sl['mean_diff']:+.1f} [{lo:+.1f}, {hi:+.1f}], t-test p = {sl['p_value']:.2g}"
+    return f"{sep}over seeds {seed_level_interval(sl)}, t-test p = {sl['p_value']:.2g}" if sl else ""
 
 
 def verdict(rows: list[dict], tests: list[dict], alpha: float = 0.05) -> list[str]:
