@@ -17,6 +17,11 @@ episode seeds shared by every ground), the plain sim (``envs.NaoSimEnv``, no gro
   ``env.step`` per control step [µs] (10 physics steps, PD, sensors, fall check) with the walk engine;
 * the ratio of each to the plane's (1.0 = as cheap as the plane).
 
+The two heightfields are also walked with MuJoCo's sparse constraint Jacobian (``mjOption.jacobian``),
+which the identified sim uses on its ground (``sysid.identified.GROUND_JACOBIAN``; the plain sim and
+MuJoCo's ``auto`` use the dense one below 60 dofs): the same equations, stored without the zeros of
+the many contact rows that touch one leg only.
+
 Prints a table (medians over the rounds) or, with ``--json``, one JSON object; ``--save NAME`` also
 writes ``docs/results/NAME.json`` for the README (with the load average).
 
@@ -39,6 +44,7 @@ import mujoco  # noqa: E402
 
 from envs import NaoSimEnv  # noqa: E402
 from experiments.fitness import run_walk  # noqa: E402
+from sysid.identified import GROUND_JACOBIAN  # noqa: E402
 from sysid.roughness import CORRELATION_RADIUS  # noqa: E402
 from terrain import gaussian  # noqa: E402
 from walk_engine import GaitParams  # noqa: E402
@@ -63,10 +69,13 @@ class _Counted(gym.Wrapper):
         return out
 
 
-def measure(terrain, seeds: list[int], seconds: float) -> dict:
+def measure(terrain, seeds: list[int], seconds: float, jacobian=None) -> dict:
     """Walk θ0 once per seed on ``terrain`` (None: the plane; a Heightfield: the same one every
-    episode) in the plain sim; returns the per-step means and timings of the walks together."""
+    episode) in the plain sim, with MuJoCo's ``jacobian`` option (None: the sim's dense default);
+    returns the per-step means and timings of the walks together."""
     env = _Counted(NaoSimEnv(terrain=terrain))
+    if jacobian is not None:
+        env.unwrapped.model.opt.jacobian = jacobian  # a fixed terrain: the model is not rebuilt at reset
     falls, phys_us, phys_n = 0, 0.0, 0
     for s in seeds:
         _, res = run_walk(GaitParams(), seed=s, seconds=seconds, env=env)
@@ -80,10 +89,15 @@ def measure(terrain, seeds: list[int], seconds: float) -> dict:
 
 
 def grounds(rms: float, seed: int) -> dict:
-    """The grounds compared: the sim's plane, a flat heightfield and the identified random ground."""
-    return {"plane": None,
-            "flat heightfield": gaussian(seed, 0.0, CORRELATION_RADIUS),
-            f"random ground, Sq {1000 * rms:.2f} mm": gaussian(seed, rms, CORRELATION_RADIUS)}
+    """The grounds compared, name -> (terrain, MuJoCo jacobian option or None for the default): the
+    sim's plane, a flat heightfield and the identified random ground, the last two also with the
+    sparse Jacobian the identified sim builds on its ground (``sysid.identified.GROUND_JACOBIAN``)."""
+    flat, rough = gaussian(seed, 0.0, CORRELATION_RADIUS), gaussian(seed, rms, CORRELATION_RADIUS)
+    return {"plane": (None, None),
+            "flat heightfield": (flat, None),
+            f"random ground, Sq {1000 * rms:.2f} mm": (rough, None),
+            "flat heightfield, sparse J": (flat, GROUND_JACOBIAN),
+            "random ground, sparse J": (rough, GROUND_JACOBIAN)}
 
 
 def main(argv=None) -> int:
@@ -104,8 +118,8 @@ def main(argv=None) -> int:
     seeds = [args.seed + i for i in range(args.episodes)]
     runs: dict[str, list[dict]] = {k: [] for k in gs}
     for r in range(args.repeats):
-        for name, terrain in gs.items():
-            runs[name].append(measure(terrain, seeds, args.seconds))
+        for name, (terrain, jacobian) in gs.items():
+            runs[name].append(measure(terrain, seeds, args.seconds, jacobian))
             print(f"[bench_ground] round {r + 1}/{args.repeats}: {name} done", file=sys.stderr, flush=True)
     out = {"episodes": args.episodes, "repeats": args.repeats, "rms_height": args.rms, "seconds": args.seconds,
            "grounds": {}}
@@ -116,11 +130,11 @@ def main(argv=None) -> int:
         out["grounds"][name] = {**med, "falls": rs[0]["falls"], "episodes": rs[0]["episodes"],
                                 "mj_step_ratio": med["mj_step_us"] / base["mj_step_us"],
                                 "env_step_ratio": med["env_step_us"] / base["env_step_us"]}
-    head = (f"{'ground':26s} {'falls':>7s} {'contacts':>8s} {'rows':>6s} {'mj_step [us]':>12s} {'x plane':>7s} "
+    head = (f"{'ground':28s} {'falls':>7s} {'contacts':>8s} {'rows':>6s} {'mj_step [us]':>12s} {'x plane':>7s} "
             f"{'env.step [us]':>13s} {'x plane':>7s}")
     lines = [head, "-" * len(head)]
     for name, g in out["grounds"].items():
-        lines.append(f"{name:26s} {g['falls']:>3d}/{g['episodes']:<3d} {g['contacts']:8.1f} {g['constraint_rows']:6.0f} "
+        lines.append(f"{name:28s} {g['falls']:>3d}/{g['episodes']:<3d} {g['contacts']:8.1f} {g['constraint_rows']:6.0f} "
                      f"{g['mj_step_us']:12.0f} {g['mj_step_ratio']:7.2f} {g['env_step_us']:13.0f} {g['env_step_ratio']:7.2f}")
     out["text"] = "\n".join(lines)
     if args.save:

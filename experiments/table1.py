@@ -247,9 +247,10 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
     (method, step) both runs have, the gaits of the optimization seeds both ran, each walked on the
     same real trial seeds; pairs = (seed, trial). A method of this run that the baseline lacks (a
     hybrid-only run against an SGAT-only one) is compared with each of the baseline's methods at the
-    same step and seed instead (``baseline_method``); a ``<base>+ane`` method also with the baseline's
-    base method and ANE (as :func:`comparisons` pairs them within a run: e.g. another noise level
-    against the baseline's). ``mean_diff`` > 0: this run's gaits are fitter.
+    same step and seed instead (``baseline_method``); a method the baseline has also with the
+    baseline's methods that :func:`comparisons` tests it against within a run (a ``<base>+ane`` method
+    with its base and ANE, hybrid with SGAT and ANE: e.g. another noise level, or another numerical
+    setting of the hybrid world, against the baseline's). ``mean_diff`` > 0: this run's gaits are fitter.
 
     Returns:
         ``[{"method", "step", "seeds", "fitness": permutation test, "falls": McNemar, "per_seed_diff":
@@ -291,10 +292,13 @@ def compare_runs(res: dict, base: dict, *, seed: int = 0) -> list[dict]:
 
 
 def _baseline_partners(m: str, b_methods: list[str]) -> list[str]:
-    """The baseline's methods a method ``m`` of this run is tested against (:func:`compare_runs`)."""
+    """The baseline's methods a method ``m`` of this run is tested against (:func:`compare_runs`): its
+    own, then those a run tests it against (:func:`comparisons`: e.g. hybrid against SGAT and ANE, a
+    ``<base>+ane`` method against its base and ANE); every baseline method when it lacks ``m``."""
     if m not in b_methods:
         return list(b_methods)
-    return [m] + [b for b in noise_partners(m) if b in b_methods]
+    own = [b for a, b in comparisons([m, *b_methods]) if a == m]
+    return list(dict.fromkeys([m, *own]))
 
 
 def baseline_verdict(tests: list[dict], alpha: float = 0.05) -> list[str]:

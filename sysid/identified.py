@@ -14,7 +14,9 @@ fitted is what is walked on:
 * the measured angle of a joint with a play or spring hinge is the sum of its hinges (the output);
 * uneven ground (``terrain_roughness``) is a fresh Gaussian random surface of the fitted RMS height
   at every episode, drawn from the episode seed (:func:`terrain.gaussian`, the diagnosis's surface
-  model with its 8 cm correlation radius), with the walking terrains' flat start pad.
+  model with its 8 cm correlation radius), with the walking terrains' flat start pad;
+* on that ground MuJoCo builds the constraint Jacobian sparse (:data:`GROUND_JACOBIAN`): the same
+  equations as the plain sim's dense default, solved faster where a sole keeps many contacts.
 
 This is the "identified" training world of ``sgatwalk fidelity`` and the base of the hybrid
 grounding (SGAT on top of it, ``experiments.fidelity``).
@@ -34,6 +36,18 @@ from sysid.model import ReplayModel, Structure
 from sysid.report import terms_from_labels
 from sysid.roughness import CORRELATION_RADIUS
 from terrain import gaussian
+
+#: MuJoCo's constraint Jacobian (``mjOption.jacobian``; MuJoCo documentation, XML reference
+#: ``option/jacobian``) of the identified sim on uneven ground. MuJoCo's CPU engine keeps up to 50
+#: contacts per sole-heightfield pair (``mjMAXCONPAIR``), each a few constraint rows that touch one
+#: leg's dofs, so the rows are mostly zeros; the sparse form (MuJoCo's ``auto`` picks dense below 60
+#: dofs, and the NAO has 30 plus its series hinges) cuts a physics step by about a quarter on the
+#: identified ground (``benchmarks/bench_ground.py``). It is a numerical setting, not physics: the
+#: model and the equations are the dense ones', solved to the same tolerance, and a walk's states
+#: agree to a tenth of a millimetre over its first second, until the walk's own sensitivity amplifies the
+#: difference (as any change of summation order would; ``tests/test_identified.py``). The flat
+#: identified sim keeps the plain sim's dense default, bit for bit.
+GROUND_JACOBIAN = mujoco.mjtJacobian.mjJAC_SPARSE
 
 
 def confounded_with_ground(rep: dict) -> set[str]:
@@ -143,6 +157,8 @@ class IdentifiedSimEnv(NaoSimEnv):
         self._rm = rm = ReplayModel(self.robot, st, ground=self._terrain)
         m = rm.model  # freshly compiled for this world: ours to edit
         self._bias = apply_terms(rm, m, self.terms)
+        if self._terrain is not None:
+            m.opt.jacobian = GROUND_JACOBIAN
         idx = {n: i for i, n in enumerate(self.robot.joint_names)}
         self._series = [(idx[n], int(rm.play_qadr[n]), int(rm.play_dadr[n])) for n in rm.play_jnt]
         self._series += [(idx[n], int(rm.spring_qadr[n]), int(rm.spring_dadr[n])) for n in rm.spring_jnt]

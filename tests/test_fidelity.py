@@ -464,8 +464,15 @@ def test_table1_resumes_after_sigkill(tmp_path):
     c = json.loads((run / "table1.json").read_text())
     assert c["rows"] == a["rows"]
     assert {(t["method"], t["step"]) for t in c["baseline"]["tests"]} == {("sgat", 1), ("none", 1)}
-    assert all(t["fitness"]["mean_diff"] == 0 and t["falls"]["only_a"] == t["falls"]["only_b"] == 0
-               for t in c["baseline"]["tests"])
+    own = [t for t in c["baseline"]["tests"] if "baseline_method" not in t]
+    assert len(own) == 2 and all(t["fitness"]["mean_diff"] == 0 and t["falls"]["only_a"] == t["falls"]["only_b"] == 0
+                                 for t in own)
+    # ... and SGAT against the baseline's NONE, as a run tests them (comparisons): the within-run test again
+    cross, = [t for t in c["baseline"]["tests"] if "baseline_method" in t]
+    within, = [t for t in a["tests"] if (t["a"], t["b"]) == ("sgat", "none")]
+    assert (cross["method"], cross["baseline_method"]) == ("sgat", "none")
+    assert cross["fitness"]["mean_diff"] == pytest.approx(within["fitness"]["mean_diff"], abs=1e-3)  # trials kept to 4 decimals
+    assert cross["per_seed_diff"] == pytest.approx(within["per_seed_diff"], abs=1e-3)
 
 
 def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
@@ -525,6 +532,12 @@ def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
     assert set(got) == {"sgat+ane", "sgat", "ane"} and got["sgat+ane"]["method"] == "sgat+ane"
     assert got["ane"]["per_seed_diff"] == [5.0, 5.0] and got["sgat+ane"]["per_seed_diff"] == [4.0, 4.0]
     assert baseline_verdict([got["ane"]])[0].endswith("this run's fitter on 2 of 2 optimization seeds)")
+    # hybrid both runs have (another numerical setting of its world): against the baseline's own, SGAT and ANE
+    b3 = {**b2, **{f"hybrid|1|{s}": {"fitness": [3.0] * 10, "fell": [0] * 10} for s in range(2)}}
+    r3 = {"theta0": base["theta0"], **{f"hybrid|1|{s}": {"fitness": [4.0] * 10, "fell": [0] * 10} for s in range(2)}}
+    got = {t.get("baseline_method", t["method"]): t for t in compare_runs({"trials": r3}, {"trials": b3})}
+    assert set(got) == {"hybrid", "sgat", "ane"} and got["hybrid"]["per_seed_diff"] == [1.0, 1.0]
+    assert got["ane"]["per_seed_diff"] == [4.0, 3.0]  # the baseline's ANE scored 0 and 1 on seeds 0 and 1
     path = tmp_path / "t.json"
     path.write_text(json.dumps({"command": "x", "result": {"config": {"seed": 0, "trials": 30}, "rows": [], "trials": base}}))
     assert load_baseline(str(path), Table1Config())["command"] == "x"

@@ -42,9 +42,9 @@ def test_tiny_run_writes_the_run_directory(tmp_path, capsys):
 
 def test_resume_after_sigkill_matches_uninterrupted(tmp_path):
     ref = tmp_path / "ref"
-    assert main(["optimize", *TINY, "--out", str(ref), "--json"]) == 0
+    assert main(["optimize", *TINY, "--methods", "sgat", "--out", str(ref), "--json"]) == 0
     run = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "experiments.cli", "optimize", *TINY, "--out", str(run), "--json"]
+    cmd = [sys.executable, "-m", "experiments.cli", "optimize", *TINY, "--methods", "sgat", "--out", str(run), "--json"]
     env = dict(os.environ, PYTHONPATH=ROOT)
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     t0 = time.time()
@@ -99,6 +99,24 @@ def test_shadow_state_reaches_every_grounded_method(tmp_path, capsys):
     assert "--shadow" in capsys.readouterr().err
     assert main(["optimize", "--shadow", "0.02", "--matched", "--out", str(tmp_path / "y")]) == 2
     assert "shadow works with the paper's transformer only" in capsys.readouterr().err
+
+
+def test_the_default_method_is_hybrid_for_the_nao_and_sgat_for_the_other_robots():
+    """``sgatwalk optimize`` with no ``--methods``: hybrid grounding for the NAO (nineteenth round), the
+    paper's SGAT for the G1 and Talos, whose physics the diagnosis does not identify (hybrid would be
+    refused for them)."""
+    import argparse
+
+    from experiments.cmd_optimize import config_from_args, register
+    from experiments.optimize import OptimizeConfig, default_methods
+
+    assert OptimizeConfig().methods == default_methods("nao") == ("hybrid",)
+    sub = argparse.ArgumentParser().add_subparsers()
+    parser = register(sub)
+    assert config_from_args(parser.parse_args([])).methods == ("hybrid",)
+    g1 = config_from_args(parser.parse_args(["--robot", "g1"]))
+    assert g1.methods == ("sgat",) and g1.robot == "g1"
+    assert config_from_args(parser.parse_args(["--methods", "gat,none"])).methods == ("gat", "none")
 
 
 def test_bad_input(tmp_path, capsys):
