@@ -263,25 +263,47 @@ BATCHED_RATIO = 0.8
 SINGLE_RATIO = {"closed-form": 0.4, "numerical": 0.15}
 
 
-def expected_generation_seconds(episodes: int, seconds: float, workers: int, batchable: bool = True,
-                                robot: str = "nao") -> dict:
-    """How long a generation of ``episodes`` episodes of ``seconds`` should take on ``workers`` cores.
+#: Bare ``mj_step`` time of a walk on the identified sim's random ground / on the plane
+#: (:func:`expected_generation_seconds`): ``benchmarks/bench_ground.py``'s θ0 walks on a heightfield
+#: with the sparse Jacobian the identified sim uses there, 2.4-2.6x (a sole meets 15-25 heightfield
+#: cells where it meets the plane at 4 points), rounded down.
+GROUND_RATIO = 2.4
 
-    Times bare ``mj_step`` of the sim of ``robot`` holding its stance for 100 control steps in this
-    process (about 20 ms), scales it to every control step of every episode (none falling), and
-    divides by the workers: the physics limit. The expectation is that divided by
-    :data:`BATCHED_RATIO` for worlds that run batched, by :data:`SINGLE_RATIO` for the others (one
-    episode at a time): 0.4 where the legs have a closed-form IK (the NAO, Talos), 0.15 where the
-    walk engine iterates a numerical one (the G1; θ0's 7.5 s sim episode against bare ``mj_step`` of
-    its own actions).
+
+def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict:
+    """How long a generation of ``episodes`` episodes like ``task`` should take on ``workers`` cores.
+
+    Times bare ``mj_step`` of the plain sim of the task's robot holding its stance on the plane for
+    100 control steps in this process (about 20 ms), scales it by :data:`GROUND_RATIO` where the
+    task's world is the identified sim on an uneven ground (its diagnosis reports give one) and to
+    every control step of every episode (none falling), and divides by the workers: the physics
+    limit. The expectation is that divided by :data:`BATCHED_RATIO` for tasks that run batched (NAO
+    episodes of ``sim``, ``identified`` or ``grounded``), by :data:`SINGLE_RATIO` for the others
+    (one episode at a time): 0.4 where the legs have a closed-form IK (the NAO, Talos), 0.15 where
+    the walk engine iterates a numerical one (the G1; θ0's 7.5 s sim episode against bare
+    ``mj_step`` of its own actions).
+
+    Args:
+        task: an :func:`experiments.tasks.run_episode` task dict (``seconds``, ``robot``,
+            ``identified`` and ``identified_ground`` are read).
+        episodes: episodes per generation.
+        workers: worker processes.
 
     Returns:
-        ``{"physics_limit_s", "expected_s", "bare_step_us"}``.
+        ``{"physics_limit_s", "expected_s", "bare_step_us"}`` (``bare_step_us``: per control step of
+        the task's world, the ground's ratio included).
     """
     from walk_engine.legs import LegChain  # lazy: only to ask whether the legs are closed-form
 
+    robot = task.get("robot", "nao")
     r = get_robot(robot)
     analytic = robot == "nao" or LegChain(r, "L").analytic
+    ground = 1.0
+    if task.get("identified") and task.get("identified_ground", True):
+        from sysid.identified import load_identified  # lazy: loads the engines
+
+        if load_identified(list(task["identified"]), bool(task.get("identified_confounded", IDENTIFIED_CONFOUNDED)))[1] > 0:
+            ground = GROUND_RATIO
     env = NaoSimEnv(r)
     env.reset(seed=0)
     m, d = env.model, env.data
@@ -289,10 +311,10 @@ def expected_generation_seconds(episodes: int, seconds: float, workers: int, bat
     t0 = time.perf_counter()
     for _ in range(100):
         mujoco.mj_step(m, d, nstep=env.n_substeps)
-    per_step = (time.perf_counter() - t0) / 100
+    per_step = ground * (time.perf_counter() - t0) / 100
     env.close()
-    steps = episodes * int(round(seconds / env.control_dt))
+    steps = episodes * int(round(float(task.get("seconds", EPISODE_SECONDS)) / env.control_dt))
     limit = steps * per_step / max(1, workers)
-    ratio = BATCHED_RATIO if batchable else SINGLE_RATIO["closed-form" if analytic else "numerical"]
+    ratio = BATCHED_RATIO if _batchable(task) else SINGLE_RATIO["closed-form" if analytic else "numerical"]
     return {"physics_limit_s": limit, "expected_s": limit / ratio,
             "bare_step_us": 1e6 * per_step}

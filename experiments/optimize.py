@@ -425,13 +425,12 @@ class Optimizer:
             prog["gen"] = 0
         es = prog["es"]
         n_ep = cfg.popsize * cfg.episodes_per_candidate
-        est = expected_generation_seconds(n_ep, cfg.seconds, getattr(self.ex, "workers", 1),
-                                          batchable=world in ("sim", "grounded") and "identified" not in kw and self.cfg.robot == "nao",
-                                          robot=self.cfg.robot)
+        est = expected_generation_seconds(self._tasks(world, prog["policy"], [0], **kw)[0], n_ep,
+                                          getattr(self.ex, "workers", 1))
         self.log(f"[{method} step {step}] a generation is {cfg.popsize} candidates x {cfg.episodes_per_candidate} "
                  f"episode(s) of {cfg.seconds:g} s in the {world} world: expected ~{est['expected_s']:.0f} s on "
                  f"{getattr(self.ex, 'workers', 1)} worker(s) (physics limit {est['physics_limit_s']:.0f} s, bare mj_step "
-                 f"{est['bare_step_us']:.0f} us per control step here)")
+                 f"{est['bare_step_us']:.0f} us per control step of this world here)")
         bar = None
         if self.progress:
             bar = tqdm(total=cfg.generations, initial=prog["gen"], desc=f"{method} step {step} CMA-ES", disable=None)

@@ -41,11 +41,11 @@ from terrain import gaussian
 #: ``option/jacobian``) of the identified sim on uneven ground. MuJoCo's CPU engine keeps up to 50
 #: contacts per sole-heightfield pair (``mjMAXCONPAIR``), each a few constraint rows that touch one
 #: leg's dofs, so the rows are mostly zeros; the sparse form (MuJoCo's ``auto`` picks dense below 60
-#: dofs, and the NAO has 30 plus its series hinges) cuts a physics step by about a quarter on the
-#: identified ground (``benchmarks/bench_ground.py``). It is a numerical setting, not physics: the
-#: model and the equations are the dense ones', solved to the same tolerance, and a walk's states
-#: agree to a tenth of a millimetre over its first second, until the walk's own sensitivity amplifies the
-#: difference (as any change of summation order would; ``tests/test_identified.py``). The flat
+#: dofs, and the NAO has 30 plus its series hinges) cuts a physics step by 16-39 % on a heightfield
+#: (``benchmarks/bench_ground.py``). It is a numerical setting, not physics: the model and the
+#: equations are the dense ones', solved to the same tolerance, and a walk's states agree to a tenth
+#: of a millimetre over its first second, until the walk's own sensitivity amplifies the difference
+#: (as any change of summation order would; ``tests/test_identified.py``). The flat
 #: identified sim keeps the plain sim's dense default, bit for bit.
 GROUND_JACOBIAN = mujoco.mjtJacobian.mjJAC_SPARSE
 

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 import torch
 
+from common.defaults import CONTROL_DT
 from envs import NaoSimEnv
 from envs.batch import SimBatch
-from experiments.batch import chunk_tasks, map_episodes, run_batch
+from experiments.batch import BATCHED_RATIO, SINGLE_RATIO, chunk_tasks, expected_generation_seconds, map_episodes, run_batch
 from experiments.executors import ProcessExecutor, SerialExecutor
 from experiments.grounding import grounding_spec
 from experiments.tasks import run_episode
@@ -98,6 +99,36 @@ def test_batched_episodes_are_bit_identical_to_single_episodes(world, transforme
     _assert_same(single, batched)
     falls = sum(r["fell"] for r in single)
     assert 0 < falls < len(tasks), "the panel should hold walks that fall and walks that do not"
+
+
+def test_generation_estimate_counts_the_identified_ground_and_batching(monkeypatch):
+    """The estimate prices the identified world's random ground (GROUND_RATIO x the plane per step)
+    and calls identified and hybrid tasks batched as experiments.batch runs them; a real-world task
+    runs one at a time. The ground's ratio is set to 1000 so that timing noise cannot hide it."""
+    import json
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = {}
+        for name, effects in (("rough", [{"family": "terrain_roughness", "value": 0.003}]), ("flat", [])):
+            paths[name] = f"{tmp}/{name}.json"
+            with open(paths[name], "w") as f:
+                json.dump({"model": {"latency": 0.012}, "effects": effects}, f)
+        monkeypatch.setattr("experiments.batch.GROUND_RATIO", 1000.0)
+        th = _gaits(1)[0]
+        hyb = {"world": "grounded", "transformer": "unused", "identified": [paths["rough"]], "theta": th, "seed": 5,
+               "seconds": 1.0}
+        est = expected_generation_seconds(hyb, episodes=12, workers=2)
+        flat = expected_generation_seconds({**hyb, "identified": [paths["flat"]]}, episodes=12, workers=2)
+        no_ground = expected_generation_seconds({**hyb, "identified_ground": False}, episodes=12, workers=2)
+    real = expected_generation_seconds({**hyb, "world": "real", "identified": None}, episodes=12, workers=2)
+    for e in (est, flat, no_ground):
+        assert e["expected_s"] == pytest.approx(e["physics_limit_s"] / BATCHED_RATIO)
+        # 12 episodes of 1 s on 2 workers: 6 s of control steps per worker at the per-step cost
+        assert e["physics_limit_s"] == pytest.approx(6 / CONTROL_DT * e["bare_step_us"] * 1e-6, rel=1e-9)
+    assert real["expected_s"] == pytest.approx(real["physics_limit_s"] / SINGLE_RATIO["closed-form"])
+    # the ground's price (the plane is timed afresh per call: only a factor 1000 is beyond its noise)
+    assert est["bare_step_us"] > 100 * max(flat["bare_step_us"], no_ground["bare_step_us"])
 
 
 def test_mixed_worlds_keep_task_order(transformers):
