@@ -101,26 +101,23 @@ def test_batched_episodes_are_bit_identical_to_single_episodes(world, transforme
     assert 0 < falls < len(tasks), "the panel should hold walks that fall and walks that do not"
 
 
-def test_generation_estimate_counts_the_identified_ground_and_batching(monkeypatch):
+def test_generation_estimate_counts_the_identified_ground_and_batching(monkeypatch, tmp_path):
     """The estimate prices the identified world's random ground (GROUND_RATIO x the plane per step)
     and calls identified and hybrid tasks batched as experiments.batch runs them; a real-world task
     runs one at a time. The ground's ratio is set to 1000 so that timing noise cannot hide it."""
     import json
-    import tempfile
 
-    with tempfile.TemporaryDirectory() as tmp:
-        paths = {}
-        for name, effects in (("rough", [{"family": "terrain_roughness", "value": 0.003}]), ("flat", [])):
-            paths[name] = f"{tmp}/{name}.json"
-            with open(paths[name], "w") as f:
-                json.dump({"model": {"latency": 0.012}, "effects": effects}, f)
-        monkeypatch.setattr("experiments.batch.GROUND_RATIO", 1000.0)
-        th = _gaits(1)[0]
-        hyb = {"world": "grounded", "transformer": "unused", "identified": [paths["rough"]], "theta": th, "seed": 5,
-               "seconds": 1.0}
-        est = expected_generation_seconds(hyb, episodes=12, workers=2)
-        flat = expected_generation_seconds({**hyb, "identified": [paths["flat"]]}, episodes=12, workers=2)
-        no_ground = expected_generation_seconds({**hyb, "identified_ground": False}, episodes=12, workers=2)
+    paths = {}
+    for name, effects in (("rough", [{"family": "terrain_roughness", "value": 0.003}]), ("flat", [])):
+        paths[name] = str(tmp_path / f"{name}.json")
+        (tmp_path / f"{name}.json").write_text(json.dumps({"model": {"latency": 0.012}, "effects": effects}))
+    monkeypatch.setattr("experiments.batch.GROUND_RATIO", 1000.0)
+    th = _gaits(1)[0]
+    hyb = {"world": "grounded", "transformer": "unused", "identified": [paths["rough"]], "theta": th, "seed": 5,
+           "seconds": 1.0}
+    est = expected_generation_seconds(hyb, episodes=12, workers=2)
+    flat = expected_generation_seconds({**hyb, "identified": [paths["flat"]]}, episodes=12, workers=2)
+    no_ground = expected_generation_seconds({**hyb, "identified_ground": False}, episodes=12, workers=2)
     real = expected_generation_seconds({**hyb, "world": "real", "identified": None}, episodes=12, workers=2)
     for e in (est, flat, no_ground):
         assert e["expected_s"] == pytest.approx(e["physics_limit_s"] / BATCHED_RATIO)
