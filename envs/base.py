@@ -37,6 +37,7 @@ from common.defaults import CONTROL_DT, PHYSICS_DT
 from common.spatial import quat_to_mat, roll_pitch
 from robots import RobotModel, nao_h25
 from terrain import Heightfield
+from terrain.heightfield import triangulated_height
 
 GRAVITY = 9.81
 #: Fall thresholds (a project choice): the torso origin lower than the robot's ``RobotModel.fall_height``
@@ -91,6 +92,48 @@ def ground_height(terrain: Heightfield | None, x, y) -> np.ndarray:
         return np.zeros(np.broadcast(x, y).shape)
     hx, hy = terrain.half_extent
     return terrain.height_at(np.clip(x, -hx, hx), np.clip(y, -hy, hy))
+
+
+class GroundStack:
+    """The grounds of B episodes (a :class:`terrain.Heightfield` or None, the plane, each), for the height
+    under one point per episode in one vectorized call: what :func:`ground_height` gives for each
+    episode alone, bit for bit (:func:`terrain.heightfield.triangulated_height`), for lock-step batches
+    (:class:`envs.batch.SimBatch`, whose fall check asks every control step).
+
+    Fields of one shape and cell size (the random surfaces of a world) are stacked once, here; fields of
+    several shapes are looked up one by one.
+
+    Args:
+        fields: B heightfields or None.
+    """
+
+    def __init__(self, fields):
+        self.fields = list(fields)
+        real = [i for i, f in enumerate(self.fields) if f is not None]
+        self.uneven = bool(real)
+        self._row = np.full(len(self.fields), -1, dtype=np.intp)  # episode -> row of the stack (-1: plane)
+        self._stack = None
+        if real and len({(self.fields[i].shape, self.fields[i].cell_size) for i in real}) == 1:
+            f0 = self.fields[real[0]]
+            self._stack = np.stack([self.fields[i].heights for i in real])
+            self._row[real] = np.arange(len(real))
+            self._cell, (self._hx, self._hy) = f0.cell_size, f0.half_extent
+
+    def height(self, episodes, x, y) -> np.ndarray:
+        """Ground height [m] under (x[j], y[j]) [m] of episode ``episodes[j]``, shape (n,); outside a
+        field the nearest edge value (as :func:`ground_height`)."""
+        episodes = np.asarray(episodes, dtype=np.intp)
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        if self._stack is None:
+            return np.array([float(ground_height(self.fields[i], x[j], y[j])) for j, i in enumerate(episodes.tolist())])
+        row = self._row[episodes]
+        out = np.zeros(len(episodes))
+        on = row >= 0
+        if on.any():
+            hx, hy = self._hx, self._hy
+            out[on] = triangulated_height(self._stack, row[on], np.clip(x[on], -hx, hx), np.clip(y[on], -hy, hy),
+                                          self._cell, hx, hy)
+        return out
 
 
 @dataclass

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from common.spatial import cross, quats_to_mats, roll_pitch
-from envs.base import (FALL_TILT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, ground_height,
+from envs.base import (FALL_TILT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, GroundStack, ground_height,
                        make_terrain)
 from envs.mujoco_world import NaoSimEnv, foot_contact_sums
 from envs.rollout import gt_row
@@ -61,7 +61,8 @@ class SimBatch:
         self.model = env.model
         self.models = [env.model] * self.size
         self._fields = [env.terrain] * self.size
-        self._uneven = env.terrain is not None
+        self._grounds = GroundStack(self._fields)
+        self._uneven = self._grounds.uneven
         self._fall_height = env.fall_height
         self.datas = [None] * self.size
         # what a subclass changes (NaoSimEnv.batch_hooks): targets minus ctrl_offset go to the servos;
@@ -126,7 +127,8 @@ class SimBatch:
                 self.reason[i] = None
         finally:
             env.model, env.data, env._terrain = own
-        self._uneven = any(f is not None for f in self._fields)
+        self._grounds = GroundStack(self._fields)
+        self._uneven = self._grounds.uneven
         self.active[:] = True
 
     def terrain(self, i: int):
@@ -216,9 +218,8 @@ class SimBatch:
             low = tilt = np.zeros(n, dtype=bool)
         else:
             with np.errstate(all="ignore"):
-                if self._uneven:  # per episode, as NaoEnv._fall_reason
-                    floor_z = np.array([float(ground_height(self._fields[i], pos[j, 0], pos[j, 1]))
-                                        for j, i in enumerate(idx.tolist())])
+                if self._uneven:  # each episode's own ground, as NaoEnv._fall_reason
+                    floor_z = self._grounds.height(idx, pos[:, 0], pos[:, 1])
                 else:
                     floor_z = ground_height(None, pos[:, 0], pos[:, 1])
                 low = pos[:, 2] - floor_z < self._fall_height

@@ -103,7 +103,7 @@ def nao_spec(state: str = "legs", history: int = 1, robot: str = "nao") -> Groun
 
 
 def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str = "legs", history: int = 1,
-                      seed: int = 0, robot: str = "nao", base_env=None) -> GroundingFit:
+                      seed: int = 0, robot: str = "nao", base_env=None, map_fn=None) -> GroundingFit:
     """Fit the action transformer of a grounding step on NAO walk recordings.
 
     Args:
@@ -119,6 +119,8 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
             model rows labelled with the real walk's next states
             (:func:`sgat.grounding.dad_transitions`; Data as Demonstrator, Venkatraman et al., AAAI
             2015), and the forward models are refitted on the real rows and every round's DAD rows.
+        map_fn: fits the ensemble's members side by side (:func:`sgat.grounding.fit_grounding`'s
+            ``map_fn``, e.g. an executor's ``map``); the fit does not depend on it.
 
     Raises:
         KeyError: a recording lacks an observation column. ValueError: unusable data, or DAD rounds
@@ -133,7 +135,7 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
     c = int(cfg.command_history)
     real = recording_transitions(real_recs, layout, spec, c)
     sim = recording_transitions(sim_recs, layout, spec, c)
-    fit = fit_grounding(real, sim, spec, cfg, seed=seed)
+    fit = fit_grounding(real, sim, spec, cfg, seed=seed, map_fn=map_fn)
     extra = []
     for _ in range(int(cfg.dad_iterations)):
         from envs.rollout import CommandLog, rollout  # lazy: loads the engines
@@ -143,5 +145,6 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
         replays = [rollout(env, CommandLog(r.group("cmd")), seed=int(r.meta.get("seed", 0)),
                            seconds=len(r) * float(r.meta["control_dt"])) for r in real_recs]
         extra.append(dad_transitions(replays, real_recs, layout, spec, c))
-        fit = fit_grounding(real, sim, spec, cfg, seed=seed, forward_extra=Transitions.concat(extra), previous=fit)
+        fit = fit_grounding(real, sim, spec, cfg, seed=seed, forward_extra=Transitions.concat(extra), previous=fit,
+                            map_fn=map_fn)
     return fit

@@ -367,7 +367,8 @@ class Optimizer:
             used[f"{_theta_key(list(r.meta['params'].values()))}_{r.meta['seed']}"] = len(r) * r.meta["control_dt"]
         t0 = time.perf_counter()
         fit = fit_nao_grounding(real, sim, self.grounding_config(method), state=cfg.grounding_state,
-                                history=cfg.history, seed=cfg.seed + step, robot=cfg.robot)
+                                history=cfg.history, seed=cfg.seed + step, robot=cfg.robot,
+                                map_fn=self.ex.map)  # the ensemble's members side by side on the workers
         fit.transformer.save(out)
         self.log(f"[{method} step {step}] grounded on {fit.info['n_real']} real / {fit.info['n_sim']} sim transitions "
                  f"(forward val loss {fit.forward_report.val_loss:.3f}, inverse {fit.inverse_report.val_loss:.3f}, "

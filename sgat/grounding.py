@@ -312,9 +312,35 @@ def local_inverse_mask(spec: GroundingSpec, *, command_input: bool = False) -> n
     return mask
 
 
+def _fit_member(t: dict) -> dict:
+    """Fit one ensemble member of :func:`fit_grounding` (a picklable task: its rows, seed and settings).
+
+    Returns:
+        ``{"forward", "forward_report"}`` and, when the task holds inverse rows, ``"inverse"``,
+        ``"inverse_report"`` and the sim models the settings ask for (``"sim_forward"``, ``"sim_mean"``).
+    """
+    s, S, A, k, c, kw = t["seed"], t["S"], t["A"], t["history"], t["commands"], t["kw"]
+    fwd = ForwardModel(S, A, history=k, stochastic=t["stochastic"], hidden=t["hidden"], components=t["components"],
+                       commands=c)
+    out = {"forward": fwd, "forward_report": fwd.fit(t["Xf"], t["Yf"], seed=s, **kw)}
+    if "Xi" not in t:
+        return out
+    inv = InverseModel(S, A, history=k, hidden=t["hidden"], command_input=t["inverse_command"])
+    out.update(inverse=inv, inverse_report=inv.fit(t["Xi"], t["Yi"], seed=s + 1, input_mask=t["mask"], **kw))
+    if t.get("residual_noise"):
+        fs = ForwardModel(S, A, history=k, stochastic=True, hidden=t["hidden"], commands=c)
+        fs.fit(t["Xs"], t["dSs"], seed=s + 2, **kw)
+        out["sim_forward"] = fs
+    if t.get("matched"):  # the sim's own mean transition, fitted like f_real on the inverse model's rows
+        fm = ForwardModel(S, A, history=k, stochastic=False, hidden=t["hidden"], commands=c)
+        fm.fit(t["Xs"], t["dSs"], seed=s + 3, **kw)
+        out["sim_mean"] = fm
+    return out
+
+
 def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg: GroundingConfig, *,
                   seed: int = 0, forward_extra: Transitions | None = None,
-                  previous: GroundingFit | None = None) -> GroundingFit:
+                  previous: GroundingFit | None = None, map_fn=None) -> GroundingFit:
     """Fit ``f_real`` on ``real`` and ``f_sim^-1`` on ``sim`` (per ensemble member) and build the
     transformer (Algorithm 1, lines "update f_real, f_sim^-1").
 
@@ -328,6 +354,10 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     ``forward_extra``: more training rows of the forward models (:func:`dad_transitions`), stacked
     under ``real`` before the bootstrap resampling. ``previous``: a fit of the same data whose
     inverse models (and sim models) are kept: only the forward models are fitted again.
+    ``map_fn``: a ``map(fn, tasks) -> list`` that fits the ensemble's members side by side (e.g. an
+    ``experiments.executors`` executor's ``map``: one member per worker). Each member is fitted from
+    its own seed with the same operations wherever it runs, so the fit does not depend on it (given one
+    torch thread per process, as the executors set).
 
     Raises:
         ValueError: unusable data (see :meth:`sgat.models._Model.fit`), or transitions without the
@@ -348,29 +378,27 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
     Xs = sim.forward_input()  # the sim's own forward model: applied actions in, its spread out
     mask = local_inverse_mask(spec, command_input=cfg.inverse_command) if cfg.local_inverse else None
-    fwds, invs, sims, means, rf, ri = [], [], [], [], [], []
+    sgat = cfg.method == "sgat"
+    tasks = []
     for i in range(int(cfg.ensemble)):
         s = seed + 7919 * i
         fi = np.arange(len(Xf)) if i == 0 else np.random.default_rng([s, 1]).integers(0, len(Xf), len(Xf))
         ii = np.arange(len(Xi)) if i == 0 else np.random.default_rng([s, 2]).integers(0, len(Xi), len(Xi))
-        sgat = cfg.method == "sgat"
-        fwd = ForwardModel(S, A, history=k, stochastic=sgat, hidden=cfg.hidden,
-                           components=int(cfg.components) if sgat else 1, commands=c)
-        rf.append(fwd.fit(Xf[fi], Yf[fi], seed=s, **kw))
-        fwds.append(fwd)
-        if previous is not None:  # the inverse (and sim) models stay
-            continue
-        inv = InverseModel(S, A, history=k, hidden=cfg.hidden, command_input=cfg.inverse_command)
-        ri.append(inv.fit(Xi[ii], Yi[ii], seed=s + 1, input_mask=mask, **kw))
-        invs.append(inv)
-        if cfg.residual_noise and cfg.method == "sgat":
-            fs = ForwardModel(S, A, history=k, stochastic=True, hidden=cfg.hidden, commands=c)
-            fs.fit(Xs[ii], sim.dS[ii], seed=s + 2, **kw)
-            sims.append(fs)
-        if cfg.matched:  # the sim's own mean transition, fitted like f_real on the inverse model's rows
-            fm = ForwardModel(S, A, history=k, stochastic=False, hidden=cfg.hidden, commands=c)
-            fm.fit(Xs[ii], sim.dS[ii], seed=s + 3, **kw)
-            means.append(fm)
+        t = {"seed": s, "S": S, "A": A, "history": k, "stochastic": sgat, "hidden": cfg.hidden, "commands": c,
+             "components": int(cfg.components) if sgat else 1, "kw": kw, "Xf": Xf[fi], "Yf": Yf[fi]}
+        if previous is None:  # else the inverse (and sim) models stay
+            t.update(Xi=Xi[ii], Yi=Yi[ii], inverse_command=cfg.inverse_command, mask=mask)
+            if (cfg.residual_noise and sgat) or cfg.matched:
+                t.update(Xs=Xs[ii], dSs=sim.dS[ii], residual_noise=bool(cfg.residual_noise and sgat),
+                         matched=bool(cfg.matched))
+        tasks.append(t)
+    members = list((map_fn or map)(_fit_member, tasks))
+    fwds = [m["forward"] for m in members]
+    rf = [m["forward_report"] for m in members]
+    invs = [m["inverse"] for m in members if "inverse" in m]
+    ri = [m["inverse_report"] for m in members if "inverse" in m]
+    sims = [m["sim_forward"] for m in members if "sim_forward" in m]
+    means = [m["sim_mean"] for m in members if "sim_mean" in m]
     if previous is not None:
         if previous.transformer.n_members != len(fwds):
             raise ValueError(f"previous fit has {previous.transformer.n_members} members, the config {len(fwds)}")

@@ -130,18 +130,7 @@ class Heightfield:
         hx, hy = self.half_extent
         if np.any(np.abs(x) > hx + 1e-12) or np.any(np.abs(y) > hy + 1e-12):
             raise ValueError(f"points outside the heightfield (|x| <= {hx:g} m, |y| <= {hy:g} m)")
-        ny, nx = self.heights.shape
-        fx = (x + hx) / self.cell_size
-        fy = (y + hy) / self.cell_size
-        ix = np.clip(np.floor(fx).astype(int), 0, nx - 2)
-        iy = np.clip(np.floor(fy).astype(int), 0, ny - 2)
-        u = fx - ix
-        v = fy - iy
-        h = self.heights
-        h00, h10, h01, h11 = h[iy, ix], h[iy, ix + 1], h[iy + 1, ix], h[iy + 1, ix + 1]
-        lower = h00 + u * (h10 - h00) + v * (h11 - h10)   # u >= v: triangle 00-10-11
-        upper = h00 + v * (h01 - h00) + u * (h11 - h01)   # u <  v: triangle 00-01-11
-        return np.where(u >= v, lower, upper)
+        return triangulated_height(self.heights[None], 0, x, y, self.cell_size, hx, hy)
 
     def roughness(self) -> float:
         """Standard deviation of the node heights [m]."""
@@ -155,6 +144,35 @@ class Heightfield:
         if self.spec is not None:
             out["spec"] = copy.deepcopy(self.spec)
         return out
+
+
+def triangulated_height(heights: np.ndarray, k, x, y, cell_size: float, half_x: float, half_y: float) -> np.ndarray:
+    """Height [m] of field ``heights[k]`` at (x, y) [m] on MuJoCo's triangulation of its cells.
+
+    The one formula behind :meth:`Heightfield.height_at` and :class:`envs.base.GroundStack` (several
+    episodes' fields of one shape, one point each, in one vectorized call): the same elementwise
+    IEEE operations, so a point's height is bit-identical whichever way it is asked for.
+
+    Args:
+        heights: stacked node heights, shape (K, ny, nx) [m].
+        k: which field per point (an int, or an int array broadcasting with x and y).
+        x, y: points [m] inside the fields (the caller checks or clips the range).
+        cell_size: grid spacing [m]; half_x, half_y: the fields' half extents [m].
+
+    Returns:
+        Heights [m], the broadcast shape of ``k``, ``x`` and ``y``.
+    """
+    ny, nx = heights.shape[-2:]
+    fx = (x + half_x) / cell_size
+    fy = (y + half_y) / cell_size
+    ix = np.clip(np.floor(fx).astype(int), 0, nx - 2)
+    iy = np.clip(np.floor(fy).astype(int), 0, ny - 2)
+    u = fx - ix
+    v = fy - iy
+    h00, h10, h01, h11 = heights[k, iy, ix], heights[k, iy, ix + 1], heights[k, iy + 1, ix], heights[k, iy + 1, ix + 1]
+    lower = h00 + u * (h10 - h00) + v * (h11 - h10)   # u >= v: triangle 00-10-11
+    upper = h00 + v * (h01 - h00) + u * (h11 - h01)   # u <  v: triangle 00-01-11
+    return np.where(u >= v, lower, upper)
 
 
 # ---------------------------------------------------------------------------- generators

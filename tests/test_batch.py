@@ -217,3 +217,27 @@ def test_stress_trials_in_lockstep_equal_single_trials():
         a.pop("wall_s"), b.pop("wall_s")
         _assert_same([a], [b])
     assert len({(r["terrain"], r["terrain_seed"]) for r in single}) == len(single)  # each on its own ground
+
+
+def test_ground_stack_gives_each_episode_its_own_ground_bit_for_bit():
+    """The batch's fall check asks every episode's ground in one call (envs.base.GroundStack): each
+    height equals ground_height on that episode's own field, bit for bit, for random surfaces of one
+    shape with planes among them, for fields of several shapes, and outside a field (its edge)."""
+    from envs.base import GroundStack, ground_height
+    from terrain import gaussian
+
+    rng = np.random.default_rng(3)
+    same = [gaussian(np.random.default_rng(s), 0.004, 0.05) for s in range(4)]
+    other = gaussian(np.random.default_rng(9), 0.004, 0.05, size=(2.0, 1.0))
+    for fields in (same, same[:2] + [None] + same[2:], [same[0], other, None]):
+        stack = GroundStack(fields)
+        assert stack.uneven
+        n = 200
+        ep = rng.integers(0, len(fields), n)
+        x, y = rng.uniform(-3.5, 3.5, n), rng.uniform(-2.0, 2.0, n)  # some beyond the fields' edges
+        got = stack.height(ep, x, y)
+        want = np.array([float(ground_height(fields[e], x[j], y[j])) for j, e in enumerate(ep)])
+        assert np.array_equal(got, want)
+        assert np.ptp(got) > 0.005  # the surfaces are not flat: a wrong field or point would show
+    assert not GroundStack([None, None]).uneven
+    assert np.array_equal(GroundStack([None, None]).height([0, 1], [0.3, -2.0], [0.1, 5.0]), [0.0, 0.0])

@@ -572,3 +572,35 @@ def test_teacher_forcing_asks_the_inverse_model_for_the_recorded_next_states(fit
         TeacherForcedEnv(_Still(), tr, ref[:, :2])
     with pytest.raises(ValueError, match="reference"):
         TeacherForcedEnv(_Still(), tr, np.full((4, 3), np.nan))
+
+
+def test_ensemble_members_fitted_on_a_process_pool_equal_the_serial_fit():
+    """fit_grounding's map_fn (optimize passes its executor's map): an ensemble whose members are
+    fitted side by side in worker processes is the serial fit, every weight bit for bit, with the
+    sim's own models (residual noise, matched) and a refit of the forward models only (``previous``,
+    as the DAD rounds refit); the members differ from one another (bootstrap resamples, seeds)."""
+    from experiments.executors import ProcessExecutor
+    from sgat.grounding import GroundingConfig, fit_grounding
+
+    spec = _spec()
+    P = np.array([[0.6, -0.3, 0.2], [-0.2, 0.5, 0.4]])
+    real, sim = _gait(600, 3, P, gain=[0.7, 1.3], explore=0.2), _gait(600, 1, P, explore=0.2)
+    cfg = GroundingConfig(alpha=0.5, method="sgat", hidden=(8,), ensemble=3, max_epochs=20, residual_noise=True,
+                          matched=True)
+
+    def weights(tr):
+        models = list(tr.forwards) + list(tr.inverses) + list(tr.sim_forwards or []) + list(tr.sim_means or [])
+        return [p.detach().clone() for m in models for p in m.state_dict().values()]
+
+    serial = fit_grounding(real, sim, spec, cfg, seed=4)
+    with ProcessExecutor(2) as ex:
+        pooled = fit_grounding(real, sim, spec, cfg, seed=4, map_fn=ex.map)
+        refit_pooled = fit_grounding(real, sim, spec, cfg, seed=5, previous=pooled, map_fn=ex.map)
+    refit_serial = fit_grounding(real, sim, spec, cfg, seed=5, previous=serial)
+    for a, b in ((serial, pooled), (refit_serial, refit_pooled)):
+        wa, wb = weights(a.transformer), weights(b.transformer)
+        assert len(wa) == len(wb) and all(torch.equal(x, y) for x, y in zip(wa, wb))
+        assert [r.val_loss for r in a.forward_reports] == [r.val_loss for r in b.forward_reports]
+    f = serial.transformer.forwards
+    assert not torch.equal(f[0].net.body[0].weight, f[1].net.body[0].weight)
+    assert len(serial.transformer.sim_forwards) == len(serial.transformer.sim_means) == 3

@@ -1,0 +1,163 @@
+"""What a hybrid optimization spends besides the physics, old way against new, side by side in one run.
+
+Two pieces of ``sgatwalk optimize``'s default (hybrid) run that are bookkeeping, not simulation:
+
+* **The fall check's ground lookup.** Every control step, a lock-step batch (``envs.batch.SimBatch``)
+  asks the ground height under each episode's torso; in the identified sim every episode walks its own
+  random surface. Timed for ``--episodes`` episodes (a worker's share of a 12-candidate generation on 2
+  cores: 6) on their own surfaces (``terrain.gaussian``, the identified sim's correlation radius, 4 cm
+  cells), over ``--steps`` control steps of torso positions within the surfaces and beyond their
+  edges: one :func:`envs.base.ground_height` call per episode (the batch's code before the
+  twenty-first round) against one :class:`envs.base.GroundStack` call for the batch (the fields
+  stacked once per batch). The heights must agree bit for bit.
+* **The grounding fit's ensemble.** A grounding step fits 5 forward/inverse pairs (the default
+  ensemble) on 4 real and 4 sim walks of θ0 (the first grounding step's data: real world against the
+  sim with the 0.02 rad exploration noise); timed fitted one after another in this process (as
+  ``optimize`` fitted them before the twenty-first round) against one member per worker of a warm
+  process pool of ``--workers`` (``fit_grounding``'s ``map_fn``, what ``optimize`` passes now). Every
+  weight must agree bit for bit.
+
+Interleaved over ``--repeats`` rounds; medians and their ratios (old / new: above 1, the new way is
+faster). Prints a table or, with ``--json``, one JSON object; ``--save NAME`` also writes
+``docs/results/NAME.json`` for the README (with the load average).
+
+Usage: ``python benchmarks/bench_overhead.py [--episodes 6] [--steps 750] [--repeats 3] [--workers 2] [--save benchoverhead]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+
+
+def lookup_round(fields, xs, ys) -> dict:
+    """One round of the fall check's lookups, both ways. Returns seconds per control step and whether
+    the heights agree."""
+    from envs.base import GroundStack, ground_height
+
+    B = len(fields)
+    ep = np.arange(B)
+    t0 = time.perf_counter()
+    old = np.array([[float(ground_height(fields[i], xs[k, i], ys[k, i])) for i in range(B)] for k in range(len(xs))])
+    t_old = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    stack = GroundStack(fields)  # once per batch, at its reset
+    new = np.array([stack.height(ep, xs[k], ys[k]) for k in range(len(xs))])
+    t_new = time.perf_counter() - t0
+    return {"old_s": t_old / len(xs), "new_s": t_new / len(xs), "same": bool(np.array_equal(old, new))}
+
+
+def grounding_data(seconds: float):
+    """4 real and 4 sim walks of θ0 with optimize's seeds' shape (the first grounding step's data)."""
+    from experiments.executors import ProcessExecutor
+    from experiments.grounding import EXPLORATION_NOISE, REAL_WALKS, SIM_WALKS
+    from experiments.tasks import run_episode
+    from walk_engine import GaitParams
+
+    theta = GaitParams().to_array().tolist()
+    tasks = ([{"world": "real", "theta": theta, "seed": 100 + i, "seconds": seconds, "record": True} for i in range(REAL_WALKS)]
+             + [{"world": "sim", "theta": theta, "seed": 200 + i, "seconds": seconds, "record": True,
+                 "action_noise": EXPLORATION_NOISE} for i in range(SIM_WALKS)])
+    with ProcessExecutor(2) as ex:
+        res = ex.map(run_episode, tasks)
+    from envs import Recording
+
+    recs = [Recording(*r["recording"]) for r in res]
+    return recs[:REAL_WALKS], recs[REAL_WALKS:]
+
+
+def fit_round(real, sim, ex) -> dict:
+    """One round of the grounding fit, both ways. Returns seconds and whether every weight agrees."""
+    import torch
+
+    from experiments.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, fit_nao_grounding
+
+    def weights(fit):
+        tr = fit.transformer
+        return [p for m in list(tr.forwards) + list(tr.inverses) for p in m.state_dict().values()]
+
+    t0 = time.perf_counter()
+    a = fit_nao_grounding(real, sim, DEFAULT_GROUNDING, history=DEFAULT_HISTORY, seed=1)
+    t_old = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    b = fit_nao_grounding(real, sim, DEFAULT_GROUNDING, history=DEFAULT_HISTORY, seed=1, map_fn=ex.map)
+    t_new = time.perf_counter() - t0
+    same = all(torch.equal(x, y) for x, y in zip(weights(a), weights(b)))
+    return {"old_s": t_old, "new_s": t_new, "same": bool(same), "members": a.transformer.n_members}
+
+
+def _warm(_):
+    return os.getpid()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--episodes", type=int, default=6, help="episodes of one batch (default 6)")
+    ap.add_argument("--steps", type=int, default=750, help="control steps of the lookup (default 750: 7.5 s)")
+    ap.add_argument("--repeats", type=int, default=3, help="interleaved rounds (default 3)")
+    ap.add_argument("--workers", type=int, default=2, help="process pool of the ensemble fit (default 2)")
+    ap.add_argument("--rms", type=float, default=0.00285, help="RMS height of the random surfaces [m]")
+    ap.add_argument("--seconds", type=float, default=7.5, help="length of the grounding walks [s]")
+    ap.add_argument("--json", action="store_true")
+    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json")
+    args = ap.parse_args(argv)
+    if min(args.episodes, args.steps, args.repeats, args.workers) < 1 or not args.rms > 0 or not args.seconds > 0:
+        ap.error("--episodes, --steps, --repeats and --workers must be >= 1, --rms and --seconds > 0")
+    load0 = os.getloadavg()[0]
+    from experiments.executors import ProcessExecutor
+    from sysid.roughness import CORRELATION_RADIUS
+    from terrain import gaussian
+
+    rng = np.random.default_rng(0)
+    fields = [gaussian(np.random.default_rng(s), args.rms, CORRELATION_RADIUS) for s in range(args.episodes)]
+    hx, hy = fields[0].half_extent
+    # torso paths: walks from the origin, some past the fields' edges (the lookup clips to the edge)
+    xs = np.cumsum(rng.normal(0.0, 0.01, (args.steps, args.episodes)), axis=0) * (1.5 * hx / 0.3)
+    ys = np.cumsum(rng.normal(0.0, 0.01, (args.steps, args.episodes)), axis=0) * (1.5 * hy / 0.3)
+    print("[bench_overhead] recording 4 real and 4 sim walks of θ0", file=sys.stderr, flush=True)
+    real, sim = grounding_data(args.seconds)
+    look, fits = [], []
+    with ProcessExecutor(args.workers) as ex:
+        ex.map(_warm, range(args.workers))  # a warm pool, as optimize's is by its first fit
+        for r in range(args.repeats):
+            look.append(lookup_round(fields, xs, ys))
+            fits.append(fit_round(real, sim, ex))
+            print(f"[bench_overhead] round {r + 1}/{args.repeats} done", file=sys.stderr, flush=True)
+    med = lambda rs, k: statistics.median(x[k] for x in rs)  # noqa: E731
+    out = {"episodes": args.episodes, "steps": args.steps, "repeats": args.repeats, "workers": args.workers,
+           "rms_height": args.rms,
+           "lookup": {"old_us_per_step": 1e6 * med(look, "old_s"), "new_us_per_step": 1e6 * med(look, "new_s"),
+                      "ratio": med(look, "old_s") / med(look, "new_s"), "bit_identical": all(x["same"] for x in look)},
+           "ensemble_fit": {"members": fits[0]["members"], "old_s": med(fits, "old_s"), "new_s": med(fits, "new_s"),
+                            "ratio": med(fits, "old_s") / med(fits, "new_s"), "bit_identical": all(x["same"] for x in fits)}}
+    lk, ft = out["lookup"], out["ensemble_fit"]
+    lookup_name = f"fall-check ground lookup, {args.episodes} episodes [us/step]"
+    fit_name = f"ensemble fit, {ft['members']} members, {args.workers} workers [s]"
+    out["text"] = "\n".join([
+        f"medians of {args.repeats} interleaved rounds; old / new: above 1, the new way is faster",
+        f"{'piece':44s} {'old':>10s} {'new':>10s} {'old/new':>8s} {'bit-identical':>13s}",
+        f"{lookup_name:44s} {lk['old_us_per_step']:10.0f} "
+        f"{lk['new_us_per_step']:10.0f} {lk['ratio']:8.1f} {str(lk['bit_identical']).lower():>13s}",
+        f"{fit_name:44s} {ft['old_s']:10.1f} {ft['new_s']:10.1f} "
+        f"{ft['ratio']:8.2f} {str(ft['bit_identical']).lower():>13s}",
+    ])
+    if args.save:
+        from experiments.readme import save_benchmark
+
+        save_benchmark(args.save, "benchmarks/bench_overhead.py", list(argv if argv is not None else sys.argv[1:]), out, load0)
+    print(json.dumps(out) if args.json else out["text"], flush=True)
+    return 0 if lk["bit_identical"] and ft["bit_identical"] else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
