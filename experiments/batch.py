@@ -20,10 +20,9 @@ from __future__ import annotations
 import copy
 import time
 
-import mujoco
 import numpy as np
 
-from common.defaults import EPISODE_SECONDS
+from common.defaults import CONTROL_DT, EPISODE_SECONDS
 from envs.batch import SimBatch
 from envs.mujoco_world import NaoSimEnv
 from envs.rollout import assemble_recording
@@ -31,7 +30,6 @@ from envs.wrappers import ActionMismatch
 from experiments.fitness import walk_fitness, walk_meta
 from experiments.grounding import nao_spec
 from experiments.tasks import IDENTIFIED_CONFOUNDED, _transformer, _world, episode_result, run_episode
-from robots import get_robot
 from walk_engine import GaitParams
 from walk_engine.batch import BatchWalkEngine
 
@@ -254,67 +252,65 @@ def map_episodes(ex, tasks: list[dict], progress=None, batch_size: int | None = 
     return out
 
 
-#: Fraction of bare ``mj_step`` speed a batched generation reaches per core (the README's
-#: ``benchmarks/bench_generation.py`` result, rounded down); used only for the time estimate below.
-BATCHED_RATIO = 0.8
-
-
-#: Bare ``mj_step`` time / walk time of one episode at a time (:func:`expected_generation_seconds`).
-SINGLE_RATIO = {"closed-form": 0.4, "numerical": 0.15}
-
-
-#: Bare ``mj_step`` time of a walk on the identified sim's random ground / on the plane
-#: (:func:`expected_generation_seconds`): ``benchmarks/bench_ground.py``'s θ0 walks on a heightfield
-#: with the sparse Jacobian the identified sim uses there, 2.4-2.6x (a sole meets 15-25 heightfield
-#: cells where it meets the plane at 4 points), rounded down.
-GROUND_RATIO = 2.4
+#: Control steps of the two trial walks that price a generation (:func:`expected_generation_seconds`):
+#: their difference gives the time per control step, the shorter one the time per batch besides.
+TRIAL_STEPS = (10, 110)
 
 
 def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict:
-    """How long a generation of ``episodes`` episodes like ``task`` should take on ``workers`` cores.
+    """How long a generation of ``episodes`` episodes like ``task`` should take on ``workers`` cores,
+    timed on a trial of the task's own world in this process.
 
-    Times bare ``mj_step`` of the plain sim of the task's robot holding its stance on the plane for
-    100 control steps in this process (about 20 ms), scales it by :data:`GROUND_RATIO` where the
-    task's world is the identified sim on an uneven ground (its diagnosis reports give one) and to
-    every control step of every episode (none falling), and divides by the workers: the physics
-    limit. The expectation is that divided by :data:`BATCHED_RATIO` for tasks that run batched (NAO
-    episodes of ``sim``, ``identified`` or ``grounded``), by :data:`SINGLE_RATIO` for the others
-    (one episode at a time): 0.4 where the legs have a closed-form IK (the NAO, Talos), 0.15 where
-    the walk engine iterates a numerical one (the G1; θ0's 7.5 s sim episode against bare
-    ``mj_step`` of its own actions).
+    The executors cut a generation into batches (:func:`chunk_tasks`: ``ceil(episodes / workers)``
+    episodes each, at most :data:`MAX_BATCH`) of which each worker runs ``rounds`` one after the other.
+    The trial walks one such batch of the task (its world, ground, transformer and gait; seeds 0, 1,
+    ...) twice, for :data:`TRIAL_STEPS` control steps (after a 2-step walk that builds the world and
+    loads the transformer, as a worker's first batch does): the difference of the two times is the
+    batch's time per control step (the physics of every episode, the walk engine, the transformer and
+    the bookkeeping), the shorter one less its steps the time per batch besides (the episodes' resets:
+    the identified sim compiles a model per episode on its own ground). A task that does not run
+    batched (the real world, a robot other than the NAO) is timed as one episode the same way. The
+    trial costs about 120 control steps of one batch (about 2 s for the hybrid default's batches of 6).
+
+    The estimate assumes that no episode falls (a fallen episode leaves its batch): a generation
+    whose episodes fall ends sooner. The trial walks the gait's first 1.1 s, whose start in double
+    support costs more per step than the walk after it (for θ0 on the identified ground, a fifth to
+    a third more than its 5 s walk's average, measured): the estimate reads high even where none
+    falls. It is timed on a shared machine and varies by a fifth between calls there.
 
     Args:
-        task: an :func:`experiments.tasks.run_episode` task dict (``seconds``, ``robot``,
-            ``identified`` and ``identified_ground`` are read).
-        episodes: episodes per generation.
-        workers: worker processes.
+        task: an :func:`experiments.tasks.run_episode` task dict (its ``seconds`` is the episode
+            length; ``seed``, ``record`` and ``meta`` are replaced for the trial).
+        episodes: episodes per generation (>= 1).
+        workers: worker processes (>= 1).
 
     Returns:
-        ``{"physics_limit_s", "expected_s", "bare_step_us"}`` (``bare_step_us``: per control step of
-        the task's world, the ground's ratio included).
+        ``{"expected_s", "batch": episodes per batch, "rounds": batches per worker, "step_ms": time per
+        control step of a batch [ms], "batch_fixed_s": time per batch besides its steps [s]}``.
+
+    Raises:
+        ValueError: episodes or workers < 1; what ``run_episode`` raises for a bad task.
     """
-    from walk_engine.legs import LegChain  # lazy: only to ask whether the legs are closed-form
-
-    robot = task.get("robot", "nao")
-    r = get_robot(robot)
-    analytic = robot == "nao" or LegChain(r, "L").analytic
-    ground = 1.0
-    if task.get("identified") and task.get("identified_ground", True):
-        from sysid.identified import load_identified  # lazy: loads the engines
-
-        if load_identified(list(task["identified"]), bool(task.get("identified_confounded", IDENTIFIED_CONFOUNDED)))[1] > 0:
-            ground = GROUND_RATIO
-    env = NaoSimEnv(r)
-    env.reset(seed=0)
-    m, d = env.model, env.data
-    mujoco.mj_step(m, d, nstep=env.n_substeps)
-    t0 = time.perf_counter()
-    for _ in range(100):
-        mujoco.mj_step(m, d, nstep=env.n_substeps)
-    per_step = ground * (time.perf_counter() - t0) / 100
-    env.close()
-    steps = episodes * int(round(float(task.get("seconds", EPISODE_SECONDS)) / env.control_dt))
-    limit = steps * per_step / max(1, workers)
-    ratio = BATCHED_RATIO if _batchable(task) else SINGLE_RATIO["closed-form" if analytic else "numerical"]
-    return {"physics_limit_s": limit, "expected_s": limit / ratio,
-            "bare_step_us": 1e6 * per_step}
+    if episodes < 1 or workers < 1:
+        raise ValueError(f"episodes and workers must be >= 1, got {episodes}, {workers}")
+    dt = CONTROL_DT
+    n = int(round(float(task.get("seconds", EPISODE_SECONDS)) / dt))
+    base = {k: v for k, v in task.items() if k not in ("record", "meta")}
+    if _batchable(task):
+        size = min(MAX_BATCH, -(-episodes // workers))
+        rounds = -(-(-(-episodes // size)) // workers)
+        walk = run_batch
+    else:
+        size, rounds = 1, -(-episodes // workers)
+        walk = lambda ts: [run_episode(t) for t in ts]  # noqa: E731 - one episode at a time, as the executors run it
+    walk([{**base, "seed": 0, "seconds": 2 * dt}])  # the world built, the transformer loaded (cached per process)
+    took = []
+    for steps in TRIAL_STEPS:
+        trial = [{**base, "seed": k, "seconds": steps * dt} for k in range(size)]
+        t0 = time.perf_counter()
+        walk(trial)
+        took.append(time.perf_counter() - t0)
+    step = max(0.0, (took[1] - took[0]) / (TRIAL_STEPS[1] - TRIAL_STEPS[0]))
+    fixed = max(0.0, took[0] - TRIAL_STEPS[0] * step)
+    return {"expected_s": rounds * (fixed + n * step), "batch": size, "rounds": rounds, "step_ms": 1e3 * step,
+            "batch_fixed_s": fixed}

@@ -428,10 +428,12 @@ class Optimizer:
         n_ep = cfg.popsize * cfg.episodes_per_candidate
         est = expected_generation_seconds(self._tasks(world, prog["policy"], [0], **kw)[0], n_ep,
                                           getattr(self.ex, "workers", 1))
+        self.state.setdefault("estimates", {})[f"{method}|{step}"] = est
         self.log(f"[{method} step {step}] a generation is {cfg.popsize} candidates x {cfg.episodes_per_candidate} "
                  f"episode(s) of {cfg.seconds:g} s in the {world} world: expected ~{est['expected_s']:.0f} s on "
-                 f"{getattr(self.ex, 'workers', 1)} worker(s) (physics limit {est['physics_limit_s']:.0f} s, bare mj_step "
-                 f"{est['bare_step_us']:.0f} us per control step of this world here)")
+                 f"{getattr(self.ex, 'workers', 1)} worker(s) if none falls ({est['rounds']} batch(es) of {est['batch']} "
+                 f"per worker; a trial batch of θ_i here: {est['step_ms']:.1f} ms per control step, "
+                 f"{est['batch_fixed_s']:.2f} s per batch besides)")
         bar = None
         if self.progress:
             bar = tqdm(total=cfg.generations, initial=prog["gen"], desc=f"{method} step {step} CMA-ES", disable=None)
@@ -639,7 +641,22 @@ class Optimizer:
         scored = [r for r in rows if r["method"] != "theta0" and r.get("trials")]
         best = max(scored, key=lambda r: r["fitness_mean"], default=None)
         return {"run_dir": self.run_dir, "rows": rows, "best": best, "real_data": self.real_data(),
-                "table": format_table(self.state["rows"])}
+                "table": format_table(self.state["rows"]), "generation_s": self.generation_times()}
+
+    def generation_times(self) -> list[dict]:
+        """Per method and grounding step: the CMA-ES generations' measured wall time (median and range
+        [s]) beside the estimate made before them (:func:`experiments.batch.expected_generation_seconds`,
+        none falling; None for a step whose generations ran before estimates were kept)."""
+        out = []
+        est = self.state.get("estimates", {})
+        steps = dict.fromkeys((g["method"], g["step"]) for g in self.state.get("generations", []))
+        for method, step in steps:
+            wall = [g["wall_s"] for g in self.state["generations"] if (g["method"], g["step"]) == (method, step)]
+            e = est.get(f"{method}|{step}")
+            out.append({"method": method, "step": step, "generations": len(wall), "median_s": float(np.median(wall)),
+                        "min_s": float(min(wall)), "max_s": float(max(wall)),
+                        "expected_s": None if e is None else float(e["expected_s"])})
+        return out
 
     def _write_config(self) -> None:
         import yaml  # lazy: yaml

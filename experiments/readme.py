@@ -228,6 +228,12 @@ def _optimize(res: dict) -> str:
     lines = ["```text", res["table"], "```", ""]
     if res.get("wall_s"):
         lines.append(f"The run took {res['wall_s'] / 60:.1f} min.")
+    gens = [g for g in res.get("generation_s") or [] if g.get("expected_s") is not None]
+    if gens:
+        lines.append("CMA-ES generations, measured (median [min, max]) against the estimate the run printed before them "
+                     "(a trial batch timed in the training world, none falling): " + "; ".join(
+                         f"{g['method'].upper()} step {g['step']} {g['median_s']:.1f} s [{g['min_s']:.1f}, {g['max_s']:.1f}] "
+                         f"against ~{g['expected_s']:.1f} s" for g in gens) + ".")
     rd = res.get("real_data") or {}
     if rd:
         lines.append("Real data per method: " + "; ".join(

@@ -8,7 +8,7 @@ import torch
 from common.defaults import CONTROL_DT
 from envs import NaoSimEnv
 from envs.batch import SimBatch
-from experiments.batch import BATCHED_RATIO, SINGLE_RATIO, chunk_tasks, expected_generation_seconds, map_episodes, run_batch
+from experiments.batch import chunk_tasks, expected_generation_seconds, map_episodes, run_batch
 from experiments.executors import ProcessExecutor, SerialExecutor
 from experiments.grounding import grounding_spec
 from experiments.tasks import run_episode
@@ -101,31 +101,64 @@ def test_batched_episodes_are_bit_identical_to_single_episodes(world, transforme
     assert 0 < falls < len(tasks), "the panel should hold walks that fall and walks that do not"
 
 
-def test_generation_estimate_counts_the_identified_ground_and_batching(monkeypatch, tmp_path):
-    """The estimate prices the identified world's random ground (GROUND_RATIO x the plane per step)
-    and calls identified and hybrid tasks batched as experiments.batch runs them; a real-world task
-    runs one at a time. The ground's ratio is set to 1000 so that timing noise cannot hide it."""
+def test_generation_estimate_extrapolates_a_trial_batch_of_the_tasks_own_world(monkeypatch):
+    """The estimate walks one batch of the generation's size in the task's own world (its keys kept,
+    its seed, record and meta replaced) for two trial lengths after a warm-up, and extrapolates:
+    on a clock that a batch advances by 0.05 s per episode plus 2 ms per episode and control step,
+    it recovers exactly those and prices the generation from them, batch rounds included; a task that
+    does not run batched (the real world) is priced as one episode at a time."""
+    import types
+
+    import experiments.batch as B
+
+    clock = [0.0]
+    calls = []
+
+    def fake_batch(tasks):
+        calls.append(tasks)
+        clock[0] += sum(0.05 + 0.002 * round(t["seconds"] / CONTROL_DT) for t in tasks)
+        return [{} for _ in tasks]
+
+    monkeypatch.setattr(B, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
+    monkeypatch.setattr(B, "run_batch", fake_batch)
+    monkeypatch.setattr(B, "run_episode", lambda t: fake_batch([t])[0])
+    task = {"world": "grounded", "transformer": "models/hybrid_step1", "identified": ["fixed.json", "floating.json"],
+            "theta": _gaits(1)[0], "seed": 17, "seconds": 7.5, "record": True, "meta": {"x": 1}}
+    est = expected_generation_seconds(task, episodes=12, workers=2)
+    assert (est["batch"], est["rounds"]) == (6, 1)
+    assert est["step_ms"] == pytest.approx(6 * 2.0) and est["batch_fixed_s"] == pytest.approx(6 * 0.05)
+    assert est["expected_s"] == pytest.approx(6 * 0.05 + 750 * 6 * 0.002)
+    warm, short, long = calls
+    assert len(warm) == 1 and [len(short), len(long)] == [6, 6]
+    assert [t["seed"] for t in short] == list(range(6)) and [round(t["seconds"] / CONTROL_DT) for t in (*short, *long)] == [10] * 6 + [110] * 6
+    for t in short + long:
+        assert {k: t[k] for k in ("world", "transformer", "identified", "theta")} == {k: task[k] for k in ("world", "transformer", "identified", "theta")}
+        assert "record" not in t and "meta" not in t
+    # a paper-scale generation: 300 episodes on 2 workers are 4 batches of 75, two per worker
+    calls.clear()
+    big = expected_generation_seconds(task, episodes=300, workers=2)
+    assert (big["batch"], big["rounds"]) == (75, 2) and len(calls[1]) == 75
+    assert big["expected_s"] == pytest.approx(2 * (75 * 0.05 + 750 * 75 * 0.002))
+    # the real world runs one episode at a time: 12 episodes on 2 workers are 6 rounds of one
+    calls.clear()
+    real = expected_generation_seconds({**task, "world": "real"}, episodes=12, workers=2)
+    assert (real["batch"], real["rounds"]) == (1, 6) and all(len(c) == 1 for c in calls)
+    assert real["expected_s"] == pytest.approx(6 * (0.05 + 750 * 0.002))
+    with pytest.raises(ValueError, match="episodes and workers"):
+        expected_generation_seconds(task, episodes=0, workers=2)
+
+
+def test_generation_estimate_walks_the_identified_ground(tmp_path):
+    """Unfaked: the trial walks the identified world on its random ground (a model per episode) and
+    gives a finite, positive price for a generation of 12 on 2 workers."""
     import json
 
-    paths = {}
-    for name, effects in (("rough", [{"family": "terrain_roughness", "value": 0.003}]), ("flat", [])):
-        paths[name] = str(tmp_path / f"{name}.json")
-        (tmp_path / f"{name}.json").write_text(json.dumps({"model": {"latency": 0.012}, "effects": effects}))
-    monkeypatch.setattr("experiments.batch.GROUND_RATIO", 1000.0)
-    th = _gaits(1)[0]
-    hyb = {"world": "grounded", "transformer": "unused", "identified": [paths["rough"]], "theta": th, "seed": 5,
-           "seconds": 1.0}
-    est = expected_generation_seconds(hyb, episodes=12, workers=2)
-    flat = expected_generation_seconds({**hyb, "identified": [paths["flat"]]}, episodes=12, workers=2)
-    no_ground = expected_generation_seconds({**hyb, "identified_ground": False}, episodes=12, workers=2)
-    real = expected_generation_seconds({**hyb, "world": "real", "identified": None}, episodes=12, workers=2)
-    for e in (est, flat, no_ground):
-        assert e["expected_s"] == pytest.approx(e["physics_limit_s"] / BATCHED_RATIO)
-        # 12 episodes of 1 s on 2 workers: 6 s of control steps per worker at the per-step cost
-        assert e["physics_limit_s"] == pytest.approx(6 / CONTROL_DT * e["bare_step_us"] * 1e-6, rel=1e-9)
-    assert real["expected_s"] == pytest.approx(real["physics_limit_s"] / SINGLE_RATIO["closed-form"])
-    # the ground's price (the plane is timed afresh per call: only a factor 1000 is beyond its noise)
-    assert est["bare_step_us"] > 100 * max(flat["bare_step_us"], no_ground["bare_step_us"])
+    report = tmp_path / "rough.json"
+    report.write_text(json.dumps({"model": {"latency": 0.012}, "effects": [{"family": "terrain_roughness", "value": 0.003}]}))
+    est = expected_generation_seconds({"world": "identified", "identified": [str(report)], "theta": _gaits(1)[0],
+                                       "seed": 0, "seconds": 1.0}, episodes=12, workers=2)
+    assert (est["batch"], est["rounds"]) == (6, 1)
+    assert np.isfinite(est["expected_s"]) and est["expected_s"] > 0 and est["step_ms"] > 0
 
 
 def test_mixed_worlds_keep_task_order(transformers):

@@ -22,7 +22,8 @@ TINY = ["--grounding-steps", "1", "--popsize", "4", "--generations", "3", "--sec
 def test_tiny_run_writes_the_run_directory(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["optimize", *TINY, "--methods", "sgat,none", "--out", str(out), "--json"]) == 0
-    res = json.loads(capsys.readouterr().out)
+    cap = capsys.readouterr()
+    res, err = json.loads(cap.out), cap.err
     assert [(r["method"], r["step"]) for r in res["rows"]] == [("theta0", 0), ("sgat", 1), ("none", 1)]
     for r in res["rows"]:
         assert r["trials"] == 2 and 0 <= r["falls"] <= 2 and np.isfinite(r["speed_mean"])
@@ -38,6 +39,13 @@ def test_tiny_run_writes_the_run_directory(tmp_path, capsys):
     # both methods saw the same real evaluation seeds (paired)
     rows = json.loads((out / "results.json").read_text())["rows"]
     assert [e["seed"] for e in rows[1]["episodes"]] == [e["seed"] for e in rows[2]["episodes"]]
+    # each CMA-ES step's generations, measured, beside the estimate printed before them (a trial batch of
+    # 4 episodes, the popsize on 1 worker: one batch per generation)
+    gen = res["generation_s"]
+    assert [(g["method"], g["step"], g["generations"]) for g in gen] == [("sgat", 1, 3), ("none", 1, 3)]
+    for g in gen:
+        assert 0 < g["min_s"] <= g["median_s"] <= g["max_s"] and g["expected_s"] > 0
+    assert err.count("if none falls (1 batch(es) of 4 per worker;") == 2, err
 
 
 def test_resume_after_sigkill_matches_uninterrupted(tmp_path):
