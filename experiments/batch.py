@@ -293,22 +293,17 @@ def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict
     """
     if episodes < 1 or workers < 1:
         raise ValueError(f"episodes and workers must be >= 1, got {episodes}, {workers}")
-    dt = CONTROL_DT
-    n = int(round(float(task.get("seconds", EPISODE_SECONDS)) / dt))
+    n = int(round(float(task.get("seconds", EPISODE_SECONDS)) / CONTROL_DT))
     base = {k: v for k, v in task.items() if k not in ("record", "meta")}
-    if _batchable(task):
-        size = min(MAX_BATCH, -(-episodes // workers))
-        rounds = -(-(-(-episodes // size)) // workers)
-        walk = run_batch
-    else:
-        size, rounds = 1, -(-episodes // workers)
-        walk = lambda ts: [run_episode(t) for t in ts]  # noqa: E731 - one episode at a time, as the executors run it
-    walk([{**base, "seed": 0, "seconds": 2 * dt}])  # the world built, the transformer loaded (cached per process)
+    chunks = chunk_tasks([base] * episodes, workers)  # the generation's batches, as map_episodes cuts them
+    size, rounds = len(chunks[0]), -(-len(chunks) // workers)
+    # run_batch walks a task that does not run batched one episode at a time, as the executors do
+    run_batch([{**base, "seed": 0, "seconds": 2 * CONTROL_DT}])  # the world built, the transformer loaded (cached per process)
     took = []
     for steps in TRIAL_STEPS:
-        trial = [{**base, "seed": k, "seconds": steps * dt} for k in range(size)]
+        trial = [{**base, "seed": k, "seconds": steps * CONTROL_DT} for k in range(size)]
         t0 = time.perf_counter()
-        walk(trial)
+        run_batch(trial)
         took.append(time.perf_counter() - t0)
     step = max(0.0, (took[1] - took[0]) / (TRIAL_STEPS[1] - TRIAL_STEPS[0]))
     fixed = max(0.0, took[0] - TRIAL_STEPS[0] * step)

@@ -121,7 +121,6 @@ def test_generation_estimate_extrapolates_a_trial_batch_of_the_tasks_own_world(m
 
     monkeypatch.setattr(B, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
     monkeypatch.setattr(B, "run_batch", fake_batch)
-    monkeypatch.setattr(B, "run_episode", lambda t: fake_batch([t])[0])
     task = {"world": "grounded", "transformer": "models/hybrid_step1", "identified": ["fixed.json", "floating.json"],
             "theta": _gaits(1)[0], "seed": 17, "seconds": 7.5, "record": True, "meta": {"x": 1}}
     est = expected_generation_seconds(task, episodes=12, workers=2)
