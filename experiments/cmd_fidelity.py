@@ -15,13 +15,17 @@ into the run directory; re-running the same command resumes where it stopped, an
 with more worlds or another ``--episodes`` measures only what is new (the first k episode seeds of a
 gait are the same whatever the count). Every stochastic world is also scored from its first 1, 2,
 4, ... episodes per gait: the table ends with fidelity against the number of episodes per gait
-(``fidelity_episodes.png``), the figures runs with fewer ``--episodes`` would report.
+(``fidelity_episodes.png``), the figures runs with fewer ``--episodes`` would report. Before that,
+paired tests of the rankings: ρ(world) − ρ(reference), the mean over the draws, with 90 % intervals
+and p-values from a paired bootstrap over the real trials and episodes (this panel) and over the
+gaits too (a new panel), for every world against the plain sim, every variant against its plain
+kind, and SGAT − GAT, hybrid − identified, hybrid − SGAT.
 
 World options after ':' (e.g. ``--worlds sgat sgat:ensemble=5 sgat:real=8``): ``alpha``,
 ``ensemble``, ``inverse_command`` (0/1), ``hidden`` (e.g. 64x64: the paper's tanh networks; 0: linear models, the default), ``epochs``, ``real`` and ``sim`` (walks
 per draw), ``noise`` (exploration noise [rad]), ``gaits`` (walks spread over this many gaits),
 ``residual`` (0/1), ``matched`` (0/1: the matched transformer, a + f_sim^-1(s, ŝ_real) - f_sim^-1(s, ŝ_sim)), ``zero`` (0/1: linear models from zero weights), ``local`` (0/1: a joint-local inverse model, each joint's command from its own state only), ``mixture`` (K Gaussians in SGAT's forward model), ``memory`` (correlation time of SGAT's noise [s]), ``shadow`` (τ [s] of the shadow state the forward model predicts from; 0: the sim's state, the paper), ``state`` (legs, legs+imu), ``history`` (frames of state the models see; default 6; 1: the paper's
-one frame), ``commands`` (c: the forward model also sees the c previous commands) for gat, sgat and hybrid, ``method`` (sgat/gat) for hybrid; ``sigma`` for ane;
+one frame), ``commands`` (c: the forward model also sees the c previous commands), ``gate`` (q in (0, 1]: the correction shrunk where the ensemble's members disagree more than the q-quantile of their disagreement on the real transitions they were fitted on) for gat, sgat and hybrid, ``method`` (sgat/gat) for hybrid; ``sigma`` for ane;
 ``terms`` and ``ground`` (0/1: ablations) for identified; ``stepping`` (stepping logs per identification), ``confounded`` (1: also the contact terms that only stand in for the identified uneven ground; default 0 since the fourteenth round), ``walkfit`` (actuation: torque limit, leg kp and latency; ground: latency and the ground's RMS height; fitted to the real walks of θ0) and ``servo`` (one kp scale common to every servo, fitted over the diagnosis's model to the in-air logs: air; the same with the stepping logs diagnosed again on top of it: staged; to the stepping logs: stepping; refit: as staged, fitted jointly with one dry and one viscous friction common to every joint and the in-air model's terms) for identified and hybrid; ``ane`` (σ [rad]: the ANE's noise added to the world's leg targets, the world of ``optimize --methods sgat+ane``) for gat, sgat, identified and hybrid.
 The world ``oracle`` (not a default) is the real world itself on fresh seeds: the ρ a world that is
 exactly right gets with the same number of episodes per gait; ``oracle:mean=1`` is the real world

@@ -46,6 +46,9 @@ model of the sim fitted on the sim walks), ``zero`` (0/1: linear models fitted f
 τ, so a deviation the sim did not follow persists; 0: the paper), ``dad`` (N: rounds of Data as
 Demonstrator for the forward model, fitted also on the states the grounded sim reaches when it replays
 the real walks' commands, labelled with the real next states; 0: the paper),
+``gate`` (q in (0, 1]: the correction gated by the ensemble's disagreement, shrunk where the members
+disagree more than the q-quantile of their disagreement on the real transitions they were fitted on,
+:class:`sgat.transformer.ActionTransformer` ``gate_scale``; twenty-third round; 0: the paper),
 ``hidden`` (e.g. ``128x128``; ``0``: linear models), ``epochs``, ``real`` (real walks per draw), ``sim`` (sim walks),
 ``noise`` (exploration noise of the sim walks [rad]), ``gaits`` (the walks are spread over θ0 and
 ``gaits`` - 1 gaits drawn in the box), ``state`` (``legs`` or ``legs+imu``: the grounding state),
@@ -79,6 +82,11 @@ interval over the paired real trials), mean absolute error and bias (world − r
 the Brier score of the world's fall frequency per gait against the real falls, and the regret of
 its pick (the real fitness lost by choosing the gait the world rates best, ``stats.pick_regret``:
 what optimizing in the world over this panel would cost); and the spread of each over the draws.
+Whether one world ranks better than another beyond the noise is a paired test (``paired`` in the
+result, :func:`paired_rows`; twenty-third round): the mean over the draws of their ρ difference with
+a 90 % interval and a p-value from a bootstrap over the gaits, the real trials and the episodes, for
+every world against the plain sim, every variant against its plain kind, and SGAT − GAT, hybrid −
+identified and hybrid − SGAT.
 The ceiling that the real trials' own noise allows is the square root of their split-half
 reliability (``experiments.stats``); the same figure over a stochastic world's episodes
 (``world_ceiling``, per draw) is the ceiling its own episode noise puts on ρ: when it is near 1,
@@ -111,7 +119,8 @@ from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATI
                                    REAL_WALKS, SIM_WALKS)
 from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, fit_servo_gain,
                                   identify_real, record_excitation_task)
-from experiments.stats import bootstrap_spearman, brier_score, pick_regret, spearman, split_half_reliability
+from experiments.stats import (bootstrap_spearman, brier_score, paired_spearman_difference, pick_regret, spearman,
+                               split_half_reliability)
 from experiments.tasks import IDENTIFIED_CONFOUNDED, fit_grounding_task
 from experiments.walkfit import GRIDS as WALKFIT_GRIDS
 from sgat.grounding import GroundingConfig
@@ -280,7 +289,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
-                                                              "zero", "local", "dad"):
+                                                              "zero", "local", "dad", "gate"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
                 elif k == "method":
@@ -311,6 +320,8 @@ def parse_world(text: str) -> WorldSpec:
                     gkw["local_inverse"] = bool(int(v))
                 elif k == "dad":
                     gkw["dad_iterations"] = int(v)
+                elif k == "gate":
+                    gkw["gate"] = float(v)
                 elif k == "alpha":
                     gkw["alpha"] = float(v)
                 elif k == "ensemble":
@@ -983,7 +994,7 @@ class Fidelity:
                "real": {"fitness": real_fit.tolist(), "fitness_se": (R.std(1, ddof=1) / math.sqrt(R.shape[1])).tolist(),
                         "fall_rate": real_fall.tolist(), "speed_cm_s": self._matrix("real", gaits, cfg.real_trials,
                                                                                     "speed_cm_s").mean(1).tolist(),
-                        "trials": cfg.real_trials, **rel,
+                        "trials": cfg.real_trials, "fitness_trials": R.tolist(), **rel,
                         "brier_base_rate": brier_score(np.full(len(gaits), base_rate), F),
                         "brier_own_frequency": brier_score(real_fall, F)},
                "worlds": {}}
@@ -1003,7 +1014,7 @@ class Fidelity:
                     curve.setdefault(k, []).append(
                         {"draw": d, **_draw_metrics(W[:, :k].mean(1), WF[:, :k].mean(1), real_fit, F)})
                 draws.append({
-                    "draw": d, "fitness": wf.tolist(), "fall_rate": wp.tolist(),
+                    "draw": d, "fitness": wf.tolist(), "fall_rate": wp.tolist(), "fitness_episodes": W.tolist(),
                     **_draw_metrics(wf, wp, real_fit, F),
                     "rho_ci90": list(bootstrap_spearman(wf, R, n_boot=cfg.bootstrap, seed=cfg.seed + d)),
                     "world_reliability": None if own is None else own["reliability"],
@@ -1025,6 +1036,7 @@ class Fidelity:
                                         **({"oracle_engine": spec.oracle_engine} if spec.oracle_engine != "pybullet" else {}),
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
                                                             for k, c in curve.items()}} if curve else {})}
+        out["paired"] = paired_rows(out, n_boot=cfg.bootstrap, seed=cfg.seed)
         return out
 
     def write(self, res: dict) -> None:
@@ -1187,6 +1199,79 @@ def fidelity_targets(res: dict, world: str = "sgat") -> list[tuple[str, bool, st
     return out
 
 
+def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]]:
+    """The pairs (world, reference) that :func:`paired_rows` compares, in the worlds' order: every
+    world against the plain ``sim`` (does it rank better than the sim it starts from?), a variant
+    with options against its plain kind (``hybrid:gate=0.9`` against ``hybrid``), and the issue's
+    comparisons ``sgat`` − ``gat``, ``hybrid`` − ``identified``, ``hybrid`` − ``sgat``, where the run
+    has both."""
+    pairs = []
+    for n in names:
+        if n != "sim" and "sim" in names:
+            pairs.append((n, "sim"))
+        base = kinds.get(n, n.split(":")[0])
+        if ":" in n and base in names and base != "sim":
+            pairs.append((n, base))
+    pairs += [p for p in (("sgat", "gat"), ("hybrid", "identified"), ("hybrid", "sgat")) if p[0] in names and p[1] in names]
+    return list(dict.fromkeys(pairs))
+
+
+def paired_rows(res: dict, *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
+    """Paired comparisons of the worlds' rankings (:func:`world_pairs`): per pair, the mean over the
+    draws of ρ_world − ρ_reference with a 90 % interval and a two-sided p-value from a bootstrap over
+    the gaits, the real trials and the episodes (:func:`experiments.stats.paired_spearman_difference`).
+    The worlds' draws are paired: draw d of every world learns from the same real data. Empty for a
+    result saved without per-episode fitness (before the twenty-third round).
+
+    ``ci_panel`` and ``p_value_panel``: the same with the panel's gaits kept (the trials and episodes
+    resampled only): is the difference beyond the noise on this panel? ``ci`` and ``p_value`` also
+    resample the gaits: would it hold on another panel of as many gaits from the same region?
+
+    Returns:
+        ``[{"world", "reference", "diff", "per_draw", "ci", "p_value", "n_boot", "ci_panel",
+        "p_value_panel"}]``.
+    """
+    trials = res["real"].get("fitness_trials")
+    worlds = res["worlds"]
+    if trials is None or not all("fitness_episodes" in d for w in worlds.values() for d in w["draws"]):
+        return []
+    eps = {n: np.array([d["fitness_episodes"] for d in w["draws"]]) for n, w in worlds.items()}
+    rows = []
+    for a, b in world_pairs(list(worlds), {n: w.get("kind", n.split(":")[0]) for n, w in worlds.items()}):
+        if eps[a].shape[0] not in (1, eps[b].shape[0]) and eps[b].shape[0] != 1:
+            continue  # draws that cannot be paired
+        panel = paired_spearman_difference(eps[a], eps[b], trials, n_boot=n_boot, seed=seed, resample_gaits=False)
+        rows.append({"world": a, "reference": b, **paired_spearman_difference(eps[a], eps[b], trials, n_boot=n_boot,
+                                                                                 seed=seed),
+                     "ci_panel": panel["ci"], "p_value_panel": panel["p_value"]})
+    return rows
+
+
+def format_paired(res: dict) -> list[str]:
+    """The text lines of ``res["paired"]`` (none when the result has none)."""
+    rows = res.get("paired") or []
+    if not rows:
+        return []
+    def ci_txt(ci):
+        return "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
+
+    lines = ["", "paired differences of rho (world - reference, the mean over the draws; 90% bootstrap intervals and "
+             "two-sided p over the real trials and episodes on this panel, and over the gaits too, for a new panel):",
+             f"  {'world - reference':40s} {'diff':>5s} {'this panel':>16s} {'p':>6s} {'a new panel':>16s} {'p':>6s}"]
+    for r in rows:
+        lines.append(f"  {r['world'] + ' - ' + r['reference']:40s} {r['diff']:+5.2f} {ci_txt(r['ci_panel']):>16s} "
+                     f"{p_text(r['p_value_panel'], r['n_boot']):>6s} {ci_txt(r['ci']):>16s} {p_text(r['p_value'], r['n_boot']):>6s}")
+    return lines
+
+
+def p_text(p: float, n_boot: int) -> str:
+    """A bootstrap p-value as text: ``"0.042"``, or ``"<0.001"`` for 0 (every one of ``n_boot``
+    replicates on one side: p < 1/n_boot)."""
+    if p is None or not math.isfinite(p):
+        return "-"
+    return f"<{1 / max(n_boot, 1):.2g}" if p == 0 else f"{p:.3f}"
+
+
 def format_table(res: dict) -> str:
     """The fidelity table: one row per world, figures as median [min, max] over the draws."""
     r = res["real"]
@@ -1222,6 +1307,7 @@ def format_table(res: dict) -> str:
             lines.append(f"  {name:26s} sim fell on {t['fell_with_real']}/{t['real_fell']} walks that fell, "
                          f"{t['fell_without_real']}/{t['walks'] - t['real_fell']} that did not; leg joints "
                          f"{t['q_rms_rad']:.3f} rad RMS from the real walk (ungrounded {t['q_rms_plain_rad']:.3f})")
+    lines += format_paired(res)
     lines += format_episodes(res)
     return "\n".join(lines)
 
@@ -1353,5 +1439,6 @@ def plot_episodes(res: dict, path: str) -> None:
 
 
 __all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "episode_counts", "episodes_rows", "episodes_view",
+           "p_text", "paired_rows", "world_pairs",
            "fidelity_targets", "first_world", "format_table",
            "parse_world", "plot", "plot_episodes", "ranking_target"]

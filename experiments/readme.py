@@ -31,7 +31,7 @@ from common.files import atomic_write_text
 from experiments.cli import main as cli_main
 from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
-from experiments.fidelity import (episodes_rows, fidelity_targets, first_world, format_phases, ranking_target,
+from experiments.fidelity import (episodes_rows, fidelity_targets, first_world, format_phases, p_text, ranking_target,
                                   replay_totals)
 from experiments.table1 import seed_level_interval
 
@@ -96,6 +96,30 @@ def _episodes_table(res: dict) -> list[str]:
     return out
 
 
+def _paired_table(res: dict) -> list[str]:
+    """The paired comparisons of the worlds' rankings (``paired`` of a fidelity result, saved since the
+    twenty-third round; none before)."""
+    rows = res.get("paired") or []
+    if not rows:
+        return []
+    lines = ["", "Paired: does a world rank the gaits better than another beyond the noise? ρ(world) − ρ(reference), "
+             "the mean over the draws (draw d of every world learns from the same real data), with 90 % intervals "
+             "and two-sided p-values from a paired bootstrap (`experiments.stats.paired_spearman_difference`): over "
+             "the real trials and the episodes, on this panel's gaits; and over the gaits too, for a new panel of as "
+             "many gaits from the same region:", "",
+             "| world − reference | Δρ, mean over the draws | this panel: 90 % interval, p | a new panel: 90 % interval, p "
+             "| Δρ per draw |", "|---|---|---|---|---|"]
+
+    def ci(c):
+        return f"[{_f(c[0], '{:+.2f}')}, {_f(c[1], '{:+.2f}')}]"
+
+    for r in rows:
+        lines.append(f"| `{r['world']}` − `{r['reference']}` | {_f(r['diff'], '{:+.2f}')} | {ci(r['ci_panel'])}, "
+                     f"p {p_text(r['p_value_panel'], r['n_boot'])} | {ci(r['ci'])}, p {p_text(r['p_value'], r['n_boot'])} | "
+                     + ", ".join(_f(x, '{:+.2f}') for x in r["per_draw"]) + " |")
+    return lines
+
+
 def _fidelity(res: dict) -> str:
     r = res["real"]
     # runs saved before the worlds' own-noise ceiling was measured have no column for it
@@ -148,6 +172,7 @@ def _fidelity(res: dict) -> str:
             lines.append(f"| `{n}` | " + " | ".join(
                 ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
     lines += _episodes_table(res)
+    lines += _paired_table(res)
     for oracle in [n for n, w in res["worlds"].items() if w.get("kind") == "oracle"] if targets else []:
         w = res["worlds"][oracle]
         parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")

@@ -199,6 +199,11 @@ class GroundingConfig:
             (:func:`experiments.grounding.fit_nao_grounding`). A one-step forward model is fitted on
             real states only, but in the grounded sim it predicts from the states the grounded sim
             reaches; DAD teaches it where the real robot went from those. 0: the paper.
+        gate: the correction gated by the ensemble's disagreement (:class:`sgat.transformer.ActionTransformer`
+            ``gate_scale``): its reference D_ref is this quantile, in (0, 1], of the disagreement over
+            the real transitions the forward models were fitted on; at states where the members
+            disagree more, the correction shrinks toward the agent's action in proportion. Needs an
+            ensemble of at least 2. 0: no gate (the paper).
         max_epochs, lr, patience, batch_size: training of each model (Adam, mini-batches, early
             stopping after ``patience`` epochs without a better validation loss).
     """
@@ -217,6 +222,7 @@ class GroundingConfig:
     zero_init: bool = False
     local_inverse: bool = False
     dad_iterations: int = 0
+    gate: float = 0.0
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -241,6 +247,12 @@ class GroundingConfig:
             raise ValueError(f"command_history must be >= 0, got {self.command_history}")
         if int(self.dad_iterations) < 0:
             raise ValueError(f"dad_iterations must be >= 0, got {self.dad_iterations}")
+        if not (np.isfinite(self.gate) and 0.0 <= self.gate <= 1.0):
+            raise ValueError(f"gate must be a quantile in [0, 1] (0: no gate), got {self.gate}")
+        if self.gate > 0 and int(self.ensemble) < 2:
+            raise ValueError(f"gate needs an ensemble of at least 2 members, got ensemble={self.ensemble}")
+        if self.gate > 0 and self.shadow_memory > 0:
+            raise ValueError("gate works without a shadow state (shadow_memory 0)")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
         if self.local_inverse and self.hidden:
             raise ValueError(f"local_inverse needs linear models (hidden=()), got hidden={self.hidden}")
@@ -250,7 +262,8 @@ class GroundingConfig:
         d["hidden"] = list(self.hidden)
         # settings added later are left out at their defaults, so saved configs and caches still match
         for k, default in (("components", 1), ("noise_memory", 0.0), ("shadow_memory", 0.0), ("command_history", 0),
-                           ("matched", False), ("zero_init", False), ("local_inverse", False), ("dad_iterations", 0)):
+                           ("matched", False), ("zero_init", False), ("local_inverse", False), ("dad_iterations", 0),
+                           ("gate", 0.0)):
             if d[k] == default:
                 d.pop(k)
         return d
@@ -407,6 +420,9 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     tr = ActionTransformer(spec, fwds, invs, method=cfg.method, alpha=cfg.alpha, seed=seed, sim_forward=sims or None,
                            noise_memory=cfg.noise_memory, sim_mean=means or None, shadow_memory=cfg.shadow_memory)
     info = {"n_real": len(real), "n_sim": len(sim)}
+    if cfg.gate > 0:  # D_ref: the disagreement's quantile over the real transitions (forward_extra left out)
+        tr.set_gate(float(np.quantile(tr.disagreement(real.H, real.A, real.P), cfg.gate)))
+        info["gate_scale"] = tr.gate_scale
     if forward_extra is not None:
         info["n_forward_extra"] = len(forward_extra)
     return GroundingFit(tr, rf, ri, info)

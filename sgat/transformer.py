@@ -167,14 +167,29 @@ class ActionTransformer:
     with B the inverse model's weights on Δs). It is the control-variate form of the paper's
     f_sim^-1(s, ŝ_real), which equals it when f_sim^-1(s, ŝ_sim) = a.
 
+    ``gate_scale`` (D_ref [rad]; None: the paper): the correction is **gated by the ensemble's
+    disagreement**. At each step the members' deterministic grounded actions g_k (each member's mean
+    Δŝ through its own inverse model) disagree by D = RMS over members and joints of g_k − mean_k g_k
+    (:meth:`disagreement`); the blend becomes ã = a + α w (g − a) with w = min(1, D_ref / D). Where
+    the members agree as well as on the real transitions they were fitted on (D ≤ D_ref, a quantile
+    of D over those transitions, ``GroundingConfig.gate``), the correction is the paper's; at states
+    unlike that data (another gait's), where the bootstrap fits disagree, it shrinks toward the
+    agent's action: the world falls back to the sim under it (for hybrid grounding, the identified
+    sim) instead of extrapolating a correction learned on one gait. Epistemic uncertainty from a
+    bootstrap ensemble as in PETS (Chua et al., NeurIPS 2018) and MOPO's disagreement penalty (Yu
+    et al., NeurIPS 2020, §4.3), used here to shrink the action correction instead of the reward.
+    Teacher forcing (:meth:`reach`) is not gated.
+
     Raises:
         ValueError: unknown method, α missing or outside [0, 1], only one kind of model given,
-            ensembles of different sizes, or models whose sizes do not match the spec.
+            ensembles of different sizes, models whose sizes do not match the spec, or a gate on an
+            ensemble of fewer than 2 members, with a shadow state, or with a D_ref that is not finite
+            and > 0.
     """
 
     def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
                  alpha: float | None = None, seed: int = 0, sim_forward=None, noise_memory: float = 0.0,
-                 sim_mean=None, shadow_memory: float = 0.0):
+                 sim_mean=None, shadow_memory: float = 0.0, gate_scale: float | None = None):
         if not (math.isfinite(float(noise_memory)) and float(noise_memory) >= 0.0):
             raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {noise_memory}")
         if not (math.isfinite(float(shadow_memory)) and float(shadow_memory) >= 0.0):
@@ -220,6 +235,28 @@ class ActionTransformer:
         self._beta = math.exp(-1.0 / self.shadow_memory) if self.shadow_memory > 0 else 0.0
         #: Δŝ of the last :meth:`transform` call (the shadow's predicted change), shape (S,) or (..., S).
         self.last_delta = None
+        self.gate_scale = None
+        if gate_scale is not None:
+            self.set_gate(gate_scale)
+
+    def set_gate(self, gate_scale: float | None) -> None:
+        """Gate the correction by the ensemble's disagreement with reference D_ref = ``gate_scale``
+        [rad] (None: no gate; see the class docstring).
+
+        Raises:
+            ValueError: fewer than 2 members, a shadow state, or D_ref not finite and > 0.
+        """
+        if gate_scale is None:
+            self.gate_scale = None
+            return
+        g = float(gate_scale)
+        if not (math.isfinite(g) and g > 0):
+            raise ValueError(f"gate_scale (D_ref) must be a finite number > 0, got {gate_scale}")
+        if self.n_members < 2:
+            raise ValueError("a disagreement gate needs an ensemble of at least 2 members")
+        if self.shadow_memory > 0:
+            raise ValueError("a disagreement gate works without a shadow state (shadow_memory 0)")
+        self.gate_scale = g
 
     @property
     def commands(self) -> int:
@@ -313,18 +350,54 @@ class ActionTransformer:
         hist = np.asarray(hist, dtype=np.float64)
         past = self._check_past(past, a.shape[:-1])
         shadow = self._check_shadow(shadow, hist.shape)
+        means = None
         if self.method == "sgat" and self.forwards[0].stochastic:
             g, ds = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None,
                                  past=past, shadow=shadow)
         else:
-            g, ds = self._mean_members(hist, a, past, shadow)
+            means = self._member_outputs(hist, a, past, shadow)
+            g, ds = np.mean([g for g, _ in means], axis=0), np.mean([d for _, d in means], axis=0)
         self.last_delta = ds
-        return self._blend(a, g)
+        return self._blend(a, g, self._gate(hist, a, past, means))
 
-    def _mean_members(self, hist, a, past, shadow) -> tuple[np.ndarray, np.ndarray]:
-        """GAT (or SGAT with deterministic models): the members' grounded actions and Δŝ averaged."""
-        out = [self._ground(k, hist, a, sample=False, past=past, shadow=shadow) for k in range(self.n_members)]
-        return np.mean([g for g, _ in out], axis=0), np.mean([d for _, d in out], axis=0)
+    def _member_outputs(self, hist, a, past, shadow=None) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Every member's deterministic (grounded action, Δŝ): averaged, GAT's (or SGAT's with
+        deterministic models) answer; their spread, the gate's disagreement."""
+        return [self._ground(k, hist, a, sample=False, past=past, shadow=shadow) for k in range(self.n_members)]
+
+    @staticmethod
+    def _spread(outs) -> np.ndarray:
+        G = np.stack([g for g, _ in outs])
+        return np.sqrt(np.mean((G - G.mean(axis=0)) ** 2, axis=(0, -1)))
+
+    def disagreement(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
+        """The ensemble's disagreement D [rad] on its grounded actions: the RMS over members and
+        grounded joints of g_k − mean_k g_k, with g_k member k's deterministic grounded action (its
+        forward model's mean Δŝ through its inverse model, before the blend).
+
+        Args:
+            hist: state histories (..., k*S); a: actions (..., A); past: (..., c*A) the previous
+                commands (forward models with a command history).
+
+        Returns:
+            (...,) ≥ 0; zeros for fewer than 2 members.
+
+        Raises:
+            ValueError: ``past`` missing or mis-shaped.
+        """
+        a = np.asarray(a, dtype=np.float64)
+        if self.n_members < 2:
+            return np.zeros(a.shape[:-1])
+        hist = np.asarray(hist, dtype=np.float64)
+        past = self._check_past(past, a.shape[:-1])
+        return self._spread(self._member_outputs(hist, a, past))
+
+    def _gate(self, hist, a, past, outs=None) -> np.ndarray | None:
+        """The gate's weights w = min(1, D_ref / D), shape (..., 1); None without a gate."""
+        if self.gate_scale is None:
+            return None
+        D = self._spread(outs if outs is not None else self._member_outputs(hist, a, past))
+        return np.minimum(1.0, self.gate_scale / np.maximum(D, 1e-300))[..., None]
 
     def _check_shadow(self, shadow, shape: tuple) -> np.ndarray | None:
         if not self.shadow_memory:
@@ -365,8 +438,11 @@ class ActionTransformer:
                      for inv in self.inverses], axis=0)
         return self._blend(a, g)
 
-    def _blend(self, a: np.ndarray, g: np.ndarray) -> np.ndarray:
-        out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
+    def _blend(self, a: np.ndarray, g: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+        if w is not None:  # the gate: ã = a + α w (g − a)
+            out = a + (self.alpha * w) * (g - a)
+        else:
+            out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
         return np.clip(out, self.spec.action_low, self.spec.action_high)
 
     @property
@@ -411,6 +487,9 @@ class ActionTransformer:
             shadow: (n, k*S) each episode's shadow state history (needed when ``shadow_memory`` > 0).
             delta_out: (n, S), filled with each episode's predicted change Δŝ if given.
 
+        With a gate (``gate_scale``) each row's weight comes from the whole ensemble's deterministic
+        outputs at that row, as in :meth:`transform`.
+
         Returns:
             (n, A); row i is bit-identical to :meth:`transform` ``(hist[i], a[i])`` of a transformer
             with ``member = members[i]`` whose generator draws ``noise[i]`` (NumPy's matmul runs the
@@ -428,6 +507,7 @@ class ActionTransformer:
         p3 = None if p3 is None else p3[:, None, :]
         s3 = self._check_shadow(shadow, hist.shape)
         s3 = None if s3 is None else s3[:, None, :]
+        means = None  # the members' deterministic outputs, when they are computed anyway (GAT)
         if self.samples:
             if noise is None:
                 raise ValueError("an SGAT transformer samples: give each episode's standard normal draws (noise)")
@@ -440,10 +520,11 @@ class ActionTransformer:
                 g[sel], ds[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
                                                past=None if p3 is None else p3[sel], shadow=None if s3 is None else s3[sel])
         else:
-            g, ds = self._mean_members(h3, a3, p3, s3)
+            means = self._member_outputs(h3, a3, p3, s3)
+            g, ds = np.mean([g for g, _ in means], axis=0), np.mean([d for _, d in means], axis=0)
         if delta_out is not None:
             delta_out[...] = ds[:, 0]
-        return self._blend(a3, g)[:, 0]
+        return self._blend(a3, g, self._gate(h3, a3, p3, means))[:, 0]
 
     # -- persistence ---------------------------------------------------------------------------
     @staticmethod
@@ -472,6 +553,8 @@ class ActionTransformer:
             meta["noise_memory"] = self.noise_memory
         if self.shadow_memory > 0:
             meta["shadow_memory"] = self.shadow_memory
+        if self.gate_scale is not None:
+            meta["gate_scale"] = self.gate_scale
         atomic_write_text(os.path.join(directory, "transformer.json"), json.dumps(meta, indent=1))
         return directory
 
@@ -508,7 +591,8 @@ class ActionTransformer:
                 invs.append(inv)
         return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"],
                    sim_forward=sims or None, noise_memory=float(meta.get("noise_memory", 0.0)),
-                   sim_mean=means or None, shadow_memory=float(meta.get("shadow_memory", 0.0)))
+                   sim_mean=means or None, shadow_memory=float(meta.get("shadow_memory", 0.0)),
+                   gate_scale=meta.get("gate_scale"))
 
 
 class GroundedEnv(gym.Wrapper):

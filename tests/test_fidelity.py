@@ -40,6 +40,8 @@ def test_parse_world_options():
     assert parse_world("sgat:local=0").key == parse_world("sgat").key != parse_world("sgat:local=1").key
     assert parse_world("sgat:dad=2").grounding.dad_iterations == 2 and parse_world("hybrid:dad=1").grounding.dad_iterations == 1
     assert parse_world("sgat:dad=0").key == parse_world("sgat").key != parse_world("sgat:dad=1").key
+    assert parse_world("hybrid:gate=0.9").grounding.gate == 0.9 and parse_world("gat:gate=0.5").grounding.gate == 0.5
+    assert parse_world("hybrid:gate=0").key == parse_world("hybrid").key != parse_world("hybrid:gate=0.9").key
     assert parse_world("identified:stepping=9").stepping_logs == 9 and parse_world("hybrid:stepping=6").stepping_logs == 6
     assert parse_world("identified").key != parse_world("identified:stepping=9").key != parse_world("identified:stepping=6").key
     # since the fourteenth round the identified worlds leave the confounded contact terms out by default
@@ -60,7 +62,9 @@ def test_parse_world_options():
                        ("sgat:memory=-1", "noise_memory"), ("ane:mixture=2", "unknown option"), ("sgat:hidden=0x16", "hidden"),
                        ("sgat:local=1:hidden=64x64", "linear models"), ("identified:stepping=-1", "stepping"),
                        ("sgat:stepping=9", "unknown option"), ("identified:stepping=x", "bad value"),
-                       ("sgat:dad=-1", "dad_iterations"), ("identified:dad=1", "unknown option")]:
+                       ("sgat:dad=-1", "dad_iterations"), ("identified:dad=1", "unknown option"),
+                       ("hybrid:gate=2", "quantile"), ("sgat:gate=0.9:ensemble=1", "at least 2 members"),
+                       ("identified:gate=0.9", "unknown option")]:
         with pytest.raises(ValueError, match=words):
             parse_world(bad)
     with pytest.raises(ValueError, match="repeats"):
@@ -580,6 +584,18 @@ def test_a_world_s_own_episode_noise_caps_its_ceiling(tmp_path):
     assert res["worlds"]["ane"]["summary"]["world_ceiling"]["min"] == quiet["world_ceiling"]
     table = format_table(res)
     assert "own-noise ceiling" in table and f"{quiet['world_ceiling']:.2f}" in table
+    # the paired test of the rankings: every world against the sim, the variant against its plain kind;
+    # the loud world ranks worse than the quiet one beyond the noise, the quiet one as well as the sim
+    # (which is the truth here), and the observed figure is the difference of the draws' rho
+    assert np.array(quiet["fitness_episodes"]).shape == (12, 8) and np.array(res["real"]["fitness_trials"]).shape == (12, 6)
+    pairs = {(r["world"], r["reference"]): r for r in res["paired"]}
+    assert list(pairs) == [("ane", "sim"), ("ane:sigma=0.1", "sim"), ("ane:sigma=0.1", "ane")]
+    worse = pairs[("ane:sigma=0.1", "ane")]
+    assert worse["diff"] == pytest.approx(loud["rho"] - quiet["rho"]) and worse["ci"][1] < 0 and worse["p_value"] < 0.05
+    assert worse["ci_panel"][1] < 0 and worse["p_value_panel"] < 0.05  # the panel's gaits kept
+    tie = pairs[("ane", "sim")]
+    assert abs(tie["diff"]) < 0.05 and tie["ci"][0] <= 0 and tie["p_value"] > 0.05
+    assert "paired differences of rho" in table and "ane:sigma=0.1 - ane" in table
 
 
 def test_the_oracle_world_walks_the_real_world_on_fresh_seeds_per_draw(tmp_path):

@@ -604,3 +604,95 @@ def test_ensemble_members_fitted_on_a_process_pool_equal_the_serial_fit():
     f = serial.transformer.forwards
     assert not torch.equal(f[0].net.body[0].weight, f[1].net.body[0].weight)
     assert len(serial.transformer.sim_forwards) == len(serial.transformer.sim_means) == 3
+
+
+def test_disagreement_gate_keeps_the_correction_on_the_data_and_shrinks_it_off_the_data(tmp_path):
+    """Grounding data from one gait whose states fill only a slab (s_0 within ±0.05) and a real world
+    with a known actuator gain. A bootstrap ensemble of linear models agrees on the slab and
+    disagrees along s_0 away from it, where no data pinned its weights. With the gate at the data's
+    maximum disagreement (q = 1): on the data's own states the grounded action is the ungated one (it
+    still grounds gain ⊙ a); far off the slab the correction ã − a is the ungated one times
+    w = D_ref / D < 1, and w falls as the state moves away. Batched rows equal single calls; the gate
+    saves and loads; bad settings are refused."""
+    from sgat.grounding import GroundingConfig, Transitions, fit_grounding
+
+    def slab(n, seed, gain):
+        rng = np.random.default_rng(seed)
+        s = rng.uniform(-1, 1, (n, 3))
+        s[:, 0] *= 0.05
+        a = rng.uniform(-0.5, 0.5, (n, 2))
+        return Transitions(s, a, (a * gain) @ M.T + rng.normal(0, 0.05, (n, 3)))
+
+    spec = GroundingSpec(np.arange(3), np.arange(2), -10 * np.ones(2), 10 * np.ones(2), 1)
+    gain = np.array([0.7, 1.3])
+    real, sim = slab(600, 3, gain), slab(600, 1, np.ones(2))
+    cfg = dict(alpha=1.0, method="gat", hidden=(), ensemble=5, max_epochs=300)
+    fit = fit_grounding(real, sim, spec, GroundingConfig(**cfg, gate=1.0))
+    gated = fit.transformer
+    plain = ActionTransformer(spec, gated.forwards, gated.inverses, method="gat", alpha=1.0)  # the same fits, no gate
+    D_train = gated.disagreement(real.H, real.A)
+    assert gated.gate_scale == pytest.approx(D_train.max()) and fit.info["gate_scale"] == gated.gate_scale
+
+    on = [(real.H[i], real.A[i]) for i in range(40)]
+    for s, a in on:
+        assert np.allclose(gated.transform(s, a), plain.transform(s, a), atol=1e-12)
+    assert np.median([np.abs(gated.transform(s, a) - gain * a).max() for s, a in on]) < 0.05
+
+    a = np.array([0.3, -0.2])
+    ws = []
+    for x in (1.0, 3.0, 9.0):
+        s = np.array([x, 0.2, -0.1])
+        D = float(gated.disagreement(s, a))
+        w = gated.gate_scale / D
+        assert w < 1.0, (x, D, gated.gate_scale)
+        assert np.allclose(gated.transform(s, a) - a, w * (plain.transform(s, a) - a), atol=1e-9)
+        ws.append(w)
+    assert ws[0] > ws[1] > ws[2] and ws[2] < 0.2, ws
+
+    S = np.array([h for h, _ in on[:5]] + [np.array([x, 0.2, -0.1]) for x in (1.0, 3.0, 9.0)])
+    A_ = np.array([a for _, a in on[:5]] + [a] * 3)
+    batch = gated.transform_episodes(S, A_, [0] * len(S))
+    assert np.allclose(batch, np.array([gated.transform(s, x) for s, x in zip(S, A_)]), atol=1e-12)
+
+    back = ActionTransformer.load(gated.save(tmp_path / "gated"))
+    assert back.gate_scale == gated.gate_scale
+    assert np.array_equal(back.transform(S[-1], a), gated.transform(S[-1], a))
+    assert ActionTransformer.load(plain.save(tmp_path / "plain")).gate_scale is None
+
+    with pytest.raises(ValueError, match="at least 2 members"):
+        ActionTransformer(spec, plain.forwards[0], plain.inverses[0], method="gat", alpha=1.0, gate_scale=0.1)
+    with pytest.raises(ValueError, match="finite number > 0"):
+        gated.set_gate(0.0)
+    with pytest.raises(ValueError, match="at least 2 members"):
+        GroundingConfig(alpha=0.5, ensemble=1, gate=0.9)
+    with pytest.raises(ValueError, match="quantile"):
+        GroundingConfig(alpha=0.5, ensemble=5, gate=1.5)
+    assert "gate" not in GroundingConfig(alpha=0.5).to_dict() and GroundingConfig(alpha=0.5, ensemble=2, gate=0.9).to_dict()["gate"] == 0.9
+
+
+def test_disagreement_gate_on_a_sampling_ensemble_batches_like_single_calls(fitted):
+    """SGAT's gate: the sampled member's correction scaled by the whole ensemble's disagreement;
+    each row of a batch (its own member and noise) equals the single call with that member and noise,
+    and the gated correction is the ungated one times min(1, D_ref / D)."""
+    sgat, _, inv = fitted
+    other = ForwardModel(3, 2, stochastic=True)
+    s, a, ds = synthetic(2000, 5)
+    other.fit(np.hstack([s, a]), ds + 0.3 * s[:, :1], seed=1, lr=3e-3)  # disagrees in proportion to s_0
+    models = dict(method="sgat", alpha=0.5, seed=0)
+    ens = ActionTransformer(_spec(), [sgat, other], [inv, inv], **models, gate_scale=0.02)
+    raw = ActionTransformer(_spec(), [sgat, other], [inv, inv], **models)
+    rng = np.random.default_rng(9)
+    S, A = rng.uniform(-1, 1, (6, 3)), rng.uniform(-0.3, 0.3, (6, 2))
+    members = [0, 1, 0, 1, 1, 0]
+    noise = np.array([np.random.default_rng(i).standard_normal(ens.noise_dim) for i in range(6)])
+    batch = ens.transform_episodes(S, A, members, noise)
+    D = ens.disagreement(S, A)
+    assert D.shape == (6,) and np.all(D > 0)
+    for i in range(6):
+        for t in (ens, raw):
+            t.member, t.rng = members[i], np.random.default_rng(i)
+        single = ens.transform(S[i], A[i])
+        assert np.allclose(batch[i], single, atol=1e-12)
+        w = min(1.0, 0.02 / D[i])
+        assert np.allclose(single - A[i], w * (raw.transform(S[i], A[i]) - A[i]), atol=1e-9)
+    assert (0.02 / D < 1).sum() >= 3  # the gate binds on most of these states

@@ -109,3 +109,41 @@ def test_pick_regret():
     for bad in (([1.0], [1.0]), ([1, 2], [1, 2, 3]), ([1, float("nan")], [1, 2])):
         with pytest.raises(ValueError):
             S.pick_regret(*bad)
+
+
+def _world_episodes(true, noise, draws, episodes, seed, shuffle=False):
+    """(draws, gaits, episodes) fitness of a training world: the true fitness (permuted across the gaits
+    when ``shuffle``: a world that ranks at chance) plus episode noise."""
+    rng = np.random.default_rng(seed)
+    base = rng.permutation(true) if shuffle else true
+    return base[None, :, None] + rng.normal(0, noise, (draws, len(true), episodes))
+
+
+def test_paired_rho_difference_tells_a_faithful_world_from_a_shuffled_one_and_not_from_itself():
+    """A world that knows the true fitness (episode noise only) against one that shuffles the gaits:
+    Δρ near the faithful world's ρ, its interval above 0, p small. Two equally faithful worlds
+    (independent noise): Δρ near 0, the interval around 0, p large. A world against itself: Δρ = 0
+    exactly on every draw and every replicate, p = 1. The observed figure is the mean of the per-draw
+    Spearman differences; a one-draw world (the plain sim) is paired with every draw."""
+    true, R = _panel()
+    good = _world_episodes(true, 2.0, 5, 4, seed=10)
+    bad = _world_episodes(true, 2.0, 5, 4, seed=11, shuffle=True)
+    res = S.paired_spearman_difference(good, bad, R, n_boot=400, seed=0)
+    want = np.mean([S.spearman(good[d].mean(1), R.mean(1)) - S.spearman(bad[d].mean(1), R.mean(1)) for d in range(5)])
+    assert res["diff"] == pytest.approx(want) and len(res["per_draw"]) == 5
+    assert res["diff"] > 0.5 and res["ci"][0] > 0.2 and res["p_value"] < 0.01 and res["n_boot"] == 400
+    twin = _world_episodes(true, 2.0, 5, 4, seed=12)
+    same = S.paired_spearman_difference(good, twin, R, n_boot=400, seed=0)
+    assert abs(same["diff"]) < 0.1 and same["ci"][0] < 0 < same["ci"][1] and same["p_value"] > 0.1
+    self_ = S.paired_spearman_difference(good, good, R, n_boot=200, seed=0)
+    assert self_["diff"] == 0 and self_["ci"] == [0.0, 0.0] and self_["p_value"] == 1.0
+    # with the panel's gaits kept, only the trial and episode noise is left: a narrower interval, the same figure
+    panel = S.paired_spearman_difference(good, twin, R, n_boot=400, seed=0, resample_gaits=False)
+    assert panel["diff"] == same["diff"] and panel["ci"][1] - panel["ci"][0] < same["ci"][1] - same["ci"][0]
+    sim = _world_episodes(true, 0.0, 1, 1, seed=13, shuffle=True)  # deterministic, no draws
+    vs_sim = S.paired_spearman_difference(good, sim, R, n_boot=200, seed=0)
+    assert len(vs_sim["per_draw"]) == 5 and vs_sim["diff"] > 0.5
+    for bad_args, words in [((good, bad[:, :5], R), "gaits"), ((good, bad[:3], R), "draws"),
+                            ((good[:, :2], bad[:, :2], R[:2]), "at least 3"), ((good[0], bad, R), "shape")]:
+        with pytest.raises(ValueError, match=words):
+            S.paired_spearman_difference(*bad_args)
