@@ -1221,7 +1221,10 @@ def paired_rows(res: dict, *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
     draws of ρ_world − ρ_reference with a 90 % interval and a two-sided p-value from a bootstrap over
     the gaits, the real trials and the episodes (:func:`experiments.stats.paired_spearman_difference`).
     The worlds' draws are paired: draw d of every world learns from the same real data. Empty for a
-    result saved without per-episode fitness (before the twenty-third round).
+    result saved without per-episode fitness (before the twenty-third round). The bootstrap's
+    replicates rank worse than the observed worlds, a stochastic world's more than a deterministic
+    one's: the test is conservative for a claim that a stochastic world ranks better than the plain
+    sim, not for one that it ranks worse (``paired_spearman_difference``'s caveat).
 
     ``ci_panel`` and ``p_value_panel``: the same with the panel's gaits kept (the trials and episodes
     resampled only): is the difference beyond the noise on this panel? ``ci`` and ``p_value`` also
@@ -1252,6 +1255,7 @@ def format_paired(res: dict) -> list[str]:
     rows = res.get("paired") or []
     if not rows:
         return []
+
     def ci_txt(ci):
         return "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
 
