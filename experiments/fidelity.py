@@ -1241,8 +1241,6 @@ def paired_rows(res: dict, *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
     eps = {n: np.array([d["fitness_episodes"] for d in w["draws"]]) for n, w in worlds.items()}
     rows = []
     for a, b in world_pairs(list(worlds), {n: w.get("kind", n.split(":")[0]) for n, w in worlds.items()}):
-        if eps[a].shape[0] not in (1, eps[b].shape[0]) and eps[b].shape[0] != 1:
-            continue  # draws that cannot be paired
         panel = paired_spearman_difference(eps[a], eps[b], trials, n_boot=n_boot, seed=seed, resample_gaits=False)
         rows.append({"world": a, "reference": b, **paired_spearman_difference(eps[a], eps[b], trials, n_boot=n_boot,
                                                                                  seed=seed),
