@@ -8,11 +8,16 @@ median [worst, best], median |bias| and bias spread, median Brier score, median 
 how many of the grounding issue's targets it meets (against its own run's sim and GAT), and for a
 grounded variant its ρ minus its run's reference SGAT's, draw by draw (median, and on how many draws
 it was higher). ``--plot`` draws the ranking (ρ over the draws per world, the ceiling marked).
+``--paired`` also tests every world that two runs of a panel measured under the same name (e.g. the
+identified world of runs made with ``--identify-rounds 1`` and ``2``): the later run's ρ minus the
+first's, the mean over the draws, with a 90 % bootstrap interval and p over the shared real trials
+and episodes (and over the gaits, for a new panel), as ``sgatwalk fidelity`` tests worlds of one run.
 
 Examples::
 
     sgatwalk compare runs/fidelity-seed0 runs/fidelity-variants
     sgatwalk compare docs/results --kinds sgat,hybrid --top 10 --plot compare.png
+    sgatwalk compare runs/fidelity-rounds2 runs/fidelity-rounds1 --kinds identified,hybrid --paired
 """
 
 from __future__ import annotations
@@ -42,12 +47,18 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--top", type=A.count(1, 100000), help="keep the best N worlds of each panel (default all)")
     p.add_argument("--plot", type=A.out_file, metavar="PNG",
                    help=f"draw the ranking into this PNG (the best {PLOT_ROWS} worlds of each panel)")
+    p.add_argument("--paired", action="store_true",
+                   help="also test each world that two runs of a panel measured under the same name, paired on "
+                        "their shared real trials and episodes (a bootstrap; needs results saved since the "
+                        "twenty-third round)")
+    p.add_argument("--bootstrap", type=A.count(1, 1_000_000), default=1000, metavar="N",
+                   help="bootstrap replicates of --paired (default 1000)")
     return p
 
 
 def run(args) -> dict:
     results, skipped = load_results(args.results)
-    res = compare(results, kinds=args.kinds, top=args.top)
+    res = compare(results, kinds=args.kinds, top=args.top, paired=args.paired, n_boot=args.bootstrap)
     res["skipped"] = skipped
     if args.plot:
         plot(res, args.plot)

@@ -68,6 +68,10 @@ def register(sub) -> argparse.ArgumentParser:
                    help=f"wall-clock time budget of each diagnosis of the identified worlds, a safety net: a budget "
                         f"that binds makes them depend on the machine's speed (default {d.identify_budget_s:g}; a "
                         "world's stepping-log diagnosis gets it per 3 logs)")
+    p.add_argument("--identify-rounds", type=A.count(1, 100), default=d.identify_rounds, metavar="N",
+                   help=f"screen/refit rounds of each diagnosis of the identified worlds (default {d.identify_rounds}; "
+                        "1 saves about a third of the diagnoses' time, but leaves out the arm and head joints' "
+                        "friction in the air, and the fitted latency absorbs it: README, twenty-fourth round)")
     p.add_argument("--seed", type=A.seed, default=d.seed, help="seed of the panel, trials and data draws (default 0)")
     p.add_argument("--out", type=A.out_dir, help="run directory (default runs/fidelity-seed<seed>)")
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
@@ -86,7 +90,8 @@ def run(args) -> dict:
     cfg = FidelityConfig(worlds=tuple(worlds), gaits=args.gaits, box=args.box, params=tuple(args.params),
                          real_trials=args.real_trials, data_seeds=args.data_seeds, episodes=args.episodes,
                          seconds=args.seconds, profile=args.profile,
-                         identify_budget_s=args.identify_budget, seed=args.seed, robot=args.robot)
+                         identify_budget_s=args.identify_budget, identify_rounds=args.identify_rounds, seed=args.seed,
+                         robot=args.robot)
     cfg.validate()
     out = args.out or os.path.join("runs", f"fidelity-{'' if args.robot == 'nao' else args.robot + '-'}seed{args.seed}")
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731 - progress on stderr, also with --json

@@ -84,6 +84,9 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--confounded-terms", dest="identified_confounded", action="store_true", default=None,
                    help="identified and hybrid: also build in the contact terms the diagnosis could not tell apart "
                         "from the uneven ground (default off since the fourteenth fidelity round; README, sgatwalk fidelity)")
+    p.add_argument("--identify-rounds", type=A.count(1, 100), metavar="N",
+                   help=f"identified and hybrid: screen/refit rounds of each diagnosis (default {d.identify_rounds}; 1 is "
+                        "faster and leaves out the arm joints' friction: README, sgatwalk fidelity, twenty-fourth round)")
     p.add_argument("--ane-sigma", type=A.real(0.0, 1.0, unit='rad'), help=f"ANE action noise [rad] (default {d.ane_sigma})")
     p.add_argument("--params", type=A.in_file, help="initial gait parameters θ0 (JSON; default: the walk engine's θ0)")
     p.add_argument("--seed", type=A.seed, help="run seed (default 0)")

@@ -55,6 +55,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--confounded-terms", dest="identified_confounded", action="store_true", default=None,
                    help="hybrid: also build in the contact terms the diagnosis could not tell apart from the uneven "
                         "ground (default: optimize's, off)")
+    p.add_argument("--identify-rounds", type=A.count(1, 100), metavar="N",
+                   help="hybrid: screen/refit rounds of each diagnosis (default: optimize's, 2)")
     p.add_argument("--ane-sigma", type=A.real(0.0, 1.0, unit="rad"),
                    help="the ANE's noise [rad], of ane and of every <method>+ane (default: optimize's, 0.05)")
     p.add_argument("--baseline", type=A.in_file, help="an earlier run's table1.json on the same real trials: "
@@ -74,7 +76,8 @@ def optimize_overrides(args) -> dict:
                              ("history", args.history), ("command_history", args.command_history),
                              ("matched", args.matched), ("local_inverse", args.local_inverse),
                              ("zero_init", args.zero_init), ("shadow", args.shadow),
-                             ("identified_confounded", args.identified_confounded), ("ane_sigma", args.ane_sigma))
+                             ("identified_confounded", args.identified_confounded), ("identify_rounds", args.identify_rounds),
+                             ("ane_sigma", args.ane_sigma))
             if v is not None}
 
 

@@ -17,7 +17,9 @@ against its run's reference SGAT world draw by draw (draw d of both is fitted on
 grounding walks: a paired comparison). Worlds are named in today's meaning of their options
 (:func:`experiments.fidelity.canonical_world_name`: an ``identified`` world saved before the
 fourteenth round, which built in the contact terms confounded with the ground, ranks as
-``identified:confounded=1``).
+``identified:confounded=1``). With ``paired``, a world that two runs of a panel measured under one name
+is also tested across the runs (:func:`paired_across_runs`: the paired bootstrap of
+:func:`experiments.stats.paired_spearman_difference` on the real trials and episodes they share).
 """
 
 from __future__ import annotations
@@ -29,7 +31,8 @@ import math
 import os
 import statistics
 
-from experiments.fidelity import canonical_world_name, distinct_suffixes, fidelity_targets, first_world, ranking_target
+from experiments.fidelity import (canonical_world_name, distinct_suffixes, fidelity_targets, first_world, format_ci, p_text,
+                                  ranking_target)
 from experiments.stats import pick_regret
 
 #: Worlds drawn per panel by :func:`plot` (the best by worst ρ).
@@ -184,13 +187,16 @@ def _measurement(name: str, world: dict) -> str:
     return hashlib.sha256(json.dumps([name, draws]).encode()).hexdigest()
 
 
-def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None = None, top: int | None = None) -> dict:
+def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None = None, top: int | None = None,
+            paired: bool = False, n_boot: int = 1000) -> dict:
     """Rank every world of ``results`` (:func:`load_results`) per panel.
 
     Args:
         results: ``[(label, path, fidelity result)]``.
         kinds: keep only worlds of these kinds (None: all).
         top: keep the first ``top`` rows of each panel (None: all).
+        paired: also test, per panel, every world that two or more runs measured differently under
+            the same name (:func:`paired_across_runs`; ``n_boot`` bootstrap replicates).
 
     Returns:
         ``{"panels": [{"key", "seed", "gaits", "trials", "profile", "ceiling", "real_fitness_mean",
@@ -198,12 +204,15 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
         panels in the order their first run was given; rows by worst ρ over the draws (best first),
         then by median ρ. A world that several results carry with the same fitness on every draw
         (runs that share a run directory) is one row: ``run`` is the first result, ``runs`` all.
+        With ``paired``, each panel also has ``"paired"``: :func:`paired_across_runs`'s rows.
 
     Raises:
-        ValueError: ``top`` < 1.
+        ValueError: ``top`` < 1 or ``n_boot`` < 1.
     """
     if top is not None and top < 1:
         raise ValueError(f"top must be >= 1, got {top}")
+    if n_boot < 1:
+        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
     panels: dict[str, dict] = {}
     for label, path, res in results:
         key = panel_key(res)
@@ -223,7 +232,7 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
             if same is not None:  # one measurement that several runs carry (a shared run directory)
                 same["runs"].append(label)
                 continue
-            p["rows"].append({"run": label, "runs": [label], **world_row(res, n), "_sig": sig})
+            p["rows"].append({"run": label, "runs": [label], **world_row(res, n), "_sig": sig, "_src": (res, n)})
 
     def order(r):
         bad = -math.inf
@@ -232,14 +241,71 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
 
     out = []
     for p in panels.values():
+        if paired:
+            p["paired"] = paired_across_runs(p["rows"], n_boot=n_boot)
         for r in p["rows"]:
-            del r["_sig"]
+            del r["_sig"], r["_src"]
         p["rows"].sort(key=order)
         p["worlds"] = len(p["rows"])
         if top is not None:
             p["rows"] = p["rows"][:top]
         out.append(p)
     return {"panels": out}
+
+
+def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
+    """Paired tests of one world measured by two runs of a panel: what changed between the runs (the
+    code, a setting such as ``--identify-rounds``) moved its ranking by how much, beyond the noise?
+
+    For every world name that two or more rows of the panel carry (in the runs' order), each later
+    row is tested against the first: the mean over the draws of ρ_row − ρ_first with a 90 %
+    interval and two-sided p from :func:`experiments.stats.paired_spearman_difference` (this panel's
+    gaits kept: ``ci_panel``, ``p_value_panel``; the gaits resampled too, for a new panel: ``ci``,
+    ``p_value``). It pairs what the design pairs only where the runs share it: the same real trials
+    (every trial's fitness equal, not only the gaits' means), the same episode seeds (a fidelity
+    run's are keyed by its seed alone) and draw d of both fitted on the same real data (the runs'
+    seeds). A pair that lacks per-episode fitness (results saved before the twenty-third round) or
+    whose real trials differ is listed with ``"skipped"`` saying why.
+
+    Args:
+        rows: a panel's rows of :func:`compare`, each with ``_src`` = (result, world name).
+        n_boot: bootstrap replicates; seed: of the resampling.
+
+    Returns:
+        ``[{"world", "run", "reference_run", "diff", "per_draw", "ci", "p_value", "ci_panel",
+        "p_value_panel", "n_boot"}]`` or ``[{"world", "run", "reference_run", "skipped"}]``.
+    """
+    import numpy as np  # lazy: keeps sgatwalk --help fast
+
+    from experiments.stats import paired_spearman_difference
+
+    groups: dict[str, list[dict]] = {}
+    for r in rows:
+        groups.setdefault(r["world"], []).append(r)
+    out = []
+    for name, rs in groups.items():
+        ref = rs[0]
+        ref_res, ref_name = ref["_src"]
+        for r in rs[1:]:
+            res, n = r["_src"]
+            row = {"world": name, "run": r["run"], "reference_run": ref["run"]}
+            ta, tb = res["real"].get("fitness_trials"), ref_res["real"].get("fitness_trials")
+            have = all("fitness_episodes" in d for x, m in ((res, n), (ref_res, ref_name)) for d in x["worlds"][m]["draws"])
+            if ta is None or tb is None or not have:
+                out.append({**row, "skipped": "no per-episode fitness (saved before the twenty-third round)"})
+                continue
+            if np.shape(ta) != np.shape(tb) or not np.array_equal(np.asarray(ta, float), np.asarray(tb, float)):
+                out.append({**row, "skipped": "the runs' real trials differ trial by trial"})
+                continue
+            ea = np.array([d["fitness_episodes"] for d in res["worlds"][n]["draws"]])
+            eb = np.array([d["fitness_episodes"] for d in ref_res["worlds"][ref_name]["draws"]])
+            if len(ea) != len(eb) and 1 not in (len(ea), len(eb)):
+                out.append({**row, "skipped": f"{len(ea)} draws against {len(eb)}"})
+                continue
+            panel = paired_spearman_difference(ea, eb, ta, n_boot=n_boot, seed=seed, resample_gaits=False)
+            out.append({**row, **paired_spearman_difference(ea, eb, ta, n_boot=n_boot, seed=seed),
+                        "ci_panel": panel["ci"], "p_value_panel": panel["p_value"]})
+    return out
 
 
 def panel_title(p: dict, rho: str = "rho", times: str = "x") -> str:
@@ -282,8 +348,27 @@ def format_compare(res: dict) -> str:
                          f"{_vs(r):>18s}")
         if len(p["rows"]) < p["worlds"]:
             lines.append(f"  ... {p['worlds'] - len(p['rows'])} more")
+        lines += _format_paired(p.get("paired") or [])
         lines.append("")
     return "\n".join(lines).rstrip()
+
+
+def _format_paired(rows: list[dict]) -> list[str]:
+    """The text lines of a panel's ``paired`` rows (none when it has none)."""
+    if not rows:
+        return []
+    lines = ["  the same world in two runs, paired (run - reference run, the mean of rho's difference over the draws; 90% "
+             "bootstrap intervals and two-sided p over the real trials and episodes on this panel, and over the gaits "
+             "too, for a new panel):",
+             f"    {'world':28s} {'run - reference run':44s} {'diff':>5s} {'this panel':>16s} {'p':>6s} {'a new panel':>16s} {'p':>6s}"]
+    for r in rows:
+        pair = f"{r['run']} - {r['reference_run']}"
+        if "skipped" in r:
+            lines.append(f"    {r['world']:28s} {pair:44s} skipped: {r['skipped']}")
+            continue
+        lines.append(f"    {r['world']:28s} {pair:44s} {r['diff']:+5.2f} {format_ci(r['ci_panel']):>16s} "
+                     f"{p_text(r['p_value_panel'], r['n_boot']):>6s} {format_ci(r['ci']):>16s} {p_text(r['p_value'], r['n_boot']):>6s}")
+    return lines
 
 
 #: Colour per world kind in :func:`plot` (matplotlib's tab10).
@@ -343,4 +428,5 @@ def plot(res: dict, path: str, *, max_rows: int = PLOT_ROWS) -> None:
     plt.close(fig)
 
 
-__all__ = ["PLOT_ROWS", "compare", "format_compare", "load_results", "panel_key", "panel_title", "plot", "world_row"]
+__all__ = ["PLOT_ROWS", "compare", "format_compare", "load_results", "paired_across_runs", "panel_key", "panel_title", "plot",
+           "world_row"]

@@ -21,7 +21,8 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
 ``gat``       grounded, deterministic forward model (GAT)
 ``sgat``      grounded, stochastic forward model (SGAT)
 ``identified``  the sim with the physics ``sgatwalk diagnose`` identified from excitation logs
-              of the real world (``sysid.identified.IdentifiedSimEnv``)
+              of the real world (``sysid.identified.IdentifiedSimEnv``), each diagnosis in
+              ``--identify-rounds`` screen/refit rounds (``experiments.grounding.IDENTIFY_ROUNDS``)
 ``hybrid``    SGAT grounding on top of the identified sim: the transformer learns only what
               the physics library could not name
 ``oracle``    the real world itself, on fresh seeds per draw and as many episodes per gait as
@@ -116,7 +117,7 @@ from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
 from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, IDENTIFY_BUDGET_S,
-                                   REAL_WALKS, SIM_WALKS)
+                                   IDENTIFY_ROUNDS, REAL_WALKS, SIM_WALKS)
 from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, fit_servo_gain,
                                   identify_real, record_excitation_task)
 from experiments.stats import (bootstrap_spearman, brier_score, paired_spearman_difference, pick_regret, spearman,
@@ -421,6 +422,10 @@ def param_gait_names(paths) -> list[str]:
     return names
 
 
+#: The diagnoses' rounds of every run saved before ``identify_rounds`` existed (its config leaves it out).
+_ROUNDS_BEFORE = 2
+
+
 @dataclass
 class FidelityConfig:
     """Settings of a fidelity run (written to ``config.json``)."""
@@ -440,6 +445,10 @@ class FidelityConfig:
     #: wall-clock time budget of each diagnosis [s], a safety net (``experiments.grounding.IDENTIFY_BUDGET_S``
     #: says why). Not part of the run's identity: a resumed run keeps the identifications it made.
     identify_budget_s: float = IDENTIFY_BUDGET_S
+    #: screen/refit rounds of each diagnosis (``experiments.grounding.IDENTIFY_ROUNDS`` says why two);
+    #: part of the run's identity (runs saved before the setting existed made two, and their config
+    #: leaves it out, as :meth:`to_dict` does at two)
+    identify_rounds: int = IDENTIFY_ROUNDS
     bootstrap: int = 1000
     seed: int = 0
     robot: str = "nao"
@@ -464,6 +473,8 @@ class FidelityConfig:
             raise ValueError(f"seconds must be positive, got {self.seconds}")
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if not 1 <= int(self.identify_rounds) <= 100:
+            raise ValueError(f"identify_rounds must be in 1..100 (screen/refit rounds per diagnosis), got {self.identify_rounds}")
         if self.identify_fixed_logs < 2 or self.identify_floating_logs < 0:
             raise ValueError("identification needs >= 2 fixed-base logs (a held-out split) and >= 0 stepping logs")
         specs = [parse_world(w) for w in self.worlds]
@@ -479,6 +490,8 @@ class FidelityConfig:
         d["worlds"], d["params"] = list(self.worlds), list(self.params)
         if d["robot"] == "nao":  # runs from before --robot keep their config
             del d["robot"]
+        if d["identify_rounds"] == _ROUNDS_BEFORE:  # ... and runs from before --identify-rounds
+            del d["identify_rounds"]
         return d
 
     @property
@@ -636,6 +649,7 @@ class Fidelity:
         args = self._identify_args(draw, stepping)
         args["out_dir"] += suffix
         return identify_real(**args, calibration=self._calibration, time_budget_s=cfg.identify_budget_s,
+                             rounds=cfg.identify_rounds,
                              stepping_budget_s=cfg.identify_budget_s * max(1.0, stepping / max(1, cfg.identify_floating_logs)),
                              base_terms=base_terms, progress=None)
 
@@ -1254,16 +1268,18 @@ def format_paired(res: dict) -> list[str]:
     if not rows:
         return []
 
-    def ci_txt(ci):
-        return "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
-
     lines = ["", "paired differences of rho (world - reference, the mean over the draws; 90% bootstrap intervals and "
              "two-sided p over the real trials and episodes on this panel, and over the gaits too, for a new panel):",
              f"  {'world - reference':40s} {'diff':>5s} {'this panel':>16s} {'p':>6s} {'a new panel':>16s} {'p':>6s}"]
     for r in rows:
-        lines.append(f"  {r['world'] + ' - ' + r['reference']:40s} {r['diff']:+5.2f} {ci_txt(r['ci_panel']):>16s} "
-                     f"{p_text(r['p_value_panel'], r['n_boot']):>6s} {ci_txt(r['ci']):>16s} {p_text(r['p_value'], r['n_boot']):>6s}")
+        lines.append(f"  {r['world'] + ' - ' + r['reference']:40s} {r['diff']:+5.2f} {format_ci(r['ci_panel']):>16s} "
+                     f"{p_text(r['p_value_panel'], r['n_boot']):>6s} {format_ci(r['ci']):>16s} {p_text(r['p_value'], r['n_boot']):>6s}")
     return lines
+
+
+def format_ci(ci) -> str:
+    """A difference's interval as text, ``"[-0.12, +0.30]"``, or ``"-"`` where it is undefined."""
+    return "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
 
 
 def p_text(p: float, n_boot: int) -> str:
@@ -1441,6 +1457,6 @@ def plot_episodes(res: dict, path: str) -> None:
 
 
 __all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "episode_counts", "episodes_rows", "episodes_view",
-           "p_text", "paired_rows", "world_pairs",
+           "format_ci", "p_text", "paired_rows", "world_pairs",
            "fidelity_targets", "first_world", "format_table",
            "parse_world", "plot", "plot_episodes", "ranking_target"]

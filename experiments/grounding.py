@@ -59,6 +59,19 @@ HYBRID_GROUNDING = dataclasses.replace(DEFAULT_GROUNDING, alpha=0.1)
 #: stepping diagnoses of Table I's optimization seeds 0-2 take 40-41 s on the faster of the README's two
 #: machines and about twice that on the slower, where 60 s may have stopped them early.
 IDENTIFY_BUDGET_S = 180.0
+#: Screen/refit rounds of each diagnosis of the real world's identification (the identified and hybrid
+#: worlds; ``experiments.identify.identify_real``'s ``rounds``), in ``optimize`` and ``fidelity`` alike.
+#: The first round finds what walking feels most (the actuation latency and the wrists' friction in
+#: the air, the contact and the uneven ground on the floor); the in-air stage's second round adds the
+#: friction of the elbows, the head and a shoulder, and costs more time than the first
+#: (``benchmarks/bench_diagnose_rounds.py``: one set of logs' in-air diagnosis took 45 s in two rounds
+#: and 9 s in one, the whole identification 122 s and 80 s, slower machine kind). One round was tried as the
+#: default in the twenty-fourth round and left as an option (``--identify-rounds 1``): without the arm
+#: terms the fitted latency absorbs their effect (0.7-4.3 ms higher on 9 of 10 draws, the same on the
+#: tenth, where the real world's lies in 10-20 ms and two rounds already read 16.5-24.5 ms), and on a
+#: held-out panel the hybrid world ranked the gaits worse beyond that panel's noise (README,
+#: twenty-fourth round).
+IDENTIFY_ROUNDS = 2
 
 
 #: Grounding states of the NAO: what it measures of its legs (encoder angles and joint velocities),

@@ -75,7 +75,7 @@ from common.files import atomic_write_bytes as _atomic_write
 from envs import Recording
 from experiments.batch import expected_generation_seconds, map_episodes
 from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, IDENTIFY_BUDGET_S,
-                                   REAL_WALKS, SIM_WALKS, fit_nao_grounding)
+                                   IDENTIFY_ROUNDS, REAL_WALKS, SIM_WALKS, fit_nao_grounding)
 from experiments.identify import ENGINE_GAP_SEED, calibrate_engines, identify_real
 from experiments.tasks import IDENTIFIED_CONFOUNDED
 from sgat.algorithm import grounding_loop, new_progress
@@ -153,6 +153,8 @@ class OptimizeConfig:
     #: identified / hybrid: also build in the contact terms confounded with the uneven ground
     #: (``experiments.tasks.IDENTIFIED_CONFOUNDED``)
     identified_confounded: bool = IDENTIFIED_CONFOUNDED
+    #: identified / hybrid: screen/refit rounds of each diagnosis (``experiments.grounding.IDENTIFY_ROUNDS``)
+    identify_rounds: int = IDENTIFY_ROUNDS
     model_epochs: int = DEFAULT_GROUNDING.max_epochs
     aggregate: bool = True
     seed: int = 0
@@ -182,6 +184,8 @@ class OptimizeConfig:
             raise ValueError(f"shadow must be a finite time >= 0 [s] (0: the paper's transformer), got {self.shadow}")
         if self.shadow > 0 and self.matched:
             raise ValueError("shadow works with the paper's transformer only, not with matched")
+        if not 1 <= int(self.identify_rounds) <= 100:
+            raise ValueError(f"identify_rounds must be in 1..100 (screen/refit rounds per diagnosis), got {self.identify_rounds}")
         if int(self.eval_trials) < 0:
             raise ValueError(f"eval_trials must be >= 0 (0: no real evaluation), got {self.eval_trials}")
         if self.popsize < 2:
@@ -208,9 +212,10 @@ def config_from_state(d: dict) -> OptimizeConfig:
     """The :class:`OptimizeConfig` a saved run state holds (``state["config"]``, :meth:`OptimizeConfig.to_dict`).
 
     A run saved before ``identified_confounded`` existed built the contact terms confounded with the
-    ground into its identified sim (the default then): it resumes with them, as it began.
+    ground into its identified sim (the default then): it resumes with them, as it began; one saved
+    before ``identify_rounds`` existed diagnosed in two rounds, and resumes so.
     """
-    return OptimizeConfig(**{"identified_confounded": True, **d, "methods": tuple(d["methods"]),
+    return OptimizeConfig(**{"identified_confounded": True, "identify_rounds": 2, **d, "methods": tuple(d["methods"]),
                              "hidden": tuple(d["hidden"])})
 
 
@@ -615,7 +620,7 @@ class Optimizer:
         # (a run saved before keeps the calibration of its own seed that it finds in its directory)
         cal = calibrate_engines(os.path.join(root, "calibration"), seed=ENGINE_GAP_SEED)
         res = identify_real(root, seed=_seeds(self.cfg, 8, n=1)[0] % 1_000_000, profile=self.cfg.profile, calibration=cal,
-                            time_budget_s=IDENTIFY_BUDGET_S)
+                            time_budget_s=IDENTIFY_BUDGET_S, rounds=self.cfg.identify_rounds)
         self.log(f"[identify] {len(res['effects'])} terms, uneven ground Sq {1000 * res['terrain_rms_height']:.2f} mm "
                  f"from {res['logs']} logs ({res['seconds']:.0f} s of recording; {time.perf_counter() - t0:.0f} s)"
                  + "".join(f"; WARNING: the {k} diagnosis ran out of its {IDENTIFY_BUDGET_S:g} s budget, so the identified "

@@ -96,6 +96,15 @@ def _episodes_table(res: dict) -> list[str]:
     return out
 
 
+def _paired_cells(r: dict) -> str:
+    """A paired comparison's Markdown cells: Δρ, this panel's interval and p, a new panel's, Δρ per draw."""
+    def ci(c):
+        return f"[{_f(c[0], '{:+.2f}')}, {_f(c[1], '{:+.2f}')}]"
+
+    return (f"{_f(r['diff'], '{:+.2f}')} | {ci(r['ci_panel'])}, p {p_text(r['p_value_panel'], r['n_boot'])} | "
+            f"{ci(r['ci'])}, p {p_text(r['p_value'], r['n_boot'])} | " + ", ".join(_f(x, '{:+.2f}') for x in r["per_draw"]))
+
+
 def _paired_table(res: dict) -> list[str]:
     """The paired comparisons of the worlds' rankings (``paired`` of a fidelity result, saved since the
     twenty-third round; none before)."""
@@ -110,13 +119,8 @@ def _paired_table(res: dict) -> list[str]:
              "| world − reference | Δρ, mean over the draws | this panel: 90 % interval, p | a new panel: 90 % interval, p "
              "| Δρ per draw |", "|---|---|---|---|---|"]
 
-    def ci(c):
-        return f"[{_f(c[0], '{:+.2f}')}, {_f(c[1], '{:+.2f}')}]"
-
     for r in rows:
-        lines.append(f"| `{r['world']}` − `{r['reference']}` | {_f(r['diff'], '{:+.2f}')} | {ci(r['ci_panel'])}, "
-                     f"p {p_text(r['p_value_panel'], r['n_boot'])} | {ci(r['ci'])}, p {p_text(r['p_value'], r['n_boot'])} | "
-                     + ", ".join(_f(x, '{:+.2f}') for x in r["per_draw"]) + " |")
+        lines.append(f"| `{r['world']}` − `{r['reference']}` | {_paired_cells(r)} |")
     return lines
 
 
@@ -302,9 +306,29 @@ def _compare(res: dict) -> str:
                          + (f"{r['targets_met']}/{len(r['targets'])}" if r["targets"] else "–") + " | "
                          + (f"{v['rho_diff_median']:+.2f} ({v['wins']}/{v['pairs']})" if v else "–") + " |")
         lines += ["", "</details>", ""]
+        lines += _compare_paired(p.get("paired") or [])
     if res.get("plot"):
         lines.append(f"![every world's ρ over its draws, per panel]({res['plot']})")
     return "\n".join(lines).rstrip()
+
+
+def _compare_paired(rows: list[dict]) -> list[str]:
+    """A panel's ``paired`` rows of ``sgatwalk compare --paired`` (the same world in two runs), as a table."""
+    if not rows:
+        return []
+    lines = ["The same world in two runs of this panel, paired: ρ(run) − ρ(reference run), the mean over the draws, with "
+             "90 % intervals and two-sided p from a bootstrap over the shared real trials and episodes on this panel's "
+             "gaits, and over the gaits too for a new panel (`experiments.compare.paired_across_runs`):", "",
+             "| world | run − reference run | Δρ, mean over the draws | this panel: 90 % interval, p "
+             "| a new panel: 90 % interval, p | Δρ per draw |", "|---|---|---|---|---|---|"]
+
+    for r in rows:
+        pair = f"{r['run']} − {r['reference_run']}"
+        if "skipped" in r:
+            lines.append(f"| `{r['world']}` | {pair} | – | not paired: {r['skipped']} | – | – |")
+            continue
+        lines.append(f"| `{r['world']}` | {pair} | {_paired_cells(r)} |")
+    return lines + [""]
 
 
 def _per_seed_cell(test: dict, seed_level: bool = False) -> str:
@@ -514,7 +538,8 @@ def _blind(res: dict) -> str:
 
 RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "compare": _compare, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext,
-             "benchlatency": _benchtext, "benchground": _benchtext, "benchoverhead": _benchtext}
+             "benchlatency": _benchtext, "benchground": _benchtext, "benchoverhead": _benchtext,
+             "benchdiagnose": _benchtext}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:

@@ -208,3 +208,67 @@ def test_identified_worlds_of_old_and_new_results_rank_under_todays_names():
     by = {r["world"]: r for r in rows}
     assert set(by) == {"identified", "identified:confounded=1", "hybrid:alpha=0.5:confounded=1", "sgat"}
     assert by["identified"]["runs"] == ["old", "new"] and by["identified:confounded=1"]["runs"] == ["old", "new"]
+
+
+def _episodic(kind: str, means: list, trials: np.ndarray, rng, noise=1.0, episodes=4) -> dict:
+    """A world of :func:`_world` that also keeps each episode's fitness (per draw, gait, episode)."""
+    w = _world(kind, means)
+    for d, m in zip(w["draws"], means):
+        d["fitness_episodes"] = (np.asarray(m)[:, None] + rng.normal(0, noise, (len(m), episodes))).tolist()
+    return w
+
+
+def test_paired_across_runs_tests_one_world_of_two_runs_on_their_shared_trials():
+    rng = np.random.default_rng(5)
+    trials = REAL[:, None] + rng.normal(0, 1.0, (len(REAL), 10))
+    real = trials.mean(axis=1)
+
+    def run(means, trials=trials):
+        res = _result({"identified": _episodic("identified", means, trials, rng, noise=3.0)}, real=real)
+        res["real"]["fitness_trials"] = trials.tolist()
+        return res
+
+    faithful = [real + rng.normal(0, 0.3, len(real)) for _ in range(3)]
+    shuffled = [rng.permutation(real) for _ in range(3)]
+    a, b, c = run(faithful), run(shuffled), run([f + 1e-6 for f in faithful])  # c: a measurement of its own
+    res = compare([("rounds2", "a.json", a), ("rounds1", "b.json", b), ("again", "c.json", c)], paired=True, n_boot=300)
+    (panel,) = res["panels"]
+    pairs = {r["run"]: r for r in panel["paired"]}
+    assert set(pairs) == {"rounds1", "again"} and all(r["reference_run"] == "rounds2" for r in pairs.values())
+    worse = pairs["rounds1"]  # shuffled gaits against a faithful world: far worse, beyond the noise
+    assert worse["diff"] < -0.5 and worse["ci_panel"][1] < -0.2 and worse["p_value_panel"] < 0.01
+    assert len(worse["per_draw"]) == 3
+    same = pairs["again"]  # the same means, other episode noise: no difference the test can see
+    assert abs(same["diff"]) < 0.1 and same["ci_panel"][0] < 0 < same["ci_panel"][1] and same["p_value_panel"] > 0.1
+    text = format_compare(res)
+    assert "the same world in two runs" in text and "rounds1 - rounds2" in text
+    assert "_src" not in json.dumps(res)  # the rows stay plain JSON
+    from experiments.readme import RENDERERS
+
+    md = RENDERERS["compare"](json.loads(json.dumps(res)))  # the README block, from the saved JSON
+    assert "| rounds1 − rounds2 | -" in md and "| again − rounds2 |" in md
+
+
+def test_paired_across_runs_skips_pairs_it_cannot_pair():
+    rng = np.random.default_rng(6)
+    trials = REAL[:, None] + rng.normal(0, 1.0, (len(REAL), 10))
+    means = [trials.mean(axis=1)] * 2
+    a = _result({"sgat": _episodic("sgat", means, trials, rng)}, real=trials.mean(axis=1))
+    a["real"]["fitness_trials"] = trials.tolist()
+    moved = trials.copy()
+    moved[0, [0, 1]] = moved[0, [1, 0]]  # the same means, other trials: pairing them would be wrong
+    b = json.loads(json.dumps(a))
+    b["real"]["fitness_trials"] = moved.tolist()
+    old = json.loads(json.dumps(a))
+    for d in old["worlds"]["sgat"]["draws"]:
+        del d["fitness_episodes"]  # saved before the twenty-third round
+    for res, eps in ((b, 1e-6), (old, 2e-6)):  # measurements of their own (the same fitness would be one row)
+        for d in res["worlds"]["sgat"]["draws"]:
+            d["fitness"] = [x + eps for x in d["fitness"]]
+    res = compare([("a", "a.json", a), ("b", "b.json", b), ("old", "o.json", old)], paired=True, n_boot=50)
+    skipped = {r["run"]: r["skipped"] for r in res["panels"][0]["paired"]}
+    assert "trial by trial" in skipped["b"] and "per-episode" in skipped["old"]
+    assert "skipped: the runs' real trials differ" in format_compare(res)
+    assert compare([("a", "a.json", a)], paired=True)["panels"][0]["paired"] == []
+    with pytest.raises(ValueError, match="n_boot"):
+        compare([("a", "a.json", a)], paired=True, n_boot=0)

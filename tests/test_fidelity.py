@@ -71,6 +71,25 @@ def test_parse_world_options():
         FidelityConfig(worlds=("sgat", "sgat")).validate()
     with pytest.raises(ValueError, match="real_trials"):
         FidelityConfig(real_trials=1).validate()
+    with pytest.raises(ValueError, match="identify_rounds"):
+        FidelityConfig(identify_rounds=0).validate()
+
+
+def test_identify_rounds_is_part_of_a_runs_identity_and_old_runs_keep_theirs(tmp_path):
+    """A run with the default two rounds per diagnosis keeps the config every run before the setting
+    saved (no key), so those resume; a run made with one round records it, and resuming it with two
+    is refused (its identifications were made with one)."""
+    from experiments.episodes import EpisodeLog
+
+    old = FidelityConfig().to_dict()
+    assert FidelityConfig().identify_rounds == 2 and "identify_rounds" not in old
+    EpisodeLog(str(tmp_path / "old"), old, "fidelity run", say=lambda s: None)
+    EpisodeLog(str(tmp_path / "old"), FidelityConfig().to_dict(), "fidelity run", say=lambda s: None)
+    one = FidelityConfig(identify_rounds=1).to_dict()
+    assert one["identify_rounds"] == 1
+    EpisodeLog(str(tmp_path / "one"), one, "fidelity run", say=lambda s: None)
+    with pytest.raises(ValueError, match="identify_rounds"):
+        EpisodeLog(str(tmp_path / "one"), FidelityConfig().to_dict(), "fidelity run", say=lambda s: None)
 
 
 def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_path, monkeypatch):
@@ -80,8 +99,9 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
 
     calls = []
 
-    def fake_identify(out_dir, *, n_fixed, n_floating, fixed_dir, seed, **kw):
+    def fake_identify(out_dir, *, n_fixed, n_floating, fixed_dir, seed, rounds, **kw):
         calls.append((os.path.relpath(out_dir, tmp_path), n_floating, os.path.relpath(fixed_dir, tmp_path), seed))
+        assert rounds == 1  # the run's identify_rounds (default experiments.grounding.IDENTIFY_ROUNDS, 2)
         rep = os.path.join(out_dir, "floating", "report.json")  # a ground compliance standing in for the ground
         os.makedirs(os.path.dirname(rep), exist_ok=True)
         comp = {"family": "ground_compliance", "joints": [], "links": [], "value": 0.03}
@@ -98,7 +118,7 @@ def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_
     monkeypatch.setattr(fid, "record_excitation_task", lambda t: recorded.append(t) or [])
     monkeypatch.setattr(fid, "calibrate_engines", lambda *a, **k: {"fixed": None, "floating": None})
     run = fid.Fidelity(FidelityConfig(worlds=("sim", "identified", "identified:stepping=9", "identified:confounded=1"),
-                                      data_seeds=2), str(tmp_path), executor=SerialExecutor())
+                                      data_seeds=2, identify_rounds=1), str(tmp_path), executor=SerialExecutor())
     prep = run.prepare()
     # every excitation log set is recorded before the diagnoses, side by side on the executor: each
     # draw's fixed-base stage once (the counts share it), a stepping stage per draw and count

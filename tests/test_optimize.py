@@ -243,11 +243,12 @@ def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_rep
     the run's seed."""
     import experiments.optimize as opt_mod
     from experiments.fidelity import FidelityConfig
-    from experiments.grounding import IDENTIFY_BUDGET_S
+    from experiments.grounding import IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS
     from experiments.identify import ENGINE_GAP_SEED
     from experiments.optimize import OptimizeConfig
 
     assert FidelityConfig().identify_budget_s == IDENTIFY_BUDGET_S >= 180.0
+    assert FidelityConfig().identify_rounds == OptimizeConfig().identify_rounds == IDENTIFY_ROUNDS
     seen = {}
 
     def fake_identify(out_dir, **kw):
@@ -264,6 +265,7 @@ def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_rep
         Optimizer(OptimizeConfig(methods=("hybrid",), seed=len(hit) + 3), str(tmp_path / f"run{len(hit)}"), None,
                   log=lines.append)._identify()
         assert seen["time_budget_s"] == IDENTIFY_BUDGET_S and seen.get("stepping_budget_s") is None
+        assert seen["rounds"] == IDENTIFY_ROUNDS == 2  # experiments.grounding: one round biases the latency
         warned = [ln for ln in lines if "WARNING" in ln]
         assert len(warned) == len(hit) and all("floating diagnosis ran out" in ln for ln in warned)
     assert cal_seeds == [ENGINE_GAP_SEED, ENGINE_GAP_SEED]
@@ -294,12 +296,19 @@ def test_identified_worlds_leave_the_confounded_contact_terms_out_unless_asked_a
     assert cmd_table1.optimize_overrides(ap1.parse_args(["table1", "--confounded-terms"])) == {"identified_confounded": True}
     assert cmd_table1.optimize_overrides(ap1.parse_args(["table1"])) == {}
     assert cmd_table1.optimize_overrides(ap1.parse_args(["table1", "--ane-sigma", "0.025"])) == {"ane_sigma": 0.025}
+    assert cmd_table1.optimize_overrides(ap1.parse_args(["table1", "--identify-rounds", "1"])) == {"identify_rounds": 1}
+    assert config_from_args(ap.parse_args(["optimize", "--identify-rounds", "1"])).identify_rounds == 1
+    with pytest.raises(ValueError, match="identify_rounds"):
+        OptimizeConfig(identify_rounds=0).validate()
     opt.cfg = OptimizeConfig(methods=("identified",), identified_confounded=True)
     assert opt._world_kw("identified", 1)[1]["identified_confounded"] is True
     # a run state saved before the field existed resumes as it began; a new one as it was saved
     old = OptimizeConfig(methods=("identified",), hidden=(8,)).to_dict()
-    del old["identified_confounded"]
+    del old["identified_confounded"], old["identify_rounds"]
     assert config_from_state(old).identified_confounded is True and config_from_state(old).hidden == (8,)
+    assert config_from_state(old).identify_rounds == 2  # the diagnoses' rounds before the setting existed
+    one = OptimizeConfig(methods=("hybrid",), identify_rounds=1)
+    assert config_from_state(one.to_dict()) == one  # a run made with one round resumes with one
     assert config_from_state(OptimizeConfig(methods=("hybrid",)).to_dict()) == OptimizeConfig(methods=("hybrid",))
 
 
