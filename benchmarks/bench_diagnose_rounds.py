@@ -93,7 +93,7 @@ def main(argv=None) -> int:
                 runs[rounds].append(diagnose_once(logs, os.path.join(tmp, f"r{rounds}"), rounds, args.seed, cal))
                 print(f"[bench_diagnose_rounds] repeat {r + 1}/{args.repeats}, {rounds} round(s): "
                       f"{runs[rounds][-1]['wall_s']:.0f} s", file=sys.stderr, flush=True)
-    med = lambda xs: statistics.median(xs)  # noqa: E731
+    med = statistics.median
     out = {"seed": args.seed, "repeats": args.repeats, "cpus": os.cpu_count(), "rounds": {}}
     for rounds, rs in runs.items():
         first = rs[0]

@@ -31,8 +31,10 @@ import math
 import os
 import statistics
 
+import numpy as np
+
 from experiments.fidelity import (canonical_world_name, distinct_suffixes, fidelity_targets, first_world, format_ci, p_text,
-                                  ranking_target)
+                                  paired_test, ranking_target)
 from experiments.stats import pick_regret
 
 #: Worlds drawn per panel by :func:`plot` (the best by worst ρ).
@@ -259,9 +261,8 @@ def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -
 
     For every world name that two or more rows of the panel carry (in the runs' order), each later
     row is tested against the first: the mean over the draws of ρ_row − ρ_first with a 90 %
-    interval and two-sided p from :func:`experiments.stats.paired_spearman_difference` (this panel's
-    gaits kept: ``ci_panel``, ``p_value_panel``; the gaits resampled too, for a new panel: ``ci``,
-    ``p_value``). It pairs what the design pairs only where the runs share it: the same real trials
+    interval and two-sided p from :func:`experiments.fidelity.paired_test` (this panel's gaits kept:
+    ``ci_panel``, ``p_value_panel``; the gaits resampled too, for a new panel: ``ci``, ``p_value``). It pairs what the design pairs only where the runs share it: the same real trials
     (every trial's fitness equal, not only the gaits' means), the same episode seeds (a fidelity
     run's are keyed by its seed alone) and draw d of both fitted on the same real data (the runs'
     seeds). A pair that lacks per-episode fitness (results saved before the twenty-third round) or
@@ -275,10 +276,6 @@ def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -
         ``[{"world", "run", "reference_run", "diff", "per_draw", "ci", "p_value", "ci_panel",
         "p_value_panel", "n_boot"}]`` or ``[{"world", "run", "reference_run", "skipped"}]``.
     """
-    import numpy as np  # lazy: keeps sgatwalk --help fast
-
-    from experiments.stats import paired_spearman_difference
-
     groups: dict[str, list[dict]] = {}
     for r in rows:
         groups.setdefault(r["world"], []).append(r)
@@ -294,7 +291,7 @@ def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -
             if ta is None or tb is None or not have:
                 out.append({**row, "skipped": "no per-episode fitness (saved before the twenty-third round)"})
                 continue
-            if np.shape(ta) != np.shape(tb) or not np.array_equal(np.asarray(ta, float), np.asarray(tb, float)):
+            if not np.array_equal(ta, tb):
                 out.append({**row, "skipped": "the runs' real trials differ trial by trial"})
                 continue
             ea = np.array([d["fitness_episodes"] for d in res["worlds"][n]["draws"]])
@@ -302,9 +299,7 @@ def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -
             if len(ea) != len(eb) and 1 not in (len(ea), len(eb)):
                 out.append({**row, "skipped": f"{len(ea)} draws against {len(eb)}"})
                 continue
-            panel = paired_spearman_difference(ea, eb, ta, n_boot=n_boot, seed=seed, resample_gaits=False)
-            out.append({**row, **paired_spearman_difference(ea, eb, ta, n_boot=n_boot, seed=seed),
-                        "ci_panel": panel["ci"], "p_value_panel": panel["p_value"]})
+            out.append({**row, **paired_test(ea, eb, ta, n_boot=n_boot, seed=seed)})
     return out
 
 

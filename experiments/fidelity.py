@@ -1253,13 +1253,21 @@ def paired_rows(res: dict, *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
     if trials is None or not all("fitness_episodes" in d for w in worlds.values() for d in w["draws"]):
         return []
     eps = {n: np.array([d["fitness_episodes"] for d in w["draws"]]) for n, w in worlds.items()}
-    rows = []
-    for a, b in world_pairs(list(worlds), {n: w.get("kind", n.split(":")[0]) for n, w in worlds.items()}):
-        panel = paired_spearman_difference(eps[a], eps[b], trials, n_boot=n_boot, seed=seed, resample_gaits=False)
-        rows.append({"world": a, "reference": b, **paired_spearman_difference(eps[a], eps[b], trials, n_boot=n_boot,
-                                                                                 seed=seed),
-                     "ci_panel": panel["ci"], "p_value_panel": panel["p_value"]})
-    return rows
+    return [{"world": a, "reference": b, **paired_test(eps[a], eps[b], trials, n_boot=n_boot, seed=seed)}
+            for a, b in world_pairs(list(worlds), {n: w.get("kind", n.split(":")[0]) for n, w in worlds.items()})]
+
+
+def paired_test(world_a, world_b, trials, *, n_boot: int = 1000, seed: int = 0) -> dict:
+    """:func:`experiments.stats.paired_spearman_difference` of two worlds' per-episode fitness
+    ((D, G, E) each) on the real trials ``trials`` (G, M), for a new panel (``ci``, ``p_value``: the
+    gaits resampled too) and for this panel (``ci_panel``, ``p_value_panel``: the gaits kept).
+
+    Returns:
+        ``{"diff", "per_draw", "ci", "p_value", "n_boot", "ci_panel", "p_value_panel"}``.
+    """
+    panel = paired_spearman_difference(world_a, world_b, trials, n_boot=n_boot, seed=seed, resample_gaits=False)
+    return {**paired_spearman_difference(world_a, world_b, trials, n_boot=n_boot, seed=seed),
+            "ci_panel": panel["ci"], "p_value_panel": panel["p_value"]}
 
 
 def format_paired(res: dict) -> list[str]:
@@ -1457,6 +1465,6 @@ def plot_episodes(res: dict, path: str) -> None:
 
 
 __all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "episode_counts", "episodes_rows", "episodes_view",
-           "format_ci", "p_text", "paired_rows", "world_pairs",
+           "format_ci", "p_text", "paired_rows", "paired_test", "world_pairs",
            "fidelity_targets", "first_world", "format_table",
            "parse_world", "plot", "plot_episodes", "ranking_target"]
