@@ -120,12 +120,9 @@ def main(argv=None) -> int:
     rows.append(f"two rounds / one: in-air diagnosis {out['ratio_fixed_two_vs_one']:.2f}x, whole identification "
                 f"{out['ratio_wall_two_vs_one']:.2f}x")
     out["text"] = "\n".join(rows)
-    if args.save:
-        from experiments.readme import save_benchmark
+    from experiments.readme import finish_benchmark
 
-        save_benchmark(args.save, "benchmarks/bench_diagnose_rounds.py", list(argv if argv is not None else sys.argv[1:]),
-                       out, load0)
-    print(json.dumps(out) if args.json else out["text"], flush=True)
+    finish_benchmark(out, "benchmarks/bench_diagnose_rounds.py", argv, save_name=args.save, as_json=args.json, load_before=load0)
     return 0
 
 

@@ -62,6 +62,15 @@ def save_benchmark(name: str, script: str, argv: list[str], result: dict, load_b
     return save(name, " ".join(["python", script, *args]), result, machine=machine)
 
 
+def finish_benchmark(result: dict, script: str, argv: list[str] | None, *, save_name: str | None, as_json: bool,
+                     load_before: float) -> None:
+    """A benchmark script's last step: :func:`save_benchmark` under ``save_name`` when given, then its
+    result printed (one JSON object with ``as_json``, else its ``"text"``). ``argv`` None: ``sys.argv[1:]``."""
+    if save_name:
+        save_benchmark(save_name, script, list(argv if argv is not None else sys.argv[1:]), result, load_before)
+    print(json.dumps(result) if as_json else result["text"], flush=True)
+
+
 def _f(x, fmt="{:.2f}") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else fmt.format(x)
 
@@ -539,7 +548,7 @@ def _blind(res: dict) -> str:
 RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "compare": _compare, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext,
              "benchlatency": _benchtext, "benchground": _benchtext, "benchoverhead": _benchtext,
-             "benchdiagnose": _benchtext}
+             "benchdiagnose": _benchtext, "benchroughness": _benchtext}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:

@@ -223,8 +223,9 @@ class RoughnessFit:
         rms_height: fitted RMS height Ŝq [m] (0 when nothing is left to explain).
         ci95: (lo, hi) [m] bootstrap interval.  peak_height: mean largest |height| of the model's
             surfaces at Ŝq [m] (a property of the dense model, not of the real ground).
-        grid: RMS heights simulated [m].  excess: (n_grid,) simulated excess cost ε(A) per window
-            (mean over surfaces and windows of all logs).  excess_obs: observed excess cost per window.
+        grid: RMS heights simulated [m] (the lower part of the grid an adaptive fit needed).
+            excess: (n_grid,) simulated excess cost ε(A) per window (mean over surfaces and windows of
+            all logs).  excess_obs: observed excess cost per window.
         excess_heldout_obs, excess_heldout_pred: held-out excess cost, observed and predicted at Â.
         heldout_p: smallest two-sided rank p-value of a held-out log's excess among the simulated
             logs' at Â (flat ground: 0 unless the excess is 0).  sim_log_excess: (5, 50, 95)
@@ -232,8 +233,8 @@ class RoughnessFit:
             per-channel profiles.
         declared: whether the report names the effect; reason: why (not).
         profile_obs, profile_pred: (k,) per-channel held-out excess, observed / predicted at Â.
-        n_rollouts: simulated windows.  n_fallen: simulated windows left out because the
-            open-loop simulation had tipped over.
+        n_rollouts: rollouts run (logs simulated on surfaces and windows replayed).  n_fallen:
+            simulated windows left out (not replayed) because the open-loop simulation had tipped over.
     """
 
     rms_height: float
@@ -262,7 +263,10 @@ def excess_left(rough: RoughnessFit, problem, model: dict) -> tuple[float, float
     ``rough``) equals the excess over flat ground ``model`` leaves in all logs, and the held-out
     excess it leaves [floor², summed over channels]. A deterministic effect (low foot friction)
     removes its own excess, which a roughness fit before it had read as uneven ground; a contact
-    term fitted on truly uneven ground removes little of it (a random surface is not repeatable)."""
+    term fitted on truly uneven ground removes little of it (a random surface is not repeatable).
+    Where that excess lies above the heights ``rough`` simulated (its adaptive grid stopped below
+    it), the height is the highest one simulated: a lower bound, at or above :data:`MIN_RMS_HEIGHT`,
+    so whether the diagnosis withdraws the roughness is decided exactly."""
     ex_tr, ex_ho = _observed_excess(problem, model)
     obs_all = float(np.concatenate([ex_tr, ex_ho]).sum(axis=1).mean())
     left = _invert(np.asarray(rough.grid), np.asarray(rough.excess), obs_all) if obs_all > 0 else 0.0
@@ -306,39 +310,50 @@ def _observed_excess(problem, model: dict) -> tuple[np.ndarray, np.ndarray]:
 
 
 def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, grid=RMS_HEIGHTS,
-                  n_boot: int = 200) -> RoughnessFit:
+                  n_boot: int = 200, adaptive: bool = True) -> RoughnessFit:
     """Fit the terrain-roughness distribution to the residual the deterministic model leaves.
+
+    The grid is simulated bottom-up (``adaptive``): an RMS height is simulated only while the fit
+    still needs it, i.e. while the made-monotone excess curve simulated so far stays below the
+    observed excess (Â lies higher up) or a bootstrap percentile of the interval lies above it.
+    Every figure of the result is then the one the whole grid gives (the curve is made monotone
+    from below and inverted between the two points around the target, so the points above the
+    bracket never enter; a bootstrap resample above the simulated range is known to lie above every
+    resolved one), at the cost of the points it does not need: on the default grid, Â of 2-4 mm
+    needs 4 of the 6 non-zero heights. ``adaptive=False`` simulates the whole grid (the
+    ``benchmarks/bench_roughness_grid.py`` reference).
 
     Args:
         problem: the diagnosis' :class:`sysid.identify.Problem` (floating base, IMU channels).
         model: the fitted deterministic terms (the problem's base terms are added).
         n_surfaces: random surfaces per grid point.  seed: seed of the surfaces.
-        grid: RMS heights [m], starting with 0.  n_boot: bootstrap resamples for the interval.
+        grid: RMS heights [m], starting with 0, increasing.  n_boot: bootstrap resamples for the interval.
+        adaptive: simulate only the grid points the fit needs (bottom-up), else all of them.
 
     Returns:
-        A :class:`RoughnessFit` (see the module docstring for the method and decision rule).
+        A :class:`RoughnessFit` (see the module docstring for the method and decision rule); its
+        ``grid`` and ``excess`` are the heights simulated (always up to the first one at or above
+        :data:`MIN_RMS_HEIGHT`, so :func:`excess_left`'s decision is exact as well).
 
     Raises:
-        ValueError: fixed-base problem, or a grid not starting at 0.
+        ValueError: fixed-base problem, or a grid not starting at 0 or not increasing.
     """
     if not problem.with_imu:
         raise ValueError("terrain roughness needs floating-base logs with IMU channels")
     grid = np.asarray(grid, dtype=float)
-    if grid[0] != 0.0 or len(grid) < 3:
-        raise ValueError("the RMS-height grid must start at 0 and have >= 3 points")
+    if grid[0] != 0.0 or len(grid) < 3 or np.any(np.diff(grid) <= 0):
+        raise ValueError("the RMS-height grid must start at 0, increase and have >= 3 points")
     values = {**problem.base, **model}
     floor = problem.floor
     # observed: per-window excess of the current model
     ex_tr, ex_ho = _observed_excess(problem, model)
     obs_ho = float(ex_ho.sum(axis=1).mean())
-    # simulated: per amplitude and surface, train and held-out windows of the simulated logs
+    ex_all = np.concatenate([ex_tr, ex_ho]).sum(axis=1)
+    obs_all = float(ex_all.mean())
     rng_seeds = [[seed, s] for s in range(n_surfaces)]
-    surfs = [(a, surface(a, rs)) for a in grid[1:] for rs in rng_seeds]
     used = sorted({w.log for w in problem.train + problem.heldout})
     logs = [problem.logs[i] for i in used]
     remap = {i: j for j, i in enumerate(used)}
-    sims = simulate_on_surfaces(logs, values, [h for _, h in surfs])
-    n_roll = len(surfs) * len(logs)
     # replayed like the recordings: from the ground-truth base state only if they have it, else from
     # the estimate (its error is part of the recordings' excess too); the simulated logs' own ground
     # truth still tells which of them tipped over
@@ -351,41 +366,69 @@ def fit_roughness(problem, model: dict, *, n_surfaces: int = 4, seed: int = 0, g
     sim_tr = np.full((len(grid), n_surfaces, len(problem.train), problem.k), np.nan)
     sim_ho = np.full((len(grid), n_surfaces, len(problem.heldout), problem.k), np.nan)
     sim_tr[0] = sim_ho[0] = 0.0
-    for g in range(1, len(grid)):
+    n_roll = 0
+
+    def simulate(g: int) -> None:
+        """Grid point ``g``: each log on each of its surfaces, replayed in windows on flat ground."""
+        nonlocal n_roll
+        sims = simulate_on_surfaces(logs, values, [surface(grid[g], rs) for rs in rng_seeds])
+        n_roll += n_surfaces * len(logs)
         for s in range(n_surfaces):
-            slogs = sims[(g - 1) * n_surfaces + s]
             for which, arr in (("train", sim_tr), ("heldout", sim_ho)):
                 wins = [Window(remap[w.log], w.k0, w.k1) for w in problem.wins[which]]
-                pred = predict(as_recorded(slogs), wins, [values], with_imu=True, models=flat)
-                meas = [measured(slogs[w.log], w, True) for w in wins]
-                ex = _excess_per_window(meas, [p[0] for p in pred], floor)
-                # an open-loop simulation that tips over is not a sample of walking on that ground
-                ok = np.array([_upright(slogs[w.log], w) for w in wins])
-                ex[~ok] = np.nan
-                arr[g, s] = ex
-                n_roll += len(wins)
-    n_fallen = int(np.isnan(sim_tr[1:, :, :, 0]).sum() + np.isnan(sim_ho[1:, :, :, 0]).sum())
+                # an open-loop simulation that tips over is not a sample of walking on that ground: its
+                # windows stay NaN and are not replayed (each window is a rollout of its own)
+                ok = [i for i, w in enumerate(wins) if _upright(sims[s][w.log], w)]
+                if ok:
+                    pred = predict(as_recorded(sims[s]), [wins[i] for i in ok], [values], with_imu=True, models=flat)
+                    meas = [measured(sims[s][wins[i].log], wins[i], True) for i in ok]
+                    arr[g, s, ok] = _excess_per_window(meas, [p[0] for p in pred], floor)
+                n_roll += len(ok)
+
     # Â from every log (each log of a robot stepping in place samples only the few spots its feet
     # stand on: its excess varies from log to log far more than from window to window, so the
     # amplitude takes all the surface samples there are); the held-out logs still decide whether
     # anything is there (below). Interval: bootstrap over logs (observed) and surfaces (simulated).
-    ex_all = np.concatenate([ex_tr, ex_ho]).sum(axis=1)
-    sim_all = np.concatenate([sim_tr, sim_ho], axis=2).sum(axis=3)  # (n_grid, S, n_windows)
     win_log = np.array([w.log for w in problem.train + problem.heldout])
-    obs_all = float(ex_all.mean())
-    curve = np.nanmean(sim_all, axis=(1, 2))
-    a_hat = _invert(grid, curve, obs_all) if obs_all > 0 else 0.0
-    rng = np.random.default_rng([seed, 99])
-    boots = []
     ulog = np.unique(win_log)
-    for _ in range(n_boot):
-        pick = rng.choice(ulog, len(ulog))
-        idx = np.concatenate([np.flatnonzero(win_log == lg) for lg in pick])
-        o = float(ex_all[idx].mean())
-        ss = rng.integers(0, n_surfaces, n_surfaces)
-        c = np.nanmean(sim_all[:, ss][:, :, idx], axis=(1, 2))
-        boots.append(_invert(grid, c, o) if o > 0 else 0.0)
-    lo, hi = np.percentile(boots, [2.5, 97.5])
+    n_min = int(np.searchsorted(grid, MIN_RMS_HEIGHT)) + 1  # simulated at least up to the smallest reported
+    top = 1  # grid[:top] simulated
+
+    def beyond(curve: np.ndarray, target: float) -> bool:
+        """Whether more grid is left and ``target`` is not below the top of the simulated part of a
+        (made monotone) curve; a NaN top (every window simulated there tipped over) resolves nothing,
+        so the grid grows on, to the whole grid's inversion at worst."""
+        return top < len(grid) and target > 0 and not target < np.maximum.accumulate(np.maximum(curve, 1e-9))[-1]
+
+    while True:
+        while top < len(grid) and (top < max(n_min, 2) or not adaptive):
+            simulate(top)
+            top += 1
+        sim_all = np.concatenate([sim_tr[:top], sim_ho[:top]], axis=2).sum(axis=3)  # (top, S, n_windows)
+        curve = np.nanmean(sim_all, axis=(1, 2))
+        if beyond(curve, obs_all):
+            simulate(top)
+            top += 1
+            continue
+        a_hat = _invert(grid[:top], curve, obs_all) if obs_all > 0 else 0.0
+        rng = np.random.default_rng([seed, 99])
+        boots = []
+        for _ in range(n_boot):
+            pick = rng.choice(ulog, len(ulog))
+            idx = np.concatenate([np.flatnonzero(win_log == lg) for lg in pick])
+            o = float(ex_all[idx].mean())
+            ss = rng.integers(0, n_surfaces, n_surfaces)
+            c = np.nanmean(sim_all[:, ss][:, :, idx], axis=(1, 2))
+            # above the simulated heights: larger than every resolved resample (the inverse is monotone)
+            boots.append(math.inf if beyond(c, o) else _invert(grid[:top], c, o) if o > 0 else 0.0)
+        with np.errstate(invalid="ignore"):  # inf - inf between two unresolved resamples: NaN, simulated on
+            lo, hi = np.percentile(boots, [2.5, 97.5])
+        if np.isfinite(hi) or top == len(grid):
+            break
+        simulate(top)  # a percentile of the interval lies above the simulated heights
+        top += 1
+    grid, sim_tr, sim_ho = grid[:top], sim_tr[:top], sim_ho[:top]
+    n_fallen = int(np.isnan(sim_tr[1:, :, :, 0]).sum() + np.isnan(sim_ho[1:, :, :, 0]).sum())
     # predicted per-channel held-out excess at Â (interpolated between grid profiles, ε ~ A² locally)
     prof_grid = np.nanmean(sim_ho, axis=(1, 2))  # (n_grid, k)
     j = int(np.clip(np.searchsorted(grid, a_hat), 1, len(grid) - 1))

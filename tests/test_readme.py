@@ -143,3 +143,20 @@ def test_fidelity_block_tabulates_fidelity_against_episodes_per_gait():
     for w in res["worlds"].values():
         w.pop("by_episodes", None)
     assert readme._episodes_table(res) == []
+
+
+def test_finish_benchmark_saves_the_command_line_less_save_then_prints(monkeypatch, capsys):
+    """A benchmark's ``--save NAME`` records the command that reproduces it (without ``--save``) and
+    the load before it; its result prints as text, or as one JSON object with ``--json``."""
+    saved = {}
+    monkeypatch.setattr(readme, "save", lambda name, command, result, machine=None:
+                        saved.update(name=name, command=command, result=result, machine=machine))
+    res = {"text": "a table", "x": 1}
+    readme.finish_benchmark(res, "benchmarks/b.py", ["--seeds", "0", "--save", "NAME"], save_name="NAME", as_json=False,
+                            load_before=0.5)
+    assert saved["name"] == "NAME" and saved["command"] == "python benchmarks/b.py --seeds 0" and saved["result"] is res
+    assert saved["machine"]["load_before"] == 0.5
+    assert capsys.readouterr().out == "a table\n"
+    saved.clear()
+    readme.finish_benchmark(res, "benchmarks/b.py", ["--json"], save_name=None, as_json=True, load_before=0.5)
+    assert not saved and json.loads(capsys.readouterr().out) == res

@@ -129,6 +129,30 @@ def test_terrain_roughness_injection_and_recovery():
     assert flat.rms_height < MIN_RMS_HEIGHT
 
 
+def test_the_adaptive_grid_gives_the_whole_grids_fit_from_fewer_heights():
+    """Simulating the RMS-height grid bottom-up only as far as the fit needs it gives the very fit
+    the whole grid gives (the height, its bootstrap interval, the decision and its evidence), and
+    leaves out the heights above the bracket; a grid point above the truth is never simulated."""
+    problem = _problem(_stepping_logs(0.008, [30, 31, 32], seconds=3.0))
+    grid = (0.0, 0.001, 0.002, 0.004, 0.006, 0.012)  # measured: 3.0 mm [1.3, 4.5]
+    full = fit_roughness(problem, {}, n_surfaces=2, grid=grid, n_boot=50, adaptive=False)
+    lazy = fit_roughness(problem, {}, n_surfaces=2, grid=grid, n_boot=50)
+    assert full.grid == list(grid) and lazy.grid == full.grid[:len(lazy.grid)]
+    assert len(lazy.grid) < len(grid), (lazy.grid, full.rms_height, full.ci95)
+    assert lazy.excess == full.excess[:len(lazy.grid)]
+    for f in ("rms_height", "ci95", "declared", "reason", "peak_height", "excess_obs", "excess_heldout_pred",
+              "heldout_p", "sim_log_excess", "profile_cosine", "profile_pred"):
+        assert getattr(lazy, f) == getattr(full, f), f
+    assert lazy.ci95[1] < lazy.grid[-1] and lazy.rms_height > 0
+    assert lazy.n_rollouts < full.n_rollouts
+    # what a deterministic term leaves is read off the simulated part of the curve alike
+    left_lazy, ho_lazy = excess_left(lazy, problem, {Term("ground_compliance"): 0.03})
+    left_full, ho_full = excess_left(full, problem, {Term("ground_compliance"): 0.03})
+    assert ho_lazy == ho_full and (left_lazy == left_full or left_full >= left_lazy >= lazy.grid[-1] >= MIN_RMS_HEIGHT)
+    with pytest.raises(ValueError, match="increase"):
+        fit_roughness(problem, {}, grid=(0.0, 0.002, 0.001))
+
+
 def test_a_deterministic_contact_effect_is_not_left_to_uneven_ground():
     """Low foot friction (0.2) on flat ground leaves an excess over the nominal replay that a
     roughness fit alone would name as uneven ground; with the friction term in the model, what is
