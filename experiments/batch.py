@@ -123,6 +123,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         spec = tr.spec
         H = np.empty((B, spec.history, spec.state_dim))
         P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
+        E = np.empty((B, tr.delay, spec.action_dim)) if tr.delay else None  # ... and the actions sent before (a delay)
         Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
         Hs = np.empty_like(H) if tr.shadow_memory else None  # each episode's shadow state history
         D = np.empty((B, spec.state_dim))  # the predicted state changes Δŝ of the step
@@ -165,10 +166,17 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
                 if k == 0:  # padded with the first command, as sgat.GroundedEnv and sgat.grounding.stack_past
                     P[idx] = cmd[:, ai][:, None]
                 past = P[idx].reshape(len(idx), -1)
+            sent = None
+            if E is not None:
+                if k == 0:  # padded with the first command, as sgat.GroundedEnv pads
+                    E[idx] = cmd[:, ai][:, None]
+                sent = E[idx].reshape(len(idx), -1)
             dout = np.empty((len(idx), spec.state_dim)) if Hs is not None else None
             act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
                                                None if Z is None else Z[idx, k], past,
-                                               None if Hs is None else Hs[idx].reshape(len(idx), -1), dout)
+                                               None if Hs is None else Hs[idx].reshape(len(idx), -1), dout, sent)
+            if E is not None:
+                E[idx] = np.concatenate([E[idx, 1:], act[:, ai][:, None]], axis=1)
             if Hs is not None:
                 D[idx] = Hs[idx, -1] + dout  # the targets ŝ_{t+1}
             if P is not None:

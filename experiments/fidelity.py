@@ -117,7 +117,7 @@ from common.files import WallClock, atomic_path, atomic_write_text, jsonable
 from experiments.argtypes import parse_hidden
 from experiments.episodes import EpisodeLog
 from experiments.grounding import (DEFAULT_GROUNDING, DEFAULT_HISTORY, EXPLORATION_NOISE, HYBRID_GROUNDING, IDENTIFY_BUDGET_S,
-                                   IDENTIFY_ROUNDS, REAL_WALKS, SIM_WALKS)
+                                   IDENTIFY_ROUNDS, REAL_WALKS, SIM_WALKS, identified_delay)
 from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, fit_servo_gain,
                                   identify_real, record_excitation_task)
 from experiments.stats import (bootstrap_spearman, brier_score, paired_spearman_difference, pick_regret, spearman,
@@ -165,7 +165,7 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 #: every cached world keeps its meaning.
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
-                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0}
+                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0, "delay_auto": False}
 
 
 @dataclass(frozen=True)
@@ -191,6 +191,7 @@ class WorldSpec:
     oracle_engine: str = "pybullet"  # oracle:mean=1: the engine its mean physics runs in (mujoco: the identified sim)
     servo: str = ""  # identified / hybrid: a kp scale common to every servo (one of SERVO_LOGS; "": none)
     envelope: float = 0.0  # gat / sgat / identified / hybrid: the ANE's noise [rad] added to the world's leg targets
+    delay_auto: bool = False  # hybrid: the models bridge the draw's identified latency (experiments.grounding.identified_delay)
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -290,7 +291,7 @@ def parse_world(text: str) -> WorldSpec:
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
-                                                              "zero", "local", "dad", "gate"):
+                                                              "zero", "local", "dad", "gate", "delay"):
                 if k == "method" and kind == "hybrid" and v in ("sgat", "gat"):
                     gkw["method"] = v
                 elif k == "method":
@@ -307,6 +308,14 @@ def parse_world(text: str) -> WorldSpec:
                     gkw["components"] = int(v)
                 elif k == "commands":
                     gkw["command_history"] = int(v)
+                elif k == "delay":  # control steps, or auto: the draw's identified latency (hybrid)
+                    if v == "auto":
+                        if kind != "hybrid":
+                            raise ValueError(f"world {text!r}: unknown option value delay=auto for {kind} "
+                                             "(the identified latency: hybrid only)")
+                        kw["delay_auto"] = True
+                    else:
+                        gkw["delay"] = int(v)
                 elif k == "memory":  # seconds -> control steps
                     gkw["noise_memory"] = float(v) / CONTROL_DT
                 elif k == "shadow":  # seconds -> control steps
@@ -868,7 +877,11 @@ class Fidelity:
                                       _seeds(cfg.seed, _GROUND_SIM, d, n=s.sim_walks),
                                       f"{base}_d{d}_n{s.exploration_noise:g}{g}", thetas, **sim_kw)
                     mdir = self._model_dir(s, d)
-                    fits.append({"real": real, "sim": sim, "out": mdir, "config": s.grounding.to_dict(),
+                    gcfg = s.grounding.to_dict()
+                    if s.delay_auto:
+                        gcfg["delay"] = identified_delay(info["identified"])
+                    info["delay"] = int(gcfg.get("delay", 0))
+                    fits.append({"real": real, "sim": sim, "out": mdir, "config": gcfg,
                                  "state": s.state, "history": s.history,
                                  **({"identified": info["identified"], "identified_confounded": s.identified_confounded}
                                     if s.kind == "hybrid" else {}),
@@ -1040,6 +1053,7 @@ class Fidelity:
                     **({"effects": info.get("effects"), "terrain_rms_height": info.get("terrain_rms_height")}
                        if spec.needs_identification else {}),
                     **({"servo_fit": info["servo_fit"]} if info.get("servo_fit") else {}),
+                    **({"delay": info["delay"]} if info.get("delay") else {}),
                 })
             out["worlds"][spec.name] = {"kind": spec.kind, "episodes": n, "draws": draws, "summary": _summary(draws),
                                         "data_gaits": spec.data_gaits if spec.grounded else None,

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 
+from common.defaults import CONTROL_DT
 from robots import get_robot
 from sgat.grounding import (GroundingConfig, GroundingFit, Transitions, dad_transitions, fit_grounding,
                            recording_transitions)
@@ -145,9 +147,9 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
         raise ValueError("dad_iterations > 0 needs the sim the transformer grounds (base_env)")
     spec = nao_spec(state, history, robot)
     layout = ObservationLayout(get_robot(robot))
-    c = int(cfg.command_history)
-    real = recording_transitions(real_recs, layout, spec, c)
-    sim = recording_transitions(sim_recs, layout, spec, c)
+    c, d = cfg.forward_commands, int(cfg.delay)
+    real = recording_transitions(real_recs, layout, spec, c, d)
+    sim = recording_transitions(sim_recs, layout, spec, c, d)
     fit = fit_grounding(real, sim, spec, cfg, seed=seed, map_fn=map_fn)
     extra = []
     for _ in range(int(cfg.dad_iterations)):
@@ -161,3 +163,29 @@ def fit_nao_grounding(real_recs, sim_recs, cfg: GroundingConfig, *, state: str =
         fit = fit_grounding(real, sim, spec, cfg, seed=seed, forward_extra=Transitions.concat(extra), previous=fit,
                             map_fn=map_fn)
     return fit
+
+
+def identified_delay(reports, control_dt: float = CONTROL_DT) -> int:
+    """The delay d [control steps] that hybrid grounding's models bridge for an identified sim: its
+    identified actuation latency L (MuJoCo ``actuator_delay``, a continuous delay) in whole control
+    steps, d = floor(L / Δt). A command given at step t reaches the identified sim's actuators at
+    t·Δt + L, within control step t + d, so s_{t+1}, ..., s_{t+d} hold nothing of it and s_{t+d+1} is
+    the first state it moves (measured: :func:`sgat.grounding.command_visibility` on the default
+    fidelity run's grounding walks finds R² ≈ 0 at lead 1 on every draw, its best lead at d + 1 for
+    latencies of 16.5-17.1 ms (d = 1) and 23.2-23.7 ms (d = 2); README, twenty-sixth round).
+
+    Args:
+        reports: the identification's ``report.json`` paths (``experiments.identify.identify_real``).
+        control_dt: the control period [s].
+
+    Returns:
+        d >= 0 (0 when no latency was identified).
+
+    Raises:
+        FileNotFoundError, ValueError: what :func:`sysid.identified.load_identified` raises.
+    """
+    from sysid.identified import load_identified  # lazy: loads the engines
+
+    terms, _ = load_identified(reports)
+    latency = next((float(v) for t, v in terms.items() if t.label() == "latency"), 0.0)
+    return max(0, int(math.floor(latency / control_dt + 1e-9)))

@@ -548,7 +548,7 @@ def _blind(res: dict) -> str:
 RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "compare": _compare, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext,
              "benchlatency": _benchtext, "benchground": _benchtext, "benchoverhead": _benchtext,
-             "benchdiagnose": _benchtext, "benchroughness": _benchtext}
+             "benchdiagnose": _benchtext, "benchroughness": _benchtext, "benchvisibility": _benchtext}
 
 
 def render(text: str, results_dir: str = RESULTS) -> str:

@@ -67,27 +67,31 @@ def stack_past(A: np.ndarray, c: int) -> np.ndarray:
 
 
 def trajectory_transitions(obs: np.ndarray, actions: np.ndarray, spec: GroundingSpec,
-                           commands: np.ndarray | None = None, past: int = 0) -> Transitions:
+                           commands: np.ndarray | None = None, past: int = 0, delay: int = 0) -> Transitions:
     """Transitions of one trajectory: ``obs`` (T, n_obs) observed before each ``actions`` (T, n_act)
     was applied (row t of ``obs`` is s_t; the transition t -> t+1 uses actions[t]); ``commands``
     (T, n_act): what the agent commanded (None: the applied actions); ``past``: how many earlier
-    applied actions each transition keeps (``P``, for a forward model with a command history).
+    applied actions each transition keeps (``P``, for a forward model with a command history);
+    ``delay`` d: the transitions bridge d + 1 steps, ``dS`` = s_{t+d+1} − s_t (for models of a world
+    whose actuators answer a command d control steps late, ``GroundingConfig.delay``; 0: one step).
 
     Raises:
-        ValueError: mismatched lengths, fewer than 2 steps or past < 0.
+        ValueError: mismatched lengths, fewer than d + 2 steps, past < 0 or delay < 0.
     """
-    if int(past) < 0:
-        raise ValueError(f"past must be >= 0, got {past}")
+    if int(past) < 0 or int(delay) < 0:
+        raise ValueError(f"past and delay must be >= 0, got {past}, {delay}")
+    d = int(delay)
     obs = np.asarray(obs, dtype=np.float64)
     actions = np.asarray(actions, dtype=np.float64)
-    if len(obs) != len(actions) or len(obs) < 2 or (commands is not None and len(commands) != len(obs)):
-        raise ValueError(f"need >= 2 observation/action rows of equal length, got {len(obs)} and {len(actions)}")
+    if len(obs) != len(actions) or len(obs) < d + 2 or (commands is not None and len(commands) != len(obs)):
+        raise ValueError(f"need >= {d + 2} observation/action rows of equal length, got {len(obs)} and {len(actions)}")
     S = spec.states(obs)
     H = spec.stack_history(S)
-    C = None if commands is None else np.asarray(commands, dtype=np.float64)[:-1][:, spec.action_index]
+    n = len(S) - 1 - d
+    C = None if commands is None else np.asarray(commands, dtype=np.float64)[:n][:, spec.action_index]
     A = actions[:, spec.action_index]
-    P = stack_past(A, int(past))[:-1] if past else None
-    return Transitions(H[:-1], A[:-1], S[1:] - S[:-1], C, P)
+    P = stack_past(A, int(past))[:n] if past else None
+    return Transitions(H[:n], A[:n], S[1 + d:] - S[:n], C, P)
 
 
 def recording_observations(rec, layout) -> np.ndarray:
@@ -102,12 +106,86 @@ def recording_observations(rec, layout) -> np.ndarray:
     return np.stack([rec.columns[n] for n in layout.names], axis=1)
 
 
-def recording_transitions(recs, layout, spec: GroundingSpec, past: int = 0) -> Transitions:
+def recording_transitions(recs, layout, spec: GroundingSpec, past: int = 0, delay: int = 0) -> Transitions:
     """Transitions of ``envs.Recording``s: applied actions (``app``, else ``cmd``) and commands (``cmd``);
-    ``past``: earlier applied actions kept per transition (:func:`trajectory_transitions`)."""
-    parts = [trajectory_transitions(recording_observations(r, layout), r.group("app"), spec, r.group("cmd"), past)
-             for r in recs if len(r) >= 2]
+    ``past``: earlier applied actions kept per transition; ``delay``: steps bridged beyond one
+    (:func:`trajectory_transitions`). Recordings shorter than ``delay + 2`` rows are skipped."""
+    parts = [trajectory_transitions(recording_observations(r, layout), r.group("app"), spec, r.group("cmd"), past, delay)
+             for r in recs if len(r) >= 2 + int(delay)]
     return Transitions.concat(parts)
+
+
+def command_visibility(recs, layout, spec: GroundingSpec, leads=(1, 2, 3, 4, 5), folds: int = 2) -> dict:
+    """How much of the exploration noise on a sim's commands its walks reveal k steps later: the
+    identifiability of ``f_sim^-1`` at each lead k.
+
+    The inverse model of a grounding step learns the *applied* action a_t from the state history
+    and the state change (:class:`sgat.models.InverseModel`). Its training walks carry white
+    exploration noise ε_t = a_t − c_t on the agent's commands c_t; the part of ε_t that a linear map
+    of ``[s_{t-h+1}, ..., s_t, s_{t+k} − s_t]`` recovers is what the state change at lead k says
+    about the action. In a sim whose actuators answer a command at once, k = 1 (the paper's
+    one-step model) shows it; in a sim with an actuation latency of L control steps (the identified
+    sim, whose diagnosis found one), s_{t+1}, ..., s_{t+L} do not depend on a_t at all, so a one-step
+    inverse model can only return the commands it saw for similar states: the data gait's policy.
+
+    Per lead k the ordinary least-squares fit (``numpy.linalg.lstsq``, with an intercept) is
+    cross-validated over whole walks (walk i in fold ``i mod folds``): the returned R² is
+    1 − Σ(ε − ε̂)² / Σ(ε − ε̄)² over the held-out rows of every fold and every grounded action
+    entry, ε̄ the training rows' mean. R² ≈ 0: the state change at that lead carries nothing of
+    the action (no better than its mean).
+
+    Args:
+        recs: ``envs.Recording`` walks of the sim with exploration noise (``app`` applied and
+            ``cmd`` commanded actions), at least ``folds`` of them.
+        layout: the ``envs.ObservationLayout`` of the recordings; ``spec``: the grounding spec (its
+            state entries, history and grounded action entries are the inverse model's).
+        leads: the leads k >= 1 to test [control steps].
+        folds: walk folds of the cross-validation (>= 2).
+
+    Returns:
+        ``{"leads": [k...], "r2": [R² per lead], "best_lead": the k of the largest R², "rows":
+        held-out rows at lead 1, "noise_rad": RMS exploration noise [rad]}``.
+
+    Raises:
+        ValueError: fewer walks than folds, folds < 2, a lead < 1, walks without exploration noise
+            (applied equal to commanded), or no rows left at some lead (walks too short).
+        KeyError: a recording lacks an observation column.
+    """
+    leads = [int(k) for k in leads]
+    if folds < 2 or not leads or min(leads) < 1:
+        raise ValueError(f"need folds >= 2 and leads >= 1, got folds={folds}, leads={leads}")
+    walks = []
+    for r in recs:
+        S = spec.states(recording_observations(r, layout))
+        eps = (r.group("app") - r.group("cmd"))[:, spec.action_index]
+        walks.append((spec.stack_history(S), S, eps))
+    if len(walks) < folds:
+        raise ValueError(f"command_visibility needs at least {folds} walks, got {len(walks)}")
+    noise = np.concatenate([w[2] for w in walks])
+    if not np.any(noise):
+        raise ValueError("the walks carry no exploration noise (applied actions equal the commands): nothing to recover")
+    r2, rows = [], 0
+    for k in leads:
+        sse = sst = 0.0
+        parts = []
+        for H, S, eps in walks:
+            n = len(S) - k
+            parts.append(None if n < 1 else (np.hstack([H[:n], S[k:k + n] - S[:n], np.ones((n, 1))]), eps[:n]))
+        for f in range(folds):
+            train = [p for i, p in enumerate(parts) if i % folds != f and p is not None]
+            test = [p for i, p in enumerate(parts) if i % folds == f and p is not None]
+            if not train or not test:
+                raise ValueError(f"no rows left at lead {k} in some fold: the walks are too short")
+            X, y = np.vstack([p[0] for p in train]), np.vstack([p[1] for p in train])
+            W = np.linalg.lstsq(X, y, rcond=None)[0]
+            Xt, yt = np.vstack([p[0] for p in test]), np.vstack([p[1] for p in test])
+            sse += float(((yt - Xt @ W) ** 2).sum())
+            sst += float(((yt - y.mean(0)) ** 2).sum())
+            if k == leads[0]:
+                rows += len(Xt)
+        r2.append(1.0 - sse / sst)
+    return {"leads": leads, "r2": r2, "best_lead": leads[int(np.argmax(r2))], "rows": rows,
+            "noise_rad": float(np.sqrt(np.mean(noise ** 2)))}
 
 
 def dad_transitions(replays, real_recs, layout, spec: GroundingSpec, past: int = 0) -> Transitions:
@@ -204,6 +282,17 @@ class GroundingConfig:
             the real transitions the forward models were fitted on; at states where the members
             disagree more, the correction shrinks toward the agent's action in proportion. Needs an
             ensemble of at least 2. 0: no gate (the paper).
+        delay: d, the actuation delay [control steps] of the sim being grounded that both models
+            bridge (0: the paper's one-step models). A sim whose actuators answer a command d steps
+            late (the identified sim with its identified latency) shows nothing of ``a_t`` in
+            s_{t+1}, ..., s_{t+d} (:func:`command_visibility`), so a one-step inverse model returns
+            the commands it saw for similar states, the data gait's, and its correction pulls every
+            gait toward that one. With d > 0 the forward model predicts s_{t+d+1} − s_t from the state
+            history, the d previous commands and ``a_t`` (``command_history`` d); the inverse model
+            answers that change given the d actions applied before ``a_t`` in the sim
+            (:class:`sgat.models.InverseModel` ``commands``), which the transformer keeps per episode.
+            Works with the paper's transformer and an ensemble (no shadow state, matched or residual
+            sim models, DAD, gate or joint-local inverse model); ``command_history`` must be 0 or d.
         max_epochs, lr, patience, batch_size: training of each model (Adam, mini-batches, early
             stopping after ``patience`` epochs without a better validation loss).
     """
@@ -223,6 +312,7 @@ class GroundingConfig:
     local_inverse: bool = False
     dad_iterations: int = 0
     gate: float = 0.0
+    delay: int = 0
     max_epochs: int = 150
     lr: float = 3e-3
     patience: int = 15
@@ -253,9 +343,23 @@ class GroundingConfig:
             raise ValueError(f"gate needs an ensemble of at least 2 members, got ensemble={self.ensemble}")
         if self.gate > 0 and self.shadow_memory > 0:
             raise ValueError("gate works without a shadow state (shadow_memory 0)")
+        if int(self.delay) < 0:
+            raise ValueError(f"delay must be >= 0 control steps, got {self.delay}")
+        if self.delay and (self.shadow_memory > 0 or self.matched or self.residual_noise or self.dad_iterations
+                           or self.gate > 0 or self.local_inverse):
+            raise ValueError("delay works with the paper's transformer only (no shadow_memory, matched, residual_noise, "
+                             "dad_iterations, gate or local_inverse)")
+        if self.delay and int(self.command_history) not in (0, int(self.delay)):
+            raise ValueError(f"with delay {self.delay} the forward model sees the {self.delay} previous commands: "
+                             f"command_history must be 0 or {self.delay}, got {self.command_history}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in self.hidden))
         if self.local_inverse and self.hidden:
             raise ValueError(f"local_inverse needs linear models (hidden=()), got hidden={self.hidden}")
+
+    @property
+    def forward_commands(self) -> int:
+        """c: the previous commands the forward model sees (``command_history``, or ``delay`` when set)."""
+        return int(self.delay) or int(self.command_history)
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -263,7 +367,7 @@ class GroundingConfig:
         # settings added later are left out at their defaults, so saved configs and caches still match
         for k, default in (("components", 1), ("noise_memory", 0.0), ("shadow_memory", 0.0), ("command_history", 0),
                            ("matched", False), ("zero_init", False), ("local_inverse", False), ("dad_iterations", 0),
-                           ("gate", 0.0)):
+                           ("gate", 0.0), ("delay", 0)):
             if d[k] == default:
                 d.pop(k)
         return d
@@ -338,7 +442,7 @@ def _fit_member(t: dict) -> dict:
     out = {"forward": fwd, "forward_report": fwd.fit(t["Xf"], t["Yf"], seed=s, **kw)}
     if "Xi" not in t:
         return out
-    inv = InverseModel(S, A, history=k, hidden=t["hidden"], command_input=t["inverse_command"])
+    inv = InverseModel(S, A, history=k, hidden=t["hidden"], command_input=t["inverse_command"], commands=t.get("delay", 0))
     out.update(inverse=inv, inverse_report=inv.fit(t["Xi"], t["Yi"], seed=s + 1, input_mask=t["mask"], **kw))
     if t.get("residual_noise"):
         fs = ForwardModel(S, A, history=k, stochastic=True, hidden=t["hidden"], commands=c)
@@ -362,7 +466,8 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     Lakshminarayanan et al., NeurIPS 2017).
 
     With ``cfg.command_history`` c > 0 both ``real`` and ``sim`` must hold c past actions per
-    transition (``recording_transitions(..., past=c)``).
+    transition (``recording_transitions(..., past=c)``); with ``cfg.delay`` d > 0 both must bridge d + 1
+    steps and hold d past actions (``recording_transitions(..., past=d, delay=d)``).
 
     ``forward_extra``: more training rows of the forward models (:func:`dad_transitions`), stacked
     under ``real`` before the bootstrap resampling. ``previous``: a fit of the same data whose
@@ -377,9 +482,9 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
             past actions the config asks for.
     """
     S, A, k = spec.state_dim, spec.action_dim, spec.history
-    c = int(cfg.command_history)
-    if real.past_commands != c or ((cfg.residual_noise or cfg.matched) and sim.past_commands != c):
-        raise ValueError(f"the config's command_history is {c} but the transitions hold {real.past_commands} "
+    c, d = cfg.forward_commands, int(cfg.delay)
+    if real.past_commands != c or ((cfg.residual_noise or cfg.matched or d) and sim.past_commands != c):
+        raise ValueError(f"the config's command_history (or delay) is {c} but the transitions hold {real.past_commands} "
                          f"past actions (real) and {sim.past_commands} (sim): build them with past={c}")
     kw = {"max_epochs": cfg.max_epochs, "lr": cfg.lr, "patience": cfg.patience, "batch_size": cfg.batch_size,
           "zero_init": cfg.zero_init}
@@ -387,7 +492,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
         raise ValueError(f"the forward_extra transitions hold {forward_extra.past_commands} past actions, the config {c}")
     fwd_rows = real if forward_extra is None else Transitions.concat([real, forward_extra])
     Xf, Yf = fwd_rows.forward_input(), fwd_rows.dS
-    inv_in = [sim.H, sim.dS] + ([sim.commands] if cfg.inverse_command else [])
+    inv_in = [sim.H] + ([sim.P] if d else []) + [sim.dS] + ([sim.commands] if cfg.inverse_command else [])
     Xi, Yi = np.concatenate(inv_in, 1), sim.A
     Xs = sim.forward_input()  # the sim's own forward model: applied actions in, its spread out
     mask = local_inverse_mask(spec, command_input=cfg.inverse_command) if cfg.local_inverse else None
@@ -400,7 +505,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
         t = {"seed": s, "S": S, "A": A, "history": k, "stochastic": sgat, "hidden": cfg.hidden, "commands": c,
              "components": int(cfg.components) if sgat else 1, "kw": kw, "Xf": Xf[fi], "Yf": Yf[fi]}
         if previous is None:  # else the inverse (and sim) models stay
-            t.update(Xi=Xi[ii], Yi=Yi[ii], inverse_command=cfg.inverse_command, mask=mask)
+            t.update(Xi=Xi[ii], Yi=Yi[ii], inverse_command=cfg.inverse_command, mask=mask, delay=d)
             if (cfg.residual_noise and sgat) or cfg.matched:
                 t.update(Xs=Xs[ii], dSs=sim.dS[ii], residual_noise=bool(cfg.residual_noise and sgat),
                          matched=bool(cfg.matched))

@@ -405,27 +405,42 @@ class InverseModel(_Model):
             inverse model without the command regresses toward the commands it saw; with it, the
             command is the prior and Δs the evidence (README, "sgatwalk fidelity").
 
-    Input layout: ``[s_{t-k+1}, ..., s_t, s_{t+1} - s_t]`` (+ ``a_t`` with ``command_input``), size
-    k*S + S (+ A); output: action (A).
+        commands: d, the actions applied before ``a_t`` that the model also sees, for a sim with an
+            actuation delay of d control steps (``GroundingConfig.delay``): there ``a_t`` first moves the
+            state d + 1 steps later, while the d actions applied before it are still on their way, so
+            the model answers ``s_{t+d+1} - s_t`` given those (:func:`sgat.grounding.command_visibility`
+            measures the lead at which a sim shows its commands). 0 (default): the paper's one-step model.
+
+    Input layout: ``[s_{t-k+1}, ..., s_t, a_{t-d}, ..., a_{t-1}, s_{t+d+1} - s_t]`` (+ ``a_t`` with
+    ``command_input``), size k*S + d*A + S (+ A); output: action (A).
+
+    Raises:
+        ValueError: commands < 0.
     """
 
     kind = "inverse"
 
     def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, hidden=(64, 64),
-                 command_input: bool = False):
+                 command_input: bool = False, commands: int = 0):
         self.state_dim, self.action_dim, self.history = int(state_dim), int(action_dim), int(history)
         self.command_input = bool(command_input)
-        super().__init__((self.history + 1) * self.state_dim + (self.action_dim if self.command_input else 0),
+        self.commands = int(commands)
+        if self.commands < 0:
+            raise ValueError(f"commands must be >= 0, got {commands}")
+        super().__init__((self.history + 1) * self.state_dim + (self.commands + int(self.command_input)) * self.action_dim,
                          self.action_dim, hidden)
 
     def config(self) -> dict:
-        return {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history,
-                "command_input": self.command_input}
+        cfg = {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history,
+               "command_input": self.command_input}
+        if self.commands:  # left out at 0, so models saved before it load unchanged
+            cfg["commands"] = self.commands
+        return cfg
 
     @classmethod
     def from_config(cls, cfg: dict) -> "InverseModel":
         return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], hidden=tuple(cfg["hidden"]),
-                   command_input=bool(cfg.get("command_input", False)))
+                   command_input=bool(cfg.get("command_input", False)), commands=int(cfg.get("commands", 0)))
 
     def _loss(self, out, y):
         return ((out - y) ** 2).mean()

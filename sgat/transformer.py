@@ -180,11 +180,20 @@ class ActionTransformer:
     et al., NeurIPS 2020, §4.3), used here to shrink the action correction instead of the reward.
     Teacher forcing (:meth:`reach`) is not gated.
 
+    **Delay** d (inverse models with ``commands`` d, ``GroundingConfig.delay``; 0: the paper): for a
+    sim whose actuators answer a command d control steps late, a_t first shows in s_{t+d+1}. The forward
+    models then predict Δŝ = ŝ_{t+d+1} − s_t from the state history, the agent's d previous commands
+    (``past``) and a_t, and the inverse models answer it given the d actions the sim was sent before
+    (``sent``: the transformer's own earlier outputs, which callers keep per episode):
+    g = f_sim^-1(s_t, â_{t-d}, ..., â_{t-1}, ŝ_{t+d+1} − s_t). Works without shadow state and
+    without matched or residual sim models and gate.
+
     Raises:
         ValueError: unknown method, α missing or outside [0, 1], only one kind of model given,
             ensembles of different sizes, models whose sizes do not match the spec, or a gate on an
             ensemble of fewer than 2 members, with a shadow state, or with a D_ref that is not finite
-            and > 0.
+            and > 0; inverse models that disagree on their delay, a delay with forward models that do
+            not see that many previous commands, or with a shadow state, sim models or a gate.
     """
 
     def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
@@ -222,6 +231,13 @@ class ActionTransformer:
             raise ValueError("give one deterministic sim forward model per ensemble member (sim_mean), or none")
         if len({f.commands for f in fwds + sims + means}) > 1:
             raise ValueError("forward models disagree on the number of past commands they see")
+        if len({getattr(i, "commands", 0) for i in invs}) > 1:
+            raise ValueError("ensemble members disagree on the delay their inverse models bridge")
+        delay = getattr(invs[0], "commands", 0) if invs else 0
+        if delay and (fwds[0].commands != delay or float(shadow_memory) > 0 or sims or means or gate_scale is not None):
+            raise ValueError(f"inverse models that bridge a delay of {delay} steps need forward models that see the "
+                             f"{delay} previous commands, and no shadow state, sim models or gate")
+        self.delay = int(delay)
         self.spec, self.forwards, self.inverses, self.sim_forwards = spec, fwds, invs, sims
         self.sim_means = means
         self.method, self.alpha, self.seed = method, float(alpha), seed
@@ -256,6 +272,8 @@ class ActionTransformer:
             raise ValueError("a disagreement gate needs an ensemble of at least 2 members")
         if self.shadow_memory > 0:
             raise ValueError("a disagreement gate works without a shadow state (shadow_memory 0)")
+        if self.delay:
+            raise ValueError("a disagreement gate works without a delay (inverse models of one step)")
         self.gate_scale = g
 
     @property
@@ -264,17 +282,30 @@ class ActionTransformer:
         as ``past`` (0: none, the paper's one-step model)."""
         return self.forwards[0].commands if self.forwards else 0
 
-    def _check_past(self, past, lead: tuple) -> np.ndarray | None:
-        if not self.commands:
+    def _check_actions(self, arr, lead: tuple, n: int, name: str, what: str, missing: str) -> np.ndarray | None:
+        """``arr`` as float of shape (*lead, n*A) (n earlier actions, oldest first); None when n is 0.
+
+        Raises:
+            ValueError: ``arr`` missing (``missing`` says why it is needed) or of another shape.
+        """
+        if not n:
             return None
-        if past is None:
-            raise ValueError(f"the forward models see the {self.commands} previous commands: give them as past")
-        past = np.asarray(past, dtype=np.float64)
-        want = (*lead, self.commands * self.spec.action_dim)
-        if past.shape != want:
-            raise ValueError(f"past must have shape {want} (the {self.commands} previous commands, oldest first), "
-                             f"got {past.shape}")
-        return past
+        if arr is None:
+            raise ValueError(f"{missing}: give them as {name}")
+        arr = np.asarray(arr, dtype=np.float64)
+        want = (*lead, n * self.spec.action_dim)
+        if arr.shape != want:
+            raise ValueError(f"{name} must have shape {want} (the {n} {what}, oldest first), got {arr.shape}")
+        return arr
+
+    def _check_sent(self, sent, lead: tuple) -> np.ndarray | None:
+        return self._check_actions(sent, lead, self.delay, "sent", "actions sent to the sim before",
+                                   f"the inverse models bridge a delay of {self.delay} steps and need the "
+                                   f"{self.delay} actions sent to the sim before this one")
+
+    def _check_past(self, past, lead: tuple) -> np.ndarray | None:
+        return self._check_actions(past, lead, self.commands, "past", "previous commands",
+                                   f"the forward models see the {self.commands} previous commands")
 
     @property
     def forward(self):
@@ -303,11 +334,14 @@ class ActionTransformer:
             self.member = int(self.rng.integers(self.n_members))
 
     def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None, past=None,
-                shadow=None) -> tuple[np.ndarray, np.ndarray]:
+                shadow=None, sent=None) -> tuple[np.ndarray, np.ndarray]:
         """Member k's grounded action and the predicted state change Δŝ; ``normal(shape)`` draws the
         SGAT noise (default: ``self.rng``); ``past``: the previous commands (forward models with a
         command history); ``shadow``: the shadow state history the forward model predicts from
-        (``shadow_memory`` > 0; None: the sim's, ``hist``)."""
+        (``shadow_memory`` > 0; None: the sim's, ``hist``); ``sent``: the actions sent to the sim
+        before (a delay)."""
+        if self.delay and sent is None:
+            raise ValueError(f"the inverse models bridge a delay of {self.delay} steps: give the actions sent before")
         fwd, inv = self.forwards[k], self.inverses[k]
         S = self.spec.state_dim
         normal = normal or self.rng.standard_normal
@@ -323,9 +357,9 @@ class ActionTransformer:
             ds = fwd.sample_with(x, normal((*x.shape[:-1], fwd.noise_dim)))
         else:
             ds = fwd.predict(x)[0]
-        # the target ŝ_{t+1} = ŝ_t + Δŝ, asked of the inverse model from the sim's state s_t
+        # the target ŝ_{t+1} = ŝ_t + Δŝ (ŝ_{t+d+1} with a delay), asked of the inverse model from the sim's state s_t
         step = ds if shadow is None else ds + (shadow[..., -S:] - hist[..., -S:])
-        z = [hist, step, a] if inv.command_input else [hist, step]
+        z = [hist] + ([sent] if self.delay else []) + [step] + ([a] if inv.command_input else [])
         g = inv.predict(np.concatenate(z, axis=-1))
         if self.sim_means:  # matched: subtract the inverse model's answer to the sim's own prediction
             ds_sim = self.sim_means[k].predict(x)[0]
@@ -334,15 +368,17 @@ class ActionTransformer:
         return g, ds
 
     def transform(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None,
-                  shadow: np.ndarray | None = None) -> np.ndarray:
+                  shadow: np.ndarray | None = None, sent: np.ndarray | None = None) -> np.ndarray:
         """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A);
         ``past`` (..., c*A): the c commands before ``a``, oldest first (required when
         :attr:`commands` > 0; at an episode's first steps, pad with the first command); ``shadow``
         (..., k*S): the shadow state history (required when ``shadow_memory`` > 0; at an episode's
-        start, the sim's). The predicted change Δŝ is left in :attr:`last_delta`.
+        start, the sim's); ``sent`` (..., d*A): the d actions sent to the sim before, oldest first
+        (required with a :attr:`delay` d; at an episode's first steps, pad with the first command).
+        The predicted change Δŝ is left in :attr:`last_delta`.
 
         Raises:
-            ValueError: ``past`` or ``shadow`` missing or of the wrong shape.
+            ValueError: ``past``, ``shadow`` or ``sent`` missing or of the wrong shape.
         """
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
@@ -350,20 +386,21 @@ class ActionTransformer:
         hist = np.asarray(hist, dtype=np.float64)
         past = self._check_past(past, a.shape[:-1])
         shadow = self._check_shadow(shadow, hist.shape)
+        sent = self._check_sent(sent, a.shape[:-1])
         means = None
         if self.method == "sgat" and self.forwards[0].stochastic:
             g, ds = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None,
-                                 past=past, shadow=shadow)
+                                 past=past, shadow=shadow, sent=sent)
         else:
-            means = self._member_outputs(hist, a, past, shadow)
+            means = self._member_outputs(hist, a, past, shadow, sent)
             g, ds = np.mean([g for g, _ in means], axis=0), np.mean([d for _, d in means], axis=0)
         self.last_delta = ds
         return self._blend(a, g, self._gate(hist, a, past, means))
 
-    def _member_outputs(self, hist, a, past, shadow=None) -> list[tuple[np.ndarray, np.ndarray]]:
+    def _member_outputs(self, hist, a, past, shadow=None, sent=None) -> list[tuple[np.ndarray, np.ndarray]]:
         """Every member's deterministic (grounded action, Δŝ): averaged, GAT's (or SGAT's with
         deterministic models) answer; their spread, the gate's disagreement."""
-        return [self._ground(k, hist, a, sample=False, past=past, shadow=shadow) for k in range(self.n_members)]
+        return [self._ground(k, hist, a, sample=False, past=past, shadow=shadow, sent=sent) for k in range(self.n_members)]
 
     @staticmethod
     def _spread(outs) -> np.ndarray:
@@ -415,7 +452,7 @@ class ActionTransformer:
         state = np.asarray(state, dtype=np.float64)
         return state + self._beta * (np.asarray(target, dtype=np.float64) - state)
 
-    def reach(self, hist: np.ndarray, step: np.ndarray, a: np.ndarray) -> np.ndarray:
+    def reach(self, hist: np.ndarray, step: np.ndarray, a: np.ndarray, sent: np.ndarray | None = None) -> np.ndarray:
         """The grounded action that asks for a given state change: the members' inverse models'
         answers to ``f_sim^-1(hist, step)`` averaged and blended with ``a`` at α (what
         :meth:`transform` does with a forward model's Δŝ; :class:`TeacherForcedEnv` gives the
@@ -423,19 +460,23 @@ class ActionTransformer:
 
         Args:
             hist: state history (k*S,); step: the wanted change of the state from the sim's
-                current one, s_target − s_t (S,); a: the agent's grounded actions (A,).
+                current one, s_target − s_t (S,; with a :attr:`delay` d, the target is d + 1 steps
+                ahead); a: the agent's grounded actions (A,); sent: (d*A,) the d actions sent to
+                the sim before (with a delay).
 
         Returns:
             (A,), clipped to the action bounds.
 
         Raises:
-            ValueError: an identity transformer (no inverse models).
+            ValueError: an identity transformer (no inverse models); ``sent`` missing or mis-shaped.
         """
         if self.is_identity:
             raise ValueError("an identity transformer has no inverse models to ask")
         a = np.asarray(a, dtype=np.float64)
-        g = np.mean([inv.predict(np.concatenate([hist, step, a] if inv.command_input else [hist, step]))
-                     for inv in self.inverses], axis=0)
+        sent = self._check_sent(sent, a.shape[:-1])
+        pre = [hist] + ([sent] if self.delay else []) + [step]
+        g = np.mean([inv.predict(np.concatenate(pre + [a] if inv.command_input else pre)) for inv in self.inverses],
+                    axis=0)
         return self._blend(a, g)
 
     def _blend(self, a: np.ndarray, g: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
@@ -474,7 +515,7 @@ class ActionTransformer:
 
     def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None,
                            past: np.ndarray | None = None, shadow: np.ndarray | None = None,
-                           delta_out: np.ndarray | None = None) -> np.ndarray:
+                           delta_out: np.ndarray | None = None, sent: np.ndarray | None = None) -> np.ndarray:
         """:meth:`transform` for n episodes at once, each with its own ensemble member and noise.
 
         Args:
@@ -486,6 +527,7 @@ class ActionTransformer:
             past: (n, c*A) each episode's previous commands (needed when :attr:`commands` > 0).
             shadow: (n, k*S) each episode's shadow state history (needed when ``shadow_memory`` > 0).
             delta_out: (n, S), filled with each episode's predicted change Δŝ if given.
+            sent: (n, d*A) the d actions sent to each episode's sim before (needed with a :attr:`delay`).
 
         With a gate (``gate_scale``) each row's weight comes from the whole ensemble's deterministic
         outputs at that row, as in :meth:`transform`.
@@ -507,6 +549,8 @@ class ActionTransformer:
         p3 = None if p3 is None else p3[:, None, :]
         s3 = self._check_shadow(shadow, hist.shape)
         s3 = None if s3 is None else s3[:, None, :]
+        e3 = self._check_sent(sent, a.shape[:-1])
+        e3 = None if e3 is None else e3[:, None, :]
         means = None  # the members' deterministic outputs, when they are computed anyway (GAT)
         if self.samples:
             if noise is None:
@@ -518,9 +562,10 @@ class ActionTransformer:
             for k in np.unique(members).tolist():
                 sel = np.flatnonzero(members == k)
                 g[sel], ds[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
-                                               past=None if p3 is None else p3[sel], shadow=None if s3 is None else s3[sel])
+                                               past=None if p3 is None else p3[sel], shadow=None if s3 is None else s3[sel],
+                                               sent=None if e3 is None else e3[sel])
         else:
-            means = self._member_outputs(h3, a3, p3, s3)
+            means = self._member_outputs(h3, a3, p3, s3, e3)
             g, ds = np.mean([g for g, _ in means], axis=0), np.mean([d for _, d in means], axis=0)
         if delta_out is not None:
             delta_out[...] = ds[:, 0]
@@ -584,7 +629,7 @@ class ActionTransformer:
                                              f"this setting needs {k * S + (fwd.commands + 1) * A}")
                     into.append(fwd)
                 inv = InverseModel.load(os.path.join(directory, fi), expect_out=A)
-                want = (k + 1) * S + (A if inv.command_input else 0)
+                want = (k + 1) * S + (inv.commands + int(inv.command_input)) * A
                 if inv.n_in != want:
                     raise ModelFileError(f"{os.path.join(directory, fi)!r}: model has {inv.n_in} inputs, "
                                          f"this setting needs {want}")
@@ -616,6 +661,7 @@ class GroundedEnv(gym.Wrapper):
         self.ctrl_cost_weight = ctrl_cost_weight
         self._hist: deque = deque(maxlen=transformer.spec.history)
         self._past: deque = deque(maxlen=max(transformer.commands, 1))
+        self._sent: deque = deque(maxlen=max(getattr(transformer, "delay", 0), 1))  # actions sent (a delay)
         self._shadow: deque = deque(maxlen=transformer.spec.history)  # shadow states (shadow_memory > 0)
         self._target = None
 
@@ -632,6 +678,7 @@ class GroundedEnv(gym.Wrapper):
         self._hist.clear()
         self._hist.extend([s] * self.transformer.spec.history)
         self._past.clear()
+        self._sent.clear()
         self._shadow.clear()
         self._shadow.extend([s] * self.transformer.spec.history)
         self._target = None
@@ -661,10 +708,24 @@ class GroundedEnv(gym.Wrapper):
                 past = np.concatenate(list(self._past))
                 self._past.append(ag)
             shadow = np.concatenate(list(self._shadow)) if self.transformer.shadow_memory else None
-            applied[spec.action_index] = self.transformer.transform(hist, ag, past, shadow)
+            sent = self._sent_before(ag)
+            applied[spec.action_index] = self.transformer.transform(hist, ag, past, shadow, sent)
+            if sent is not None:
+                self._sent.append(applied[spec.action_index].copy())
             if shadow is not None:
                 self._target = self._shadow[-1] + self.transformer.last_delta
         return applied
+
+    def _sent_before(self, ag: np.ndarray) -> np.ndarray | None:
+        """The d actions sent before this step, oldest first (a transformer with a delay d; None
+        without): at an episode's first step padded with the agent's first command, as the batched
+        rollouts pad (the training rows pad with the first applied action, ``stack_past``)."""
+        d = getattr(self.transformer, "delay", 0)
+        if not d:
+            return None
+        if not self._sent:
+            self._sent.extend([ag] * d)
+        return np.concatenate(list(self._sent))
 
     def observe(self, obs: np.ndarray) -> None:
         """Append the state of the new observation to the history (and the relaxed target to the
@@ -693,8 +754,8 @@ class GroundedEnv(gym.Wrapper):
 class TeacherForcedEnv(GroundedEnv):
     """The grounded sim with the forward model replaced by a recorded real walk (teacher forcing).
 
-    At step t the target is the real walk's next state s^real_{t+1} instead of a forward model's
-    prediction, and the inverse model is asked for it from the sim's own state:
+    At step t the target is the real walk's next state s^real_{t+1} (s^real_{t+d+1} for a transformer
+    with a delay d) instead of a forward model's prediction, and the inverse model is asked for it from the sim's own state:
     ``g = f_sim^-1(s_t, s^real_{t+1} − s_t)`` (the ensemble members' answers averaged), blended with
     the agent's action at the transformer's α. It is the grounded sim with a forward model that is
     exactly right for that walk, so it separates what the forward model gets wrong from what action
@@ -735,10 +796,15 @@ class TeacherForcedEnv(GroundedEnv):
         a = np.array(action, dtype=np.float64)
         if a.shape != self.env.action_space.shape or not np.all(np.isfinite(a)):
             raise ValueError(f"action must be finite with shape {self.env.action_space.shape}")
-        if t + 1 >= len(self.reference):  # the recording is over: the sim's own dynamics
+        d = self.transformer.delay
+        if t + 1 + d >= len(self.reference):  # the recording is over: the sim's own dynamics
             return a
         spec = self.transformer.spec
         applied = a.copy()
-        applied[spec.action_index] = self.transformer.reach(np.concatenate(list(self._hist)), self.reference[t + 1]
-                                                            - self._hist[-1], a[spec.action_index])
+        ag = a[spec.action_index]
+        sent = self._sent_before(ag)
+        applied[spec.action_index] = self.transformer.reach(np.concatenate(list(self._hist)), self.reference[t + 1 + d]
+                                                            - self._hist[-1], ag, sent)
+        if sent is not None:
+            self._sent.append(applied[spec.action_index].copy())
         return applied

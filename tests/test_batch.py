@@ -43,18 +43,18 @@ def _assert_same(a: list[dict], b: list[dict]) -> None:
 @pytest.fixture(scope="module")
 def transformers(tmp_path_factory):
     """Saved SGAT (2-member ensemble; one Gaussian, a 3-component mixture, noise with memory, a shadow
-    state) and GAT transformers (one with a shadow state) with random (untrained) weights: they push
-    the legs around enough to make some walks fall."""
+    state, a delay of 2 steps) and GAT transformers (one with a shadow state) with random (untrained)
+    weights: they push the legs around enough to make some walks fall."""
     spec = grounding_spec(NaoSimEnv())
     S, A = spec.state_dim, spec.action_dim
     out = {}
     for name, method, K, memory, c, shadow in (
             ("sgat", "sgat", 1, 0, 0, 0), ("gat", "gat", 1, 0, 0, 0), ("sgat-mdn", "sgat", 3, 0, 0, 0),
             ("sgat-memory", "sgat", 1, 20.0, 0, 0), ("gat-commands", "gat", 1, 0, 3, 0),
-            ("sgat-shadow", "sgat", 1, 0, 0, 3.0), ("gat-shadow", "gat", 1, 0, 3, 3.0)):
+            ("sgat-shadow", "sgat", 1, 0, 0, 3.0), ("gat-shadow", "gat", 1, 0, 3, 3.0), ("sgat-delay", "sgat", 1, 0, 2, 0)):
         torch.manual_seed({"sgat": 7, "gat": 8}.get(name, 9))
         fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K, commands=c) for _ in range(2)]
-        inv = [InverseModel(S, A, command_input=True) for _ in range(2)]
+        inv = [InverseModel(S, A, command_input=True, commands=c if name.endswith("delay") else 0) for _ in range(2)]
         path = tmp_path_factory.mktemp(name)
         ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0, noise_memory=memory,
                           shadow_memory=shadow).save(path)
@@ -78,7 +78,7 @@ def report(tmp_path_factory):
 
 
 @pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "sgat-memory", "gat-commands", "sgat-shadow",
-                                   "gat-shadow", "identified", "hybrid"])
+                                   "gat-shadow", "identified", "hybrid", "hybrid-delay"])
 def test_batched_episodes_are_bit_identical_to_single_episodes(world, transformers, report):
     """Every MuJoCo world the optimizer trains in: results and recordings equal run_episode's,
     falls included."""
@@ -91,7 +91,8 @@ def test_batched_episodes_are_bit_identical_to_single_episodes(world, transforme
           "sgat-shadow": {"world": "grounded", "transformer": transformers.get("sgat-shadow")},
           "gat-shadow": {"world": "grounded", "transformer": transformers.get("gat-shadow")},
           "identified": {"world": "identified", "identified": [report]},
-          "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]}}[world]
+          "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]},
+          "hybrid-delay": {"world": "grounded", "transformer": transformers.get("sgat-delay"), "identified": [report]}}[world]
     tasks = [{**kw, "theta": th, "seed": 10 + i, "seconds": SECONDS, "record": True}
              for i, th in enumerate(_gaits(6))]
     single = [run_episode(t) for t in tasks]

@@ -42,6 +42,13 @@ def test_parse_world_options():
     assert parse_world("sgat:dad=0").key == parse_world("sgat").key != parse_world("sgat:dad=1").key
     assert parse_world("hybrid:gate=0.9").grounding.gate == 0.9 and parse_world("gat:gate=0.5").grounding.gate == 0.5
     assert parse_world("hybrid:gate=0").key == parse_world("hybrid").key != parse_world("hybrid:gate=0.9").key
+    # delay: fixed, or hybrid's identified latency per draw; 0 hashes as the paper's world
+    assert parse_world("sgat:delay=2").grounding.delay == 2 and parse_world("hybrid:delay=auto").delay_auto
+    assert parse_world("hybrid:delay=0").key == parse_world("hybrid").key != parse_world("hybrid:delay=auto").key
+    for bad, words in [("sgat:delay=auto", "hybrid only"), ("sgat:delay=2:matched=1", "delay works with the paper"),
+                       ("gat:delay=x", "bad value")]:
+        with pytest.raises(ValueError, match=words):
+            parse_world(bad)
     assert parse_world("identified:stepping=9").stepping_logs == 9 and parse_world("hybrid:stepping=6").stepping_logs == 6
     assert parse_world("identified").key != parse_world("identified:stepping=9").key != parse_world("identified:stepping=6").key
     # since the fourteenth round the identified worlds leave the confounded contact terms out by default

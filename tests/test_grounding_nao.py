@@ -203,3 +203,17 @@ def test_dad_rounds_pull_the_grounded_replay_toward_the_real_walk():
     with pytest.raises(ValueError, match="dad_iterations"):
         GroundingConfig(alpha=0.5, dad_iterations=-1)
     assert "dad_iterations" not in cfg.to_dict() and GroundingConfig(alpha=0.5, dad_iterations=2).to_dict()["dad_iterations"] == 2
+
+
+@pytest.mark.parametrize("latency, delay", [(0.0237, 2), (0.0165, 1), (0.0099, 0), (None, 0)])
+def test_identified_delay_is_the_latency_in_whole_control_steps(tmp_path, latency, delay):
+    """Hybrid grounding's ``delay=auto``: the identified latency floored to control steps (10 ms); no
+    latency term, no delay."""
+    import json
+
+    from experiments.grounding import identified_delay
+
+    model = {"pd_gain[RAnklePitch]": 0.9, **({"latency": latency} if latency is not None else {})}
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps({"model": model, "effects": []}))
+    assert identified_delay([str(path)]) == delay

@@ -371,6 +371,52 @@ def test_command_history_lets_the_transformer_ground_an_actuation_latency():
                       GroundingConfig(alpha=1.0, method="gat", hidden=(), command_history=2))
 
 
+def test_delay_lets_the_transformer_ground_a_sim_that_answers_late():
+    """A real world and a sim that both execute every command two steps late (s_{t+1} = s_t +
+    a_{t-2} Mᵀ), the sim with other gains (M diag(g)): a_t shows in neither before s_{t+3}. With
+    ``delay=2`` the grounded action is a / g given the actions already sent (â_{t-2}, â_{t-1} = their
+    commands / g), exactly the sim command that lands where the real one does; the paper's one-step
+    models cannot see a_t in either world and do not."""
+    from sgat.grounding import GroundingConfig, Transitions, fit_grounding
+
+    rng = np.random.default_rng(23)
+    spec = _spec()
+    g = np.array([0.5, 2.0])
+
+    def walk(n, gain):
+        s = np.zeros((n, 3))
+        a = rng.uniform(-0.7, 0.7, (n, 2))
+        for t in range(n - 1):
+            s[t + 1] = s[t] + (a[max(t - 2, 0)] * gain) @ M.T
+        return s, a
+
+    def rows(gain, **kw):
+        return Transitions.concat([trajectory_transitions(*walk(600, gain), spec, **kw) for _ in range(4)])
+
+    real, sim = rows(np.ones(2), past=2, delay=2), rows(g, past=2, delay=2)
+    assert real.past_commands == 2 and len(real) == 4 * (600 - 3)  # rows bridge three steps
+    cfg = GroundingConfig(alpha=1.0, method="gat", hidden=(), delay=2, max_epochs=300)
+    tr = fit_grounding(real, sim, spec, cfg).transformer
+    one_step = fit_grounding(rows(np.ones(2)), rows(g), spec,
+                             GroundingConfig(alpha=1.0, method="gat", hidden=(), max_epochs=300)).transformer
+    assert tr.delay == 2 and tr.commands == 2 and one_step.delay == 0
+    err, err1 = [], []
+    for _ in range(30):
+        past, a, s = rng.uniform(-0.35, 0.35, 4), rng.uniform(-0.35, 0.35, 2), rng.normal(0, 1, 3)  # a / g inside ±1
+        err.append(np.abs(tr.transform(s, a, past, sent=past / np.tile(g, 2)) - a / g).max())
+        err1.append(np.abs(one_step.transform(s, a) - a / g).max())
+    assert max(err) < 0.06, max(err)
+    assert np.median(err1) > 0.2
+    with pytest.raises(ValueError, match="sent"):
+        tr.transform(s, a, past)
+    with pytest.raises(ValueError, match="delay works with the paper"):
+        GroundingConfig(alpha=0.5, delay=2, matched=True)
+    with pytest.raises(ValueError, match="command_history must be 0 or 2"):
+        GroundingConfig(alpha=0.5, delay=2, command_history=3)
+    with pytest.raises(ValueError, match="past"):  # the sim rows must hold the actions sent before
+        fit_grounding(real, rows(g, delay=2), spec, cfg)
+
+
 def _gait(n, seed, P, gain=(1.0, 1.0), explore=0.05, process=0.05):
     """Walk-like transitions: the commands follow a policy of the state, a = P s + exploration noise
     (a gait commands what its phase asks for), Δs = (gain ⊙ a) Mᵀ + process noise."""
@@ -696,3 +742,69 @@ def test_disagreement_gate_on_a_sampling_ensemble_batches_like_single_calls(fitt
         w = min(1.0, 0.02 / D[i])
         assert np.allclose(single - A[i], w * (raw.transform(S[i], A[i]) - A[i]), atol=1e-9)
     assert (0.02 / D < 1).sum() >= 3  # the gate binds on most of these states
+
+
+class _Walk:
+    """The parts of an ``envs.Recording`` that ``command_visibility`` reads: observation columns and
+    the applied and commanded action groups."""
+
+    def __init__(self, q: np.ndarray, applied: np.ndarray, commanded: np.ndarray):
+        self.columns = {f"q{j}": q[:, j] for j in range(q.shape[1])}
+        self._groups = {"app": applied, "cmd": commanded}
+
+    def group(self, name: str) -> np.ndarray:
+        return self._groups[name]
+
+
+def _delayed_servo_walks(delay: int, n: int = 6, steps: int = 400, seed: int = 0) -> list:
+    """Walks of three first-order servos q_{t+1} = 0.7 q_t + 0.3 u_{t-delay}, commanded a periodic
+    pattern with white exploration noise (σ 0.02) on the applied targets u."""
+    rng = np.random.default_rng(seed)
+    walks = []
+    for _ in range(n):
+        t = np.arange(steps)
+        c = 0.3 * np.sin(2 * np.pi * t[:, None] / 50 + np.array([0.0, 1.0, 2.0]))
+        u = c + 0.02 * rng.standard_normal(c.shape)
+        q = np.zeros_like(c)
+        for k in range(steps - 1):
+            q[k + 1] = 0.7 * q[k] + 0.3 * u[max(k - delay, 0)]
+        walks.append(_Walk(q, u, c))
+    return walks
+
+
+@pytest.mark.parametrize("delay", [0, 2])
+def test_command_visibility_finds_the_lead_at_which_a_delayed_command_shows(delay):
+    from types import SimpleNamespace
+
+    from sgat.grounding import command_visibility
+
+    spec = GroundingSpec(np.arange(3), np.arange(3), -np.ones(3), np.ones(3), history=2)
+    layout = SimpleNamespace(names=["q0", "q1", "q2"])
+    res = command_visibility(_delayed_servo_walks(delay), layout, spec, leads=(1, 2, 3, 4))
+    r2 = dict(zip(res["leads"], res["r2"]))
+    assert res["best_lead"] == delay + 1
+    # the noise on u_t shows in q_{t+delay+1} (beside that of the commands still in the pipeline)
+    assert r2[delay + 1] > 0.25
+    for k in range(1, delay + 1):  # ... and not at all before
+        assert r2[k] < 0.05
+    assert res["noise_rad"] == pytest.approx(0.02, rel=0.1)
+
+
+def test_command_visibility_rejects_unusable_walks():
+    from types import SimpleNamespace
+
+    from sgat.grounding import command_visibility
+
+    spec = GroundingSpec(np.arange(3), np.arange(3), -np.ones(3), np.ones(3), history=2)
+    layout = SimpleNamespace(names=["q0", "q1", "q2"])
+    walks = _delayed_servo_walks(0, n=3)
+    with pytest.raises(ValueError, match="at least 2 walks"):
+        command_visibility(walks[:1], layout, spec)
+    with pytest.raises(ValueError, match="leads >= 1"):
+        command_visibility(walks, layout, spec, leads=(0, 1))
+    quiet = [_Walk(np.asarray([w.columns[n] for n in layout.names]).T, w.group("cmd"), w.group("cmd")) for w in walks]
+    with pytest.raises(ValueError, match="no exploration noise"):
+        command_visibility(quiet, layout, spec)
+    short = [_Walk(np.zeros((3, 3)), w.group("app")[:3], w.group("cmd")[:3]) for w in walks]
+    with pytest.raises(ValueError, match="too short"):
+        command_visibility(short, layout, spec, leads=(1, 4))
