@@ -6,7 +6,7 @@ noise on which the inverse models ``f_sim^-1`` were fitted, in the plain sim (th
 :func:`sgat.grounding.command_visibility`: per lead k the cross-validated R² with which a linear map
 of the state history and the state change ``s_{t+k} − s_t`` (the inputs of the linear inverse model)
 recovers the noise on the applied leg targets. The paper's inverse model works at lead 1. Beside it,
-the actuation latency the draw's diagnosis identified (``identified/d<d>/fixed/report.json``), in
+the actuation latency the draw's diagnosis identified (``identified/d<d>/*/report.json``), in
 control steps: a command takes effect that much later in the identified sim.
 
 Reads only the run directory (the walks it recorded and the reports its identification wrote): no
@@ -45,7 +45,7 @@ def main(argv=None) -> int:
     from common.defaults import CONTROL_DT
     from envs import ObservationLayout, Recording
     from experiments.fidelity import _GROUND_SIM, _seeds
-    from experiments.grounding import DEFAULT_HISTORY, EXPLORATION_NOISE, nao_spec
+    from experiments.grounding import DEFAULT_HISTORY, EXPLORATION_NOISE, identified_latency, nao_spec
     from experiments.readme import finish_benchmark
     from robots import get_robot
     from sgat.grounding import command_visibility
@@ -64,12 +64,10 @@ def main(argv=None) -> int:
     for d in range(int(cfg["data_seeds"])):
         seeds = _seeds(int(cfg["seed"]), _GROUND_SIM, d, n=args.walks)
         row = {}
-        rep = os.path.join(args.run, "identified", f"d{d}", "fixed", "report.json")
-        if os.path.exists(rep):
-            with open(rep) as f:
-                r = json.load(f)
-            lat = {**r.get("base_model", {}), **r["model"]}.get("latency")
-            row["latency_ms"] = None if lat is None else 1000 * lat
+        reps = [os.path.join(args.run, "identified", f"d{d}", stage, "report.json") for stage in ("fixed", "floating")]
+        reps = [r for r in reps if os.path.exists(r)]
+        if reps:
+            row["latency_ms"] = 1000 * identified_latency(reps)
         for kind, tag in TAGS.items():
             paths = [os.path.join(args.run, "data", f"{tag}_d{d}_n{EXPLORATION_NOISE:g}_{s}.parquet") for s in seeds]
             if not all(os.path.exists(p) for p in paths):

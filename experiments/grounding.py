@@ -184,8 +184,17 @@ def identified_delay(reports, control_dt: float = CONTROL_DT) -> int:
     Raises:
         FileNotFoundError, ValueError: what :func:`sysid.identified.load_identified` raises.
     """
+    return max(0, int(math.floor(identified_latency(reports) / control_dt + 1e-9)))
+
+
+def identified_latency(reports) -> float:
+    """The actuation latency [s] an identification found (``latency`` of
+    :func:`sysid.identified.load_identified`, later reports overriding earlier ones); 0 when none.
+
+    Raises:
+        FileNotFoundError, ValueError: what :func:`sysid.identified.load_identified` raises.
+    """
     from sysid.identified import load_identified  # lazy: loads the engines
 
     terms, _ = load_identified(reports)
-    latency = next((float(v) for t, v in terms.items() if t.label() == "latency"), 0.0)
-    return max(0, int(math.floor(latency / control_dt + 1e-9)))
+    return next((float(v) for t, v in terms.items() if t.label() == "latency"), 0.0)

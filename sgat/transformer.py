@@ -231,9 +231,9 @@ class ActionTransformer:
             raise ValueError("give one deterministic sim forward model per ensemble member (sim_mean), or none")
         if len({f.commands for f in fwds + sims + means}) > 1:
             raise ValueError("forward models disagree on the number of past commands they see")
-        if len({getattr(i, "commands", 0) for i in invs}) > 1:
+        if len({i.commands for i in invs}) > 1:
             raise ValueError("ensemble members disagree on the delay their inverse models bridge")
-        delay = getattr(invs[0], "commands", 0) if invs else 0
+        delay = invs[0].commands if invs else 0
         if delay and (fwds[0].commands != delay or float(shadow_memory) > 0 or sims or means or gate_scale is not None):
             raise ValueError(f"inverse models that bridge a delay of {delay} steps need forward models that see the "
                              f"{delay} previous commands, and no shadow state, sim models or gate")
@@ -661,7 +661,7 @@ class GroundedEnv(gym.Wrapper):
         self.ctrl_cost_weight = ctrl_cost_weight
         self._hist: deque = deque(maxlen=transformer.spec.history)
         self._past: deque = deque(maxlen=max(transformer.commands, 1))
-        self._sent: deque = deque(maxlen=max(getattr(transformer, "delay", 0), 1))  # actions sent (a delay)
+        self._sent: deque = deque(maxlen=max(transformer.delay, 1))  # actions sent (a delay)
         self._shadow: deque = deque(maxlen=transformer.spec.history)  # shadow states (shadow_memory > 0)
         self._target = None
 
@@ -720,7 +720,7 @@ class GroundedEnv(gym.Wrapper):
         """The d actions sent before this step, oldest first (a transformer with a delay d; None
         without): at an episode's first step padded with the agent's first command, as the batched
         rollouts pad (the training rows pad with the first applied action, ``stack_past``)."""
-        d = getattr(self.transformer, "delay", 0)
+        d = self.transformer.delay
         if not d:
             return None
         if not self._sent:
