@@ -11,8 +11,8 @@ every resulting gait scored on the same paired real trials, and paired tests bet
    interval, fitness mean ± s.e.; per seed too; and the fitness the training world itself gave the
    gait it chose (the optimizer's selection score): how much a method's world flattered its choice. Paired tests at each step (``experiments.stats``):
    a permutation test on fitness and McNemar's exact test on falls, pairs = (seed, trial); for
-   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?), and every
-   method vs θ0; a method trained with the action-noise envelope on top of its grounding
+   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?), hybrid
+   vs identified (does the learned grounding add to the identified physics under it?), and every method vs θ0; a method trained with the action-noise envelope on top of its grounding
    (``sgat+ane``, ``hybrid+ane``, ...: ``experiments.optimize``) also against its base method (what
    the noise adds) and against ANE (what the grounding adds to the noise).
 
@@ -44,7 +44,7 @@ from experiments.stats import mcnemar_test, paired_permutation_test, seed_level_
 
 #: Comparisons tested at every grounding step (a, b): "a vs b" (and :func:`comparisons` adds those of
 #: the ``<base>+ane`` methods).
-COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"), ("hybrid", "ane"))
+COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"), ("hybrid", "ane"), ("hybrid", "identified"))
 
 
 def noise_partners(method: str) -> tuple:

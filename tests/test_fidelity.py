@@ -514,6 +514,8 @@ def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
 
     assert comparisons(("sgat", "gat", "ane", "sgat+ane", "hybrid+ane")) == [  # only pairs of methods run: no hybrid
         ("sgat", "gat"), ("sgat+ane", "sgat"), ("sgat+ane", "ane"), ("hybrid+ane", "ane")]
+    # hybrid against the identified sim it grounds: what the learned grounding adds to the identified physics
+    assert comparisons(("identified", "hybrid", "sgat")) == [("hybrid", "sgat"), ("hybrid", "identified")]
     args = ["--seeds", "1", "--trials", "3", "--popsize", "3", "--generations", "2", "--grounding-steps", "1",
             "--seconds", "0.8", "--workers", "1"]
     run = tmp_path / "t1"
