@@ -5,7 +5,8 @@ Runs ``sgatwalk optimize`` (default settings) for every method and each of ``--s
 seeds, then walks θ0 and every resulting gait on the same ``--trials`` real trial seeds. Prints per
 method and grounding step the speed mean ± s.e. [cm/s], falls with a Wilson 95 % interval and the
 fitness, then paired tests at each step (a permutation test on fitness, McNemar's exact test on
-falls; pairs = seed x trial) of SGAT vs GAT, SGAT vs none, hybrid vs SGAT and every method vs θ0, each
+falls; pairs = seed x trial) of SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE, hybrid vs
+identified (``experiments.table1.comparisons``: only pairs of methods run) and every method vs θ0, each
 with its fitness difference per optimization seed and a t-test over those (the seeds as the units:
 whether the methods, not only these gaits, differ), and a verdict in words whichever way it falls.
 Writes ``table1.json`` and ``table.txt``; the optimization runs live in ``opt_seed<s>/``. Re-running

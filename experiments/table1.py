@@ -11,8 +11,9 @@ every resulting gait scored on the same paired real trials, and paired tests bet
    interval, fitness mean ± s.e.; per seed too; and the fitness the training world itself gave the
    gait it chose (the optimizer's selection score): how much a method's world flattered its choice. Paired tests at each step (``experiments.stats``):
    a permutation test on fitness and McNemar's exact test on falls, pairs = (seed, trial); for
-   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?), hybrid
-   vs identified (does the learned grounding add to the identified physics under it?), and every method vs θ0; a method trained with the action-noise envelope on top of its grounding
+   SGAT vs GAT, SGAT vs none, hybrid vs SGAT, hybrid vs ANE (does the real data beat plain action noise?),
+   hybrid vs identified (does the learned grounding add to the identified physics under it?), and every
+   method vs θ0; a method trained with the action-noise envelope on top of its grounding
    (``sgat+ane``, ``hybrid+ane``, ...: ``experiments.optimize``) also against its base method (what
    the noise adds) and against ANE (what the grounding adds to the noise).
 
