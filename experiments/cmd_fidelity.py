@@ -56,7 +56,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--gaits", type=A.count(0, 1000), default=d.gaits, help=f"gaits drawn around θ0 besides θ0 (default {d.gaits})")
     p.add_argument("--box", type=A.real(0.0, 1.0, open_lo=True), default=d.box,
                    help=f"half-width of the box the gaits are drawn in, normalized (default {d.box}: optimize's trust region)")
-    p.add_argument("--params", type=A.in_file, nargs="+", default=[], metavar="THETA_JSON", help="more gaits: θ files (e.g. a run's thetas/*.json)")
+    p.add_argument("--params", type=A.in_file, nargs="+", default=[], metavar="THETA_JSON", help="more gaits: θ files (e.g. a run's thetas/*.json); every world is then also scored on "
+                   "the drawn and the given gaits apart, and on each file name (every Table I seed's hybrid_step2)")
     p.add_argument("--real-trials", type=A.count(2, 10000), default=d.real_trials, help=f"paired real trials per gait (default {d.real_trials})")
     p.add_argument("--data-seeds", type=A.count(1, 100), default=d.data_seeds,
                    help=f"independent draws of the real data each learned world is fitted on (default {d.data_seeds})")

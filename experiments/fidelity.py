@@ -1065,6 +1065,8 @@ class Fidelity:
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
                                                             for k, c in curve.items()}} if curve else {})}
         out["paired"] = paired_rows(out, n_boot=cfg.bootstrap, seed=cfg.seed)
+        if cfg.params:  # each world on the drawn and the given gaits apart
+            out["groups"] = group_rows(out)
         return out
 
     def write(self, res: dict) -> None:
@@ -1348,6 +1350,7 @@ def format_table(res: dict) -> str:
                          f"{t['fell_without_real']}/{t['walks'] - t['real_fell']} that did not; leg joints "
                          f"{t['q_rms_rad']:.3f} rad RMS from the real walk (ungrounded {t['q_rms_plain_rad']:.3f})")
     lines += format_paired(res)
+    lines += format_groups(res)
     lines += format_episodes(res)
     return "\n".join(lines)
 
@@ -1370,6 +1373,108 @@ def episodes_rows(res: dict) -> list[dict]:
                          "brier_median": s["brier"]["median"], "targets_met": sum(ok for _, ok, _ in t) if t else None,
                          "targets": len(t) if t else None, "ranking_met": bool(t[0][1]) if t else None})
     return rows
+
+
+#: Fewest gaits of a group that :func:`group_rows` gives a Spearman ρ (a rank correlation over a
+#: handful of gaits says little).
+GROUP_MIN_RANK = 8
+
+
+def gait_groups(res: dict) -> dict[str, list[int]]:
+    """The groups of a fidelity panel that has θ files (``--params``): ``drawn`` (θ0 and the gaits
+    drawn in the trust region), ``given`` (the θ files) and, where the files have more than one
+    name, one group per file name (the last part of the gait's name: ``hybrid_step2`` holds every
+    Table I seed's ``opt_seed<k>/thetas/hybrid_step2``).
+
+    Returns:
+        ``{group: [indices into res["gaits"]]}`` in that order; empty for a panel without θ files.
+    """
+    n_given = len(res.get("config", {}).get("params") or [])
+    if not n_given:
+        return {}
+    n = len(res["gaits"])
+    given = list(range(n - n_given, n))
+    out = {"drawn": list(range(n - n_given)), "given": given}
+    by_name: dict[str, list[int]] = {}
+    for i in given:
+        by_name.setdefault(res["gaits"][i].rsplit("/", 1)[-1], []).append(i)
+    if len(by_name) > 1:
+        out.update({f"given: {k}": v for k, v in by_name.items()})
+    return out
+
+
+def group_rows(res: dict) -> list[dict]:
+    """Each world on each gait group of :func:`gait_groups` (gaits optimized in a training world
+    apart from those drawn around θ0: what the world promised for them against what they did).
+
+    Per group and world, over the draws (median [min, max]): the world's mean fitness over the
+    group's gaits and its bias (world − real, mean over the gaits), the Spearman ρ within the group
+    and the regret of the world's pick within the group (:func:`experiments.stats.pick_regret`: the
+    real fitness lost by taking the gait the world rates best instead of the group's real best). ρ
+    only for groups of at least :data:`GROUP_MIN_RANK` gaits, with the group's ceiling of ρ from the
+    real trials' noise (:func:`experiments.stats.split_half_reliability`). The group's real mean
+    fitness (with its standard error over the paired trials) and fall rate come with it.
+
+    Returns:
+        ``[{"group", "gaits", "real_fitness", "real_fitness_se", "real_ceiling", "real_falls",
+        "world", "fitness", "bias", "rho", "pick_regret"}]``, each figure of the world a
+        ``{"median", "min", "max"}`` (``rho`` and ``real_ceiling`` None for a small group); empty
+        without θ files.
+    """
+    groups = gait_groups(res)
+    if not groups:
+        return []
+    real_fit = np.asarray(res["real"]["fitness"], dtype=float)
+    trials = res["real"].get("fitness_trials")
+    falls = np.asarray(res["real"]["fall_rate"], dtype=float)
+    seed = int(res["config"].get("seed", 0))
+
+    def spread(v):
+        v = np.asarray(v, dtype=float)
+        return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max())}
+
+    rows = []
+    for group, idx in groups.items():
+        ix = np.asarray(idx)
+        for name, w in res["worlds"].items():
+            fit, bias, rho, regret = [], [], [], []
+            for d in w["draws"]:
+                wf = np.asarray(d["fitness"], dtype=float)[ix]
+                fit.append(wf.mean())
+                bias.append(float(np.mean(wf - real_fit[ix])))
+                if len(ix) >= GROUP_MIN_RANK:
+                    rho.append(spearman(wf, real_fit[ix]))
+                if len(ix) >= 2:
+                    regret.append(pick_regret(wf, real_fit[ix]))
+            ceiling = (split_half_reliability(np.asarray(trials)[ix], seed=seed)["ceiling"]
+                       if trials and len(ix) >= GROUP_MIN_RANK else None)
+            rows.append({"group": group, "gaits": len(ix), "real_fitness": float(real_fit[ix].mean()),
+                         "real_ceiling": ceiling,
+                         "real_fitness_se": (float(np.std(np.asarray(trials)[ix].mean(0), ddof=1) / math.sqrt(len(trials[0])))
+                                             if trials else None),
+                         "real_falls": float(falls[ix].mean()), "world": name, "fitness": spread(fit),
+                         "bias": spread(bias), "rho": spread(rho) if rho else None,
+                         "pick_regret": spread(regret) if regret else None})
+    return rows
+
+
+def format_groups(res: dict) -> list[str]:
+    """The text lines of :func:`group_rows` (none for a panel without θ files)."""
+    rows = group_rows(res)
+    if not rows:
+        return []
+    lines = ["", "per gait group (drawn: theta0 and the trust-region gaits; given: the --params files, and each file "
+                 "name): median [min, max] over the draws; rho /the group's ceiling from the real trials' noise",
+             f"  {'group':30s} {'world':16s} {'gaits':>5s} {'real':>6s} {'world':>19s} {'bias':>20s} {'rho /ceiling':>25s} "
+             f"{'pick regret':>17s}"]
+    for r in rows:
+        def c(s, fmt="{:+.1f}"):
+            return "-" if s is None else f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
+        rho = c(r['rho'], '{:.2f}') + ("" if r["real_ceiling"] is None else f" /{r['real_ceiling']:.2f}")
+        lines.append(f"  {r['group']:30s} {r['world']:16s} {r['gaits']:>5d} {r['real_fitness']:>+6.1f} "
+                     f"{c(r['fitness']):>19s} {c(r['bias']):>20s} {rho:>25s} "
+                     f"{c(r['pick_regret'], '{:.1f}'):>17s}")
+    return lines
 
 
 def format_episodes(res: dict) -> list[str]:

@@ -31,8 +31,8 @@ from common.files import atomic_write_text
 from experiments.cli import main as cli_main
 from experiments.cmd_cliff import format_table
 from experiments.cmd_stand import format_stand
-from experiments.fidelity import (episodes_rows, fidelity_targets, first_world, format_phases, p_text, ranking_target,
-                                  replay_totals)
+from experiments.fidelity import (episodes_rows, fidelity_targets, first_world, format_phases, group_rows, p_text,
+                                  ranking_target, replay_totals)
 from experiments.table1 import seed_level_interval
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -102,6 +102,45 @@ def _episodes_table(res: dict) -> list[str]:
                          + ("" if one_draw else f", spread {_f(r['bias_spread'], '{:.1f}')}")
                          + ("" if r["targets"] is None else f", {r['targets_met']}/{r['targets']}"))
         out.append(f"| `{name}` | " + " | ".join(cells) + " |")
+    return out
+
+
+def _groups_table(res: dict) -> list[str]:
+    """Each world on the panel's gait groups (``experiments.fidelity.group_rows``: the drawn gaits, the
+    given θ files, each file name): its bias per group, then its ranking and pick within the groups
+    large enough to rank. None for a panel without θ files."""
+    rows = group_rows(res)
+    if not rows:
+        return []
+    worlds = list(dict.fromkeys(r["world"] for r in rows))
+    groups = list(dict.fromkeys(r["group"] for r in rows))
+    cell = {(r["group"], r["world"]): r for r in rows}
+
+    def rng(s, fmt):
+        return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
+
+    out = ["", "Per group of gaits (drawn: θ0 and the gaits drawn around it; given: the θ files of `--params`, "
+               "and each file name): the real mean fitness (± s.e. over the paired trials) and falls, and each "
+               "world's bias on the group (world − real, the mean over its gaits; median [min, max] over the draws):",
+           "", "| group | gaits | real fitness | real falls | " + " | ".join(f"`{w}`" for w in worlds) + " |",
+           "|---|---|---|---|" + "---|" * len(worlds)]
+    for g in groups:
+        r0 = cell[(g, worlds[0])]
+        se = "" if r0["real_fitness_se"] is None else f" ± {r0['real_fitness_se']:.1f}"
+        out.append(f"| {g} | {r0['gaits']} | {r0['real_fitness']:+.1f}{se} | {100 * r0['real_falls']:.0f} % | "
+                   + " | ".join(rng(cell[(g, w)]["bias"], "{:+.1f}") for w in worlds) + " |")
+    ranked = [g for g in groups if cell[(g, worlds[0])]["rho"] is not None]
+    if ranked:
+        out += ["", "Within the groups of at least 8 gaits: Spearman ρ with the real fitness and the regret of the "
+                    "world's pick (the real fitness lost by taking the gait the world rates best instead of the "
+                    "group's real best), median [min, max] over the draws; the group's ceiling of ρ from the real "
+                    "trials' own noise beside its name:", "",
+                "| group (ceiling) | " + " | ".join(f"`{w}`" for w in worlds) + " |", "|---|" + "---|" * len(worlds)]
+        for g in ranked:
+            c = cell[(g, worlds[0])]["real_ceiling"]
+            out.append(f"| {g}{'' if c is None else f' ({c:.2f})'} | " + " | ".join(
+                f"ρ {rng(cell[(g, w)]['rho'], '{:.2f}')}, regret {rng(cell[(g, w)]['pick_regret'], '{:.1f}')}"
+                for w in worlds) + " |")
     return out
 
 
@@ -186,6 +225,7 @@ def _fidelity(res: dict) -> str:
                 ("✓" if ok else "✗") + ("" if "every draw" in t else f" {v.split(' (')[0]}") for t, ok, v in tv) + " |")
     lines += _episodes_table(res)
     lines += _paired_table(res)
+    lines += _groups_table(res)
     for oracle in [n for n, w in res["worlds"].items() if w.get("kind") == "oracle"] if targets else []:
         w = res["worlds"][oracle]
         parts = [f"{'met' if ok else '**not met**'}: {t}" + ("" if "every draw" in t else f" — {v.split(' (')[0]}")

@@ -429,6 +429,47 @@ def test_params_with_one_file_name_stay_apart(tmp_path, capsys):
     real = [(f, p) for f, p in zip(res["real"]["fitness"], res["real"]["speed_cm_s"])]
     assert real[1] == real[0]  # the same gait on the same paired seeds
     assert real[2] != real[1]  # another gait: walked, not read back from the first file's cache
+    # the given gaits scored apart from the drawn one (one file name: no group per name)
+    assert [(r["group"], r["gaits"]) for r in res["groups"]] == [("drawn", 1), ("given", 2)]
+
+
+def test_gait_groups_score_each_world_on_the_drawn_and_the_given_gaits_apart():
+    """A world exact on the drawn gaits and 5 points optimistic on the optimized ones (given as θ
+    files) shows no bias on the first group and +5 on the second, per file name too; it ranks the
+    drawn gaits perfectly, and a world that rates the given gaits in reverse picks their worst."""
+    from experiments.fidelity import GROUP_MIN_RANK, format_groups, gait_groups, group_rows
+
+    drawn, per_name = GROUP_MIN_RANK, 3
+    names = ["theta0"] + [f"box{i:02d}" for i in range(drawn - 1)]
+    names += [f"s{k}/hybrid_step1" for k in range(per_name)] + [f"s{k}/hybrid_step2" for k in range(per_name)]
+    G = len(names)
+    real = np.arange(G, dtype=float)
+    trials = np.repeat(real[:, None], 4, axis=1) + np.array([-1.0, 1.0, -1.0, 1.0])
+    given = np.arange(drawn, G)
+    exact_then_optimistic = real + np.where(np.arange(G) >= drawn, 5.0, 0.0)
+    reversed_given = real.copy()
+    reversed_given[given] = real[given][::-1]
+    res = {"config": {"params": [f"s{k}.json" for k in range(2 * per_name)]}, "gaits": names,
+           "real": {"fitness": real.tolist(), "fitness_trials": trials.tolist(), "fall_rate": [0.5] * G},
+           "worlds": {w: {"draws": [{"fitness": f.tolist(), "fall_rate": [0.5] * G}]}
+                      for w, f in (("optimistic", exact_then_optimistic), ("reversed", reversed_given))}}
+    groups = gait_groups(res)
+    assert groups["drawn"] == list(range(drawn)) and groups["given"] == given.tolist()
+    assert groups["given: hybrid_step1"] == list(range(drawn, drawn + per_name))
+    assert groups["given: hybrid_step2"] == list(range(drawn + per_name, G))
+    rows = {(r["group"], r["world"]): r for r in group_rows(res)}
+    assert rows[("drawn", "optimistic")]["bias"]["median"] == pytest.approx(0.0)
+    assert rows[("drawn", "optimistic")]["rho"]["median"] == pytest.approx(1.0)
+    assert rows[("drawn", "optimistic")]["pick_regret"]["median"] == pytest.approx(0.0)
+    for g in ("given", "given: hybrid_step1", "given: hybrid_step2"):
+        assert rows[(g, "optimistic")]["bias"]["median"] == pytest.approx(5.0)
+    assert rows[("given", "optimistic")]["rho"] is None  # 6 gaits: too few to rank
+    assert rows[("given", "reversed")]["pick_regret"]["median"] == pytest.approx(real[given].max() - real[given].min())
+    assert rows[("given", "reversed")]["bias"]["median"] == pytest.approx(0.0)
+    assert rows[("given", "optimistic")]["real_fitness"] == pytest.approx(real[given].mean())
+    assert rows[("given", "optimistic")]["real_fitness_se"] == pytest.approx(np.std([-1, 1, -1, 1], ddof=1) / 2)
+    assert any("hybrid_step2" in line and "+5.0" in line for line in format_groups(res))
+    assert gait_groups({**res, "config": {"params": []}}) == {} and group_rows({**res, "config": {}}) == []
 
 
 def test_fidelity_bad_input(tmp_path, capsys):
