@@ -1408,7 +1408,8 @@ def group_rows(res: dict) -> list[dict]:
     apart from those drawn around θ0: what the world promised for them against what they did).
 
     Per group and world, over the draws (median [min, max]): the world's mean fitness over the
-    group's gaits and its bias (world − real, mean over the gaits), the Spearman ρ within the group
+    group's gaits, its bias (world − real, mean over the gaits) and mean absolute error, the Spearman
+    ρ within the group
     and the regret of the world's pick within the group (:func:`experiments.stats.pick_regret`: the
     real fitness lost by taking the gait the world rates best instead of the group's real best). ρ
     only for groups of at least :data:`GROUP_MIN_RANK` gaits, with the group's ceiling of ρ from the
@@ -1417,7 +1418,7 @@ def group_rows(res: dict) -> list[dict]:
 
     Returns:
         ``[{"group", "gaits", "real_fitness", "real_fitness_se", "real_ceiling", "real_falls",
-        "world", "fitness", "bias", "rho", "pick_regret"}]``, each figure of the world a
+        "world", "fitness", "bias", "mae", "rho", "pick_regret"}]``, each figure of the world a
         ``{"median", "min", "max"}`` (``rho`` and ``real_ceiling`` None for a small group); empty
         without θ files.
     """
@@ -1437,11 +1438,12 @@ def group_rows(res: dict) -> list[dict]:
     for group, idx in groups.items():
         ix = np.asarray(idx)
         for name, w in res["worlds"].items():
-            fit, bias, rho, regret = [], [], [], []
+            fit, bias, mae, rho, regret = [], [], [], [], []
             for d in w["draws"]:
                 wf = np.asarray(d["fitness"], dtype=float)[ix]
                 fit.append(wf.mean())
                 bias.append(float(np.mean(wf - real_fit[ix])))
+                mae.append(float(np.mean(np.abs(wf - real_fit[ix]))))
                 if len(ix) >= GROUP_MIN_RANK:
                     rho.append(spearman(wf, real_fit[ix]))
                 if len(ix) >= 2:
@@ -1453,7 +1455,7 @@ def group_rows(res: dict) -> list[dict]:
                          "real_fitness_se": (float(np.std(np.asarray(trials)[ix].mean(0), ddof=1) / math.sqrt(len(trials[0])))
                                              if trials else None),
                          "real_falls": float(falls[ix].mean()), "world": name, "fitness": spread(fit),
-                         "bias": spread(bias), "rho": spread(rho) if rho else None,
+                         "bias": spread(bias), "mae": spread(mae), "rho": spread(rho) if rho else None,
                          "pick_regret": spread(regret) if regret else None})
     return rows
 
@@ -1499,7 +1501,8 @@ def _own(summary: dict) -> str:
 
 
 def plot(res: dict, path: str) -> None:
-    """Predicted against real fitness, one panel per world, one colour per draw."""
+    """Predicted against real fitness, one panel per world, one colour per draw; a panel with θ files
+    (:func:`gait_groups`) draws the given gaits as triangles, the drawn ones as dots."""
     import matplotlib  # lazy: matplotlib
 
     matplotlib.use("Agg")
@@ -1515,12 +1518,20 @@ def plot(res: dict, path: str) -> None:
     se = np.array(res["real"]["fitness_se"])
     lo = min(real.min(), min(min(d["fitness"]) for _, w in worlds for d in w["draws"])) - 2
     hi = max(real.max(), max(max(d["fitness"]) for _, w in worlds for d in w["draws"])) + 2
+    given = np.zeros(len(real), dtype=bool)
+    given[gait_groups(res).get("given", [])] = True
     for ax, (name, w) in zip(axes.ravel(), worlds):
         ax.plot([lo, hi], [lo, hi], color="0.6", lw=1, ls="--")
         for d in w["draws"]:
-            ax.errorbar(real, d["fitness"], xerr=se, fmt="o", ms=3.5, lw=0.6, alpha=0.8,
-                        label=f"draw {d['draw']}: ρ {d['rho']:.2f}" if d["rho"] is not None and math.isfinite(d["rho"])
-                        else f"draw {d['draw']}")
+            f = np.asarray(d["fitness"], dtype=float)
+            line = ax.errorbar(real[~given], f[~given], xerr=se[~given], fmt="o", ms=3.5, lw=0.6, alpha=0.8,
+                               label=f"draw {d['draw']}: ρ {d['rho']:.2f}"
+                               if d["rho"] is not None and math.isfinite(d["rho"]) else f"draw {d['draw']}")
+            if given.any():
+                ax.errorbar(real[given], f[given], xerr=se[given], fmt="^", ms=4.5, lw=0.6, alpha=0.8,
+                            color=line[0].get_color())
+        if given.any():  # the marker key, in the legend below the draws
+            ax.plot([], [], "^", color="0.3", ms=4.5, label="given θ files")
         ax.set_xlim(lo, hi)
         ax.set_ylim(lo, hi)
         ax.set_title(name, fontsize=10)

@@ -121,14 +121,16 @@ def _groups_table(res: dict) -> list[str]:
 
     out = ["", "Per group of gaits (drawn: θ0 and the gaits drawn around it; given: the θ files of `--params`, "
                "and each file name): the real mean fitness (± s.e. over the paired trials) and falls, and each "
-               "world's bias on the group (world − real, the mean over its gaits; median [min, max] over the draws):",
+               "world's bias on the group (world − real, the mean over its gaits; median [min, max] over the draws) "
+               "and its mean absolute error (median over the draws):",
            "", "| group | gaits | real fitness | real falls | " + " | ".join(f"`{w}`" for w in worlds) + " |",
            "|---|---|---|---|" + "---|" * len(worlds)]
     for g in groups:
         r0 = cell[(g, worlds[0])]
         se = "" if r0["real_fitness_se"] is None else f" ± {r0['real_fitness_se']:.1f}"
         out.append(f"| {g} | {r0['gaits']} | {r0['real_fitness']:+.1f}{se} | {100 * r0['real_falls']:.0f} % | "
-                   + " | ".join(rng(cell[(g, w)]["bias"], "{:+.1f}") for w in worlds) + " |")
+                   + " | ".join(f"{rng(cell[(g, w)]['bias'], '{:+.1f}')}, MAE {cell[(g, w)]['mae']['median']:.1f}"
+                                for w in worlds) + " |")
     ranked = [g for g in groups if cell[(g, worlds[0])]["rho"] is not None]
     if ranked:
         out += ["", "Within the groups of at least 8 gaits: Spearman ρ with the real fitness and the regret of the "

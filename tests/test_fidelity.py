@@ -465,7 +465,10 @@ def test_gait_groups_score_each_world_on_the_drawn_and_the_given_gaits_apart():
         assert rows[(g, "optimistic")]["bias"]["median"] == pytest.approx(5.0)
     assert rows[("given", "optimistic")]["rho"] is None  # 6 gaits: too few to rank
     assert rows[("given", "reversed")]["pick_regret"]["median"] == pytest.approx(real[given].max() - real[given].min())
-    assert rows[("given", "reversed")]["bias"]["median"] == pytest.approx(0.0)
+    assert rows[("given", "reversed")]["bias"]["median"] == pytest.approx(0.0)  # errors cancel in the bias,
+    reversed_error = np.mean(np.abs(real[given][::-1] - real[given]))
+    assert rows[("given", "reversed")]["mae"]["median"] == pytest.approx(reversed_error)  # not in the error
+    assert rows[("given", "optimistic")]["mae"]["median"] == pytest.approx(5.0)
     assert rows[("given", "optimistic")]["real_fitness"] == pytest.approx(real[given].mean())
     assert rows[("given", "optimistic")]["real_fitness_se"] == pytest.approx(np.std([-1, 1, -1, 1], ddof=1) / 2)
     assert any("hybrid_step2" in line and "+5.0" in line for line in format_groups(res))
