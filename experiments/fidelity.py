@@ -95,8 +95,11 @@ more episodes per gait cannot lift ρ and what is left is the world's model erro
 world is also scored from the first k of its episodes per gait, k = 1, 2, 4, ... up to ``episodes``
 (``by_episodes``, :func:`episodes_rows`, ``fidelity_episodes.png``): episode seeds are a
 prefix-stable stream, so these are the figures a run with ``--episodes k`` reports, and one run
-gives fidelity against the number of episodes per gait. Everything random is keyed by (seed, purpose,
-...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
+gives fidelity against the number of episodes per gait. A panel with θ files also scores every
+world on the drawn gaits and on the given ones apart, and on each file name among the given
+(``groups``, :func:`group_rows`; twenty-eighth round): what each world promised for the gaits an
+optimizer returned (a run's ``thetas/``) against what they walked. Everything random is keyed by
+(seed, purpose, ...) through ``numpy.random.SeedSequence``; a run directory resumes where it stopped.
 """
 
 from __future__ import annotations
