@@ -1166,14 +1166,25 @@ def episodes_view(res: dict, k: int) -> dict:
     return {**res, "worlds": worlds}
 
 
+def _over_draws(values) -> dict:
+    """``{"median", "min", "max", "spread"}`` of one figure over the draws, its non-finite values left
+    out (all NaN where none is finite)."""
+    v = np.asarray(values, dtype=float)
+    ok = v[np.isfinite(v)]
+    if not len(ok):
+        return {"median": math.nan, "min": math.nan, "max": math.nan, "spread": math.nan}
+    return {"median": float(np.median(ok)), "min": float(ok.min()), "max": float(ok.max()),
+            "spread": float(ok.max() - ok.min())}
+
+
+def _range_text(s: dict | None, fmt: str = "{:.2f}") -> str:
+    """A figure over the draws as text: 'median [min, max]' ('-' for None)."""
+    return "-" if s is None else f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
+
+
 def _summary(draws: list[dict]) -> dict:
     def agg(key):
-        v = np.array([d[key] for d in draws], dtype=float)
-        ok = v[np.isfinite(v)]
-        if not len(ok):
-            return {"median": math.nan, "min": math.nan, "max": math.nan, "spread": math.nan}
-        return {"median": float(np.median(ok)), "min": float(ok.min()), "max": float(ok.max()),
-                "spread": float(ok.max() - ok.min())}
+        return _over_draws([d[key] for d in draws])
     s = {k: agg(k) for k in ("rho", "mae", "bias", "brier")}
     if all("pick_regret" in d for d in draws):  # runs saved before it have none
         s["pick_regret"] = agg("pick_regret")
@@ -1330,8 +1341,7 @@ def format_table(res: dict) -> str:
              f"{'bias (world-real)':>24s} {'Brier':>22s} {'pick regret':>20s} {'own-noise ceiling':>18s}",
              "-" * 176]
 
-    def rng3(s, fmt="{:.2f}"):
-        return f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
+    rng3 = _range_text
 
     for name, w in res["worlds"].items():
         s = w["summary"]
@@ -1422,8 +1432,8 @@ def group_rows(res: dict) -> list[dict]:
     Returns:
         ``[{"group", "gaits", "real_fitness", "real_fitness_se", "real_ceiling", "real_falls",
         "world", "fitness", "bias", "mae", "rho", "pick_regret"}]``, each figure of the world a
-        ``{"median", "min", "max"}`` (``rho`` and ``real_ceiling`` None for a small group); empty
-        without θ files.
+        ``{"median", "min", "max", "spread"}`` (``rho`` and ``real_ceiling`` None for a small group);
+        empty without θ files.
     """
     groups = gait_groups(res)
     if not groups:
@@ -1432,14 +1442,15 @@ def group_rows(res: dict) -> list[dict]:
     trials = res["real"].get("fitness_trials")
     falls = np.asarray(res["real"]["fall_rate"], dtype=float)
     seed = int(res["config"].get("seed", 0))
-
-    def spread(v):
-        v = np.asarray(v, dtype=float)
-        return {"median": float(np.median(v)), "min": float(v.min()), "max": float(v.max())}
-
     rows = []
     for group, idx in groups.items():
         ix = np.asarray(idx)
+        real = {"group": group, "gaits": len(ix), "real_fitness": float(real_fit[ix].mean()),
+                "real_fitness_se": (float(np.std(np.asarray(trials)[ix].mean(0), ddof=1) / math.sqrt(len(trials[0])))
+                                    if trials else None),
+                "real_ceiling": (split_half_reliability(np.asarray(trials)[ix], seed=seed)["ceiling"]
+                                 if trials and len(ix) >= GROUP_MIN_RANK else None),
+                "real_falls": float(falls[ix].mean())}
         for name, w in res["worlds"].items():
             fit, bias, mae, rho, regret = [], [], [], [], []
             for d in w["draws"]:
@@ -1451,15 +1462,9 @@ def group_rows(res: dict) -> list[dict]:
                     rho.append(spearman(wf, real_fit[ix]))
                 if len(ix) >= 2:
                     regret.append(pick_regret(wf, real_fit[ix]))
-            ceiling = (split_half_reliability(np.asarray(trials)[ix], seed=seed)["ceiling"]
-                       if trials and len(ix) >= GROUP_MIN_RANK else None)
-            rows.append({"group": group, "gaits": len(ix), "real_fitness": float(real_fit[ix].mean()),
-                         "real_ceiling": ceiling,
-                         "real_fitness_se": (float(np.std(np.asarray(trials)[ix].mean(0), ddof=1) / math.sqrt(len(trials[0])))
-                                             if trials else None),
-                         "real_falls": float(falls[ix].mean()), "world": name, "fitness": spread(fit),
-                         "bias": spread(bias), "mae": spread(mae), "rho": spread(rho) if rho else None,
-                         "pick_regret": spread(regret) if regret else None})
+            rows.append({**real, "world": name, "fitness": _over_draws(fit), "bias": _over_draws(bias),
+                         "mae": _over_draws(mae), "rho": _over_draws(rho) if rho else None,
+                         "pick_regret": _over_draws(regret) if regret else None})
     return rows
 
 
@@ -1473,12 +1478,10 @@ def format_groups(res: dict) -> list[str]:
              f"  {'group':30s} {'world':16s} {'gaits':>5s} {'real':>6s} {'world':>19s} {'bias':>20s} {'rho /ceiling':>25s} "
              f"{'pick regret':>17s}"]
     for r in rows:
-        def c(s, fmt="{:+.1f}"):
-            return "-" if s is None else f"{fmt.format(s['median'])} [{fmt.format(s['min'])}, {fmt.format(s['max'])}]"
-        rho = c(r['rho'], '{:.2f}') + ("" if r["real_ceiling"] is None else f" /{r['real_ceiling']:.2f}")
+        rho = _range_text(r["rho"]) + ("" if r["real_ceiling"] is None else f" /{r['real_ceiling']:.2f}")
         lines.append(f"  {r['group']:30s} {r['world']:16s} {r['gaits']:>5d} {r['real_fitness']:>+6.1f} "
-                     f"{c(r['fitness']):>19s} {c(r['bias']):>20s} {rho:>25s} "
-                     f"{c(r['pick_regret'], '{:.1f}'):>17s}")
+                     f"{_range_text(r['fitness'], '{:+.1f}'):>19s} {_range_text(r['bias'], '{:+.1f}'):>20s} {rho:>25s} "
+                     f"{_range_text(r['pick_regret'], '{:.1f}'):>17s}")
     return lines
 
 
