@@ -1474,13 +1474,13 @@ def format_groups(res: dict) -> list[str]:
     if not rows:
         return []
     lines = ["", "per gait group (drawn: theta0 and the trust-region gaits; given: the --params files, and each file "
-                 "name): median [min, max] over the draws; rho /the group's ceiling from the real trials' noise",
-             f"  {'group':30s} {'world':16s} {'gaits':>5s} {'real':>6s} {'world':>19s} {'bias':>20s} {'rho /ceiling':>25s} "
+                 "name): median [min, max] over the draws (MAE: the median); rho /the group's ceiling from the real trials' noise",
+             f"  {'group':30s} {'world':16s} {'gaits':>5s} {'real':>6s} {'world':>19s} {'bias':>20s} {'MAE':>6s} {'rho /ceiling':>25s} "
              f"{'pick regret':>17s}"]
     for r in rows:
         rho = _range_text(r["rho"]) + ("" if r["real_ceiling"] is None else f" /{r['real_ceiling']:.2f}")
         lines.append(f"  {r['group']:30s} {r['world']:16s} {r['gaits']:>5d} {r['real_fitness']:>+6.1f} "
-                     f"{_range_text(r['fitness'], '{:+.1f}'):>19s} {_range_text(r['bias'], '{:+.1f}'):>20s} {rho:>25s} "
+                     f"{_range_text(r['fitness'], '{:+.1f}'):>19s} {_range_text(r['bias'], '{:+.1f}'):>20s} {r['mae']['median']:>6.1f} {rho:>25s} "
                      f"{_range_text(r['pick_regret'], '{:.1f}'):>17s}")
     return lines
 
