@@ -72,7 +72,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--identify-rounds", type=A.count(1, 100), default=d.identify_rounds, metavar="N",
                    help=f"screen/refit rounds of each diagnosis of the identified worlds (default {d.identify_rounds}; "
                         "1 saves about a third of the diagnoses' time, but leaves out the arm and head joints' "
-                        "friction in the air, and the fitted latency absorbs it: README, twenty-fourth round)")
+                        "friction in the air, and the fitted latency absorbs it: docs/grounding_history.md, twenty-fourth round)")
     p.add_argument("--seed", type=A.seed, default=d.seed, help="seed of the panel, trials and data draws (default 0)")
     p.add_argument("--out", type=A.out_dir, help="run directory (default runs/fidelity-seed<seed>)")
     p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")

@@ -68,7 +68,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--shadow", type=A.real(0.0, 10.0, unit="s"),
                    help=f"τ [s] of the transformer's shadow state: the forward model predicts from it and it relaxes "
                    f"toward the sim's state over τ (default {d.shadow:g}: the paper, from the sim's state; 0.02 "
-                   "forecast better around θ0 but optimized worse in Table I: README, sgatwalk fidelity, ninth round)")
+                   "forecast better around θ0 but optimized worse in Table I: docs/grounding_history.md, ninth round)")
     p.add_argument("--alpha", type=A.fraction, help=f"blend ã = (1-α) a + α g(s,a) of raw and grounded action (default {d.alpha}; "
                    "1 = the paper's formula)")
     p.add_argument("--hybrid-alpha", type=A.fraction, help=f"blend of the hybrid method (default {d.hybrid_alpha})")
@@ -83,10 +83,10 @@ def register(sub) -> argparse.ArgumentParser:
                         "every θ_j so far, as the GARAT code accumulates data)")
     p.add_argument("--confounded-terms", dest="identified_confounded", action="store_true", default=None,
                    help="identified and hybrid: also build in the contact terms the diagnosis could not tell apart "
-                        "from the uneven ground (default off since the fourteenth fidelity round; README, sgatwalk fidelity)")
+                        "from the uneven ground (default off since the fourteenth fidelity round; docs/grounding_history.md)")
     p.add_argument("--identify-rounds", type=A.count(1, 100), metavar="N",
                    help=f"identified and hybrid: screen/refit rounds of each diagnosis (default {d.identify_rounds}; 1 is "
-                        "faster and leaves out the arm joints' friction: README, sgatwalk fidelity, twenty-fourth round)")
+                        "faster and leaves out the arm joints' friction: docs/grounding_history.md, twenty-fourth round)")
     p.add_argument("--ane-sigma", type=A.real(0.0, 1.0, unit='rad'), help=f"ANE action noise [rad] (default {d.ane_sigma})")
     p.add_argument("--params", type=A.in_file, help="initial gait parameters θ0 (JSON; default: the walk engine's θ0)")
     p.add_argument("--seed", type=A.seed, help="run seed (default 0)")

@@ -9,10 +9,12 @@ Usage:
 
 * ``python -m experiments.readme run NAME -- optimize --methods sgat`` runs ``sgatwalk optimize
   --methods sgat --json`` and saves its JSON with the command line as ``docs/results/NAME.json``;
-* ``python -m experiments.readme`` rewrites README.md from the saved results;
-* ``python -m experiments.readme --check`` exits 1 (naming the blocks) when the README and the saved
-  results disagree, or (naming them) when a relative link leads nowhere: an in-page anchor no heading
-  or ``<a id>`` gives, or a missing file (``tests/test_readme.py`` runs it).
+* ``python -m experiments.readme`` rewrites README.md and the other :data:`DOCUMENTS` (the record of
+  every fidelity and Table I run, ``docs/grounding_history.md``) from the saved results;
+* ``python -m experiments.readme --check`` exits 1 (naming the file and the blocks) when a document and
+  the saved results disagree, or (naming them) when a relative link leads nowhere: an in-page anchor no
+  heading or ``<a id>`` gives, a missing file, or an anchor another Markdown file does not give
+  (``tests/test_readme.py`` runs it).
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ from experiments.table1 import seed_level_interval
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RESULTS = os.path.join(ROOT, "docs", "results")
+#: The Markdown documents whose results blocks are rendered and whose links are checked, relative to
+#: the repository root: the README (commands, today's default runs, what they found) and the record of
+#: every fidelity and Table I run behind it.
+DOCUMENTS = ("README.md", os.path.join("docs", "grounding_history.md"))
 _BLOCK = re.compile(r"(<!-- results:(?P<name>[\w-]+) -->\n)(?P<body>.*?)(<!-- /results:(?P=name) -->)", re.S)
 
 
@@ -593,8 +599,25 @@ RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _d
              "benchdiagnose": _benchtext, "benchroughness": _benchtext, "benchvisibility": _benchtext}
 
 
-def render(text: str, results_dir: str = RESULTS) -> str:
-    """``text`` with every results block regenerated from ``results_dir``.
+def _relink(body: str, doc_dir: str) -> str:
+    """``body`` (Markdown whose relative links are relative to the repository root, as renderers write
+    them, e.g. a result's ``plot``) with those links made relative to ``doc_dir``, the folder of the
+    document it goes into. In-page anchors and web links stay as they are."""
+    if os.path.abspath(doc_dir) == ROOT:
+        return body
+
+    def fix(m: re.Match) -> str:
+        target = m.group(1)
+        if target.startswith("#") or "://" in target or target.startswith("mailto:"):
+            return m.group(0)
+        return "](" + os.path.relpath(os.path.join(ROOT, target), doc_dir).replace(os.sep, "/") + ")"
+
+    return _LINK.sub(fix, body)
+
+
+def render(text: str, results_dir: str = RESULTS, doc_dir: str = ROOT) -> str:
+    """``text`` with every results block regenerated from ``results_dir``; ``doc_dir``: the folder of
+    the document ``text`` is (relative links in the blocks are written relative to it).
 
     Raises:
         FileNotFoundError: a block whose results file is missing. KeyError: no renderer for a block.
@@ -617,7 +640,7 @@ def render(text: str, results_dir: str = RESULTS) -> str:
         for key in ("relabelled", "note"):  # a later relabelling; how the run was made (a shared run directory)
             if doc.get(key):
                 body += f"\n<sub>{doc[key]}</sub>\n"
-        return m.group(1) + body + m.group(4)
+        return m.group(1) + _relink(body, doc_dir) + m.group(4)
 
     return _BLOCK.sub(block, text)
 
@@ -672,16 +695,25 @@ def anchors(text: str) -> set[str]:
 
 def broken_links(text: str, root: str = ROOT) -> list[str]:
     """Relative links of a Markdown text that lead nowhere: ``(#anchor)`` without that anchor in the text
-    (:func:`anchors`) and ``(path)`` / ``(path#anchor)`` without the file under ``root``. Web links
+    (:func:`anchors`), ``(path)`` / ``(path#anchor)`` without the file under ``root`` (the folder of the
+    text's file), and ``(file.md#anchor)`` where that Markdown file gives no such anchor. Web links
     (``scheme://``) and ``mailto:`` are not checked. Returns the link targets, in order, once each."""
     have = anchors(text)
+    other: dict[str, set[str]] = {}
     bad: list[str] = []
     for target in _LINK.findall(text):
         if "://" in target or target.startswith("mailto:") or target in bad:
             continue
         path, _, frag = target.partition("#")
-        if (not path and frag not in have) or (path and not os.path.exists(os.path.join(root, path))):
+        full = os.path.join(root, path)
+        if (not path and frag not in have) or (path and not os.path.exists(full)):
             bad.append(target)
+        elif path and frag and path.endswith(".md"):
+            if full not in other:
+                with open(full) as f:
+                    other[full] = anchors(f.read())
+            if frag not in other[full]:
+                bad.append(target)
     return bad
 
 
@@ -694,29 +726,34 @@ def main(argv=None) -> int:
         k = argv.index("--")
         print(run_and_save(argv[1], argv[k + 1:]))
         return 0
-    ap = argparse.ArgumentParser(description="render docs/results/*.json into README.md")
-    ap.add_argument("--check", action="store_true", help="exit 1 if README.md differs from the rendering or links to what is not there")
-    ap.add_argument("--readme", default=os.path.join(ROOT, "README.md"))
+    ap = argparse.ArgumentParser(description="render docs/results/*.json into README.md and the other documents")
+    ap.add_argument("--check", action="store_true",
+                    help="exit 1 if a document differs from the rendering or links to what is not there")
+    ap.add_argument("--readme", default=None,
+                    help="one Markdown file to render or check (default: every document of DOCUMENTS)")
     args = ap.parse_args(argv)
-    with open(args.readme) as f:
-        text = f.read()
-    new = render(text)
-    if args.check:
-        rc = 0
-        if new != text:
-            names = [m.group("name") for m in _BLOCK.finditer(text)
-                     if render(m.group(0)) != m.group(0)]
-            print(f"README.md is stale in block(s): {', '.join(names) or '?'}; run python -m experiments.readme",
-                  file=sys.stderr)
-            rc = 1
-        bad = broken_links(text, os.path.dirname(os.path.abspath(args.readme)))
-        if bad:
-            print(f"README.md links to what is not there: {', '.join(bad)}", file=sys.stderr)
-            rc = 1
-        return rc
-    if new != text:
-        atomic_write_text(args.readme, new)
-    return 0
+    paths = [args.readme] if args.readme else [os.path.join(ROOT, d) for d in DOCUMENTS]
+    rc = 0
+    for path in paths:
+        with open(path) as f:
+            text = f.read()
+        doc_dir = os.path.dirname(os.path.abspath(path))
+        new = render(text, doc_dir=doc_dir)
+        name = os.path.relpath(path, ROOT) if not args.readme else path
+        if args.check:
+            if new != text:
+                names = [m.group("name") for m in _BLOCK.finditer(text)
+                         if render(m.group(0), doc_dir=doc_dir) != m.group(0)]
+                print(f"{name} is stale in block(s): {', '.join(names) or '?'}; run python -m experiments.readme",
+                      file=sys.stderr)
+                rc = 1
+            bad = broken_links(text, doc_dir)
+            if bad:
+                print(f"{name} links to what is not there: {', '.join(bad)}", file=sys.stderr)
+                rc = 1
+        elif new != text:
+            atomic_write_text(path, new)
+    return rc
 
 
 if __name__ == "__main__":  # pragma: no cover

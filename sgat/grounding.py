@@ -243,7 +243,7 @@ class GroundingConfig:
             paper; :class:`sgat.transformer.ActionTransformer`).
         shadow_memory: τ [control steps] of the transformer's shadow state (0: the paper, every
             prediction starts from the sim's state; :class:`sgat.transformer.ActionTransformer`).
-            A deployment setting: the fitted models are the same. Measured for the NAO (README,
+            A deployment setting: the fitted models are the same. Measured for the NAO (docs/grounding_history.md,
             ``sgatwalk fidelity``, ninth round): τ = 2 steps forecast gaits around θ0 better on the
             held-out panel (bias +2.5 -> -0.5, Brier 0.28 -> 0.20), but CMA-ES in that world found
             gaits that fall more often than the paper's transformer's (Table I), so 0 stays the default.

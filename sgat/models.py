@@ -403,7 +403,7 @@ class InverseModel(_Model):
             (under that Gaussian prior) that explains the state change. A one-step change of a PD-driven
             walking robot says little about its target (the contact forces are unobserved), so an
             inverse model without the command regresses toward the commands it saw; with it, the
-            command is the prior and Δs the evidence (README, "sgatwalk fidelity").
+            command is the prior and Δs the evidence (docs/grounding_history.md).
 
         commands: d, the actions applied before ``a_t`` that the model also sees, for a sim with an
             actuation delay of d control steps (``GroundingConfig.delay``): there ``a_t`` first moves the

@@ -53,7 +53,25 @@ def test_link_check_finds_anchors_that_no_heading_gives(tmp_path):
             "[g](#not-a-heading) [h](docs/b.png#x) [f again](#same-2)\n")
     assert readme.anchors(text) == {"top", "same", "same-1", "tag"}
     assert readme.broken_links(text, str(tmp_path)) == ["#same-2", "#not-a-heading", "docs/b.png#x"]
-    assert readme.broken_links(readme.render(open(readme.os.path.join(readme.ROOT, "README.md")).read())) == []
+    for doc in readme.DOCUMENTS:  # the README and the record of every run, as rendered
+        path = readme.os.path.join(readme.ROOT, doc)
+        folder = readme.os.path.dirname(path)
+        assert readme.broken_links(readme.render(open(path).read(), doc_dir=folder), folder) == [], doc
+
+
+def test_links_between_documents_are_checked_and_written_relative_to_each(tmp_path):
+    """A link to another Markdown file's anchor counts as broken when that file gives no such anchor,
+    and a rendered block's links (written relative to the repository root, e.g. a result's plot) are
+    made relative to the folder of the document the block goes into."""
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "h.md").write_text("# History\n<a id=\"round-1\"></a>**Round 1.**\n")
+    text = "[a](docs/h.md#round-1) [b](docs/h.md#round-2) [c](docs/h.md#history) [d](docs/h.md)\n"
+    assert readme.broken_links(text, str(tmp_path)) == ["docs/h.md#round-2"]
+    assert readme.broken_links("[e](../README.md#x)", str(tmp_path / "docs")) == ["../README.md#x"]
+    body = "![plot](docs/compare-fidelity.png) [here](#anchor) [web](https://example.org/a.png) [code](experiments/x.py)"
+    assert readme._relink(body, readme.ROOT) == body
+    assert readme._relink(body, readme.os.path.join(readme.ROOT, "docs")) == (
+        "![plot](compare-fidelity.png) [here](#anchor) [web](https://example.org/a.png) [code](../experiments/x.py)")
 
 
 def _world(kind, rhos, briers, bias=1.0, spread=2.0):
