@@ -599,6 +599,11 @@ RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _d
              "benchdiagnose": _benchtext, "benchroughness": _benchtext, "benchvisibility": _benchtext}
 
 
+def _external(target: str) -> bool:
+    """Whether a Markdown link target leaves the repository (``scheme://...`` or ``mailto:``)."""
+    return "://" in target or target.startswith("mailto:")
+
+
 def _relink(body: str, doc_dir: str) -> str:
     """``body`` (Markdown whose relative links are relative to the repository root, as renderers write
     them, e.g. a result's ``plot``) with those links made relative to ``doc_dir``, the folder of the
@@ -608,7 +613,7 @@ def _relink(body: str, doc_dir: str) -> str:
 
     def fix(m: re.Match) -> str:
         target = m.group(1)
-        if target.startswith("#") or "://" in target or target.startswith("mailto:"):
+        if target.startswith("#") or _external(target):
             return m.group(0)
         return "](" + os.path.relpath(os.path.join(ROOT, target), doc_dir).replace(os.sep, "/") + ")"
 
@@ -702,7 +707,7 @@ def broken_links(text: str, root: str = ROOT) -> list[str]:
     other: dict[str, set[str]] = {}
     bad: list[str] = []
     for target in _LINK.findall(text):
-        if "://" in target or target.startswith("mailto:") or target in bad:
+        if _external(target) or target in bad:
             continue
         path, _, frag = target.partition("#")
         full = os.path.join(root, path)
