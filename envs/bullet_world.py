@@ -68,6 +68,18 @@ from robots import RobotModel
 from terrain import Heightfield, lumpy
 
 
+def real_ground(seed: int, amplitude: float) -> Heightfield | None:
+    """The real world's uneven ground of an episode: the lumpy terrain (:func:`terrain.lumpy`, foam
+    under turf) of ``amplitude`` [m] drawn from the episode seed's terrain stream (the second of the
+    three streams spawned from ``numpy.random.SeedSequence(seed)``: effects, terrain, sensor noise),
+    or None (flat) for amplitude 0. :class:`NaoRealEnv` walks this ground; another world given it
+    (the identified sim's ``ground``) walks the very same field for the same seed."""
+    if amplitude <= 0:
+        return None
+    terr_ss = np.random.SeedSequence(int(seed)).spawn(3)[1]
+    return lumpy(np.random.default_rng(terr_ss), amplitude=amplitude)
+
+
 def _xyzw_to_wxyz(q) -> np.ndarray:
     return np.array([q[3], q[0], q[1], q[2]])
 
@@ -110,6 +122,9 @@ class NaoRealEnv(NaoEnv):
             or a fixed :class:`terrain.Heightfield`. ``reset(options={"terrain": ...})`` overrides it
             for one episode.
         solver_iterations: Bullet's constraint solver iterations.
+        ground: ``seed -> Heightfield | None``, the uneven ground of each episode in place of the
+            lumpy terrain of ``terrain="lumpy"`` (e.g. the identified sim's Gaussian surface,
+            ``sysid.identified.model_ground``: the real world's physics on the sim's ground model).
 
     Raises:
         ValueError: unknown profile or terrain.
@@ -118,8 +133,9 @@ class NaoRealEnv(NaoEnv):
     world = "real"
 
     def __init__(self, robot: RobotModel | None = None, *, profile="real", terrain="lumpy",
-                 solver_iterations: int = 50, **kwargs):
+                 solver_iterations: int = 50, ground=None, **kwargs):
         super().__init__(robot, **kwargs)
+        self.ground = ground
         self.profile: RealProfile = get_profile(profile, self.robot)
         if not (terrain == "lumpy" or terrain is None or terrain == "flat" or isinstance(terrain, Heightfield)):
             raise ValueError(f"terrain must be 'lumpy', 'flat', None or a Heightfield, got {terrain!r}")
@@ -146,14 +162,13 @@ class NaoRealEnv(NaoEnv):
     def _reset_world(self, seed, options) -> None:
         r, p = self.robot, self.client
         # Independent streams for effects, terrain and sensor noise, all from the episode seed.
-        ss = np.random.SeedSequence(seed if seed is not None else int(self.np_random.integers(2**31)))
-        eff_ss, terr_ss, noise_ss = ss.spawn(3)
+        seed = int(seed if seed is not None else self.np_random.integers(2**31))
+        eff_ss, _, noise_ss = np.random.SeedSequence(seed).spawn(3)  # the terrain's stream: real_ground
         self.effects = self.profile.draw(np.random.default_rng(eff_ss), len(r.joint_names), len(r.links))
         self._noise_rng = np.random.default_rng(noise_ss)
         spec = options.get("terrain", self.terrain_spec)
         if spec == "lumpy":
-            amp = self.effects.terrain_amplitude
-            spec = lumpy(np.random.default_rng(terr_ss), amplitude=amp) if amp > 0 else None
+            spec = self.ground(seed) if self.ground is not None else real_ground(seed, self.effects.terrain_amplitude)
         self._terrain = make_terrain(spec)
 
         p.resetSimulation()

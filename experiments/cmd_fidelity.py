@@ -32,7 +32,9 @@ exactly right gets with the same number of episodes per gait; ``oracle:mean=1`` 
 with every effect fixed at the middle of its range (the terrain's amplitude too): what a world that
 knows the real physics exactly, as one point and without its spread from episode to episode, gets. ``oracle:mean=1:engine=mujoco`` builds that mean physics into the MuJoCo sim
 with the identified sim's effect models: what the identified world gets if the diagnosis finds every
-effect exactly.
+effect exactly. ``ground=real`` walks that MuJoCo form on the real world's own lumpy terrain of each
+episode seed, ``ground=model`` the PyBullet form on the identified sim's Gaussian surface of each
+seed: the four mean-physics oracles tell the engines' gap from the ground model's.
 """
 
 from __future__ import annotations

@@ -16,6 +16,9 @@ from typing import Callable
 from common.defaults import CONTROL_DT
 from common.files import atomic_write_text
 
+#: Seconds between the progress lines of a run without a terminal.
+ETA_EVERY_S = 30.0
+
 
 class EpisodeLog:
     """Episodes of one run directory by key.
@@ -62,25 +65,27 @@ class EpisodeLog:
     def run(self, ex, tasks: list[dict], desc: str, progress: bool = True) -> None:
         """Run the tasks (``experiments.tasks.run_episode`` dicts with a ``key``) that have no result
         yet, in chunks of 150 (sent to the workers as lock-step batches); each chunk is appended to ``episodes.jsonl`` as it ends.
-        Without a terminal a line with the count and an ETA goes to ``say`` every 30 s."""
+        Without a terminal a line with the count and an ETA goes to ``say`` every :data:`ETA_EVERY_S`
+        seconds, counted as the executor's batches end."""
         from experiments.batch import MAX_BATCH, map_episodes  # lazy: loads the engines and torch
 
         todo = [t for t in tasks if t["key"] not in self.done]
         if not todo:
             self.say(f"{desc}: {len(tasks)} episodes already done")
             return
-        t0 = last = time.perf_counter()
+        t0 = time.perf_counter()
         self.say(f"{desc}: {len(todo)} episodes ({len(tasks) - len(todo)} resumed)")
         bar = None
         if progress:
             from tqdm import tqdm  # lazy: tqdm
 
             bar = tqdm(total=len(todo), desc=desc, leave=False, disable=None)
+        lines = _EtaLines(desc, len(todo), self.say, t0) if bar is None or bar.disable else None
         chunk = max(8, 2 * MAX_BATCH)  # lock-step batches (experiments.batch), saved as each chunk ends
         try:
             for k in range(0, len(todo), chunk):
                 part = todo[k:k + chunk]
-                res = map_episodes(ex, part, progress=(bar.update if bar else None))
+                res = map_episodes(ex, part, progress=(bar.update if lines is None else lines.update))
                 rows = [{"key": t["key"], "fitness": r["fitness"], "speed_cm_s": r["speed_cm_s"], "fell": bool(r["fell"]),
                          "seconds": r["steps"] * CONTROL_DT} for t, r in zip(part, res)]
                 for row in rows:
@@ -89,15 +94,27 @@ class EpisodeLog:
                     f.write("".join(json.dumps(row) + "\n" for row in rows))
                     f.flush()
                     os.fsync(f.fileno())
-                now = time.perf_counter()
-                if (bar is None or bar.disable) and now - last > 30:
-                    n = k + len(part)
-                    self.say(f"{desc}: {n}/{len(todo)}, ETA {(now - t0) / n * (len(todo) - n):.0f} s")
-                    last = now
         finally:
             if bar:
                 bar.close()
         self.say(f"{desc}: done in {time.perf_counter() - t0:.0f} s")
 
 
-__all__ = ["EpisodeLog"]
+class _EtaLines:
+    """Progress without a terminal: a line with the count and an ETA every :data:`ETA_EVERY_S` s, counted as
+    the executor's batches end (``map_episodes``'s ``progress``), so a chunk of long episodes (the
+    real world's) shows its progress too."""
+
+    def __init__(self, desc: str, total: int, say: Callable[[str], None], t0: float):
+        self.desc, self.total, self.say, self.t0, self.every = desc, total, say, t0, ETA_EVERY_S
+        self.n, self.last = 0, t0
+
+    def update(self, n: int) -> None:
+        self.n += n
+        now = time.perf_counter()
+        if now - self.last > self.every and self.n < self.total:
+            self.say(f"{self.desc}: {self.n}/{self.total}, ETA {(now - self.t0) / self.n * (self.total - self.n):.0f} s")
+            self.last = now
+
+
+__all__ = ["ETA_EVERY_S", "EpisodeLog"]

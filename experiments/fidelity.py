@@ -33,7 +33,12 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
               knows the real physics exactly, as one point, gets (the identified sim's best);
               ``oracle:mean=1:engine=mujoco``: that mean physics built into the MuJoCo sim by
               the identified sim's effect models (``experiments.tasks.mean_physics_report``):
-              what the identified world would get if the diagnosis found every effect exactly
+              what the identified world would get if the diagnosis found every effect exactly;
+              ``ground=real`` (MuJoCo form) or ``ground=model`` (PyBullet form): the same
+              physics on the other engine's ground, the very surface of each episode seed (the
+              real world's lumpy terrain, ``envs.bullet_world.real_ground``; the identified sim's
+              Gaussian surface, ``sysid.identified.model_ground``): with the two plain forms, a
+              2 × 2 of engine and ground that tells the engines' gap from the ground model's
 ============  ==========================================================================
 
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
@@ -139,6 +144,9 @@ from walk_engine import params_for
 SERVO_LOGS = ("air", "staged", "stepping", "refit")
 #: The ``servo=`` variants whose stepping logs are diagnosed again on top of the in-air fit.
 STAGED_SERVO = ("staged", "refit")
+#: The ground of each engine's mean-physics oracle (``oracle:mean=1:ground=...``): the real world's lumpy
+#: terrain is PyBullet's own, the identified sim's Gaussian surface model the MuJoCo form's own.
+OWN_GROUND = {"pybullet": "real", "mujoco": "model"}
 #: World kinds (see the module docstring).
 KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
@@ -152,6 +160,21 @@ PHASES = ("real trials", "excitation logs", "diagnoses", "servo fits", "groundin
 #: calibration's seed until that became one constant (``experiments.identify.ENGINE_GAP_SEED``, seed
 #: 0's draw); it keeps its place so the streams after it keep their values.
 _PANEL, _REAL, _GROUND_REAL, _GROUND_SIM, _WORLD, _FIT, _IDENT, _CAL, _DATA_GAITS, _ORACLE, _WALKFIT = range(11, 22)
+
+
+def drawn_panel(params_class, seed: int, gaits: int, box: float) -> list[dict]:
+    """The drawn part of a fidelity panel: θ0 and ``gaits`` gaits drawn uniformly in ±``box`` around it
+    in the normalized space CMA-ES searches (clipped to [0, 1]), from the run seed's panel stream:
+    ``[{"name": "theta0" | "boxNN", "theta": [16 SI values]}]`` (what ``sgatwalk fidelity --seed``
+    walks; ``params_class`` a :func:`walk_engine.params_for` class)."""
+    th0 = params_class.initial()
+    u0 = th0.to_vector()
+    rng = np.random.default_rng(np.random.SeedSequence([seed, _PANEL]))
+    out = [{"name": "theta0", "theta": th0.to_array().tolist()}]
+    for i in range(gaits):
+        u = np.clip(u0 + rng.uniform(-box, box, len(u0)), 0.0, 1.0)
+        out.append({"name": f"box{i:02d}", "theta": params_class.from_vector(u).to_array().tolist()})
+    return out
 
 
 def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
@@ -168,7 +191,7 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 #: every cached world keeps its meaning.
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
-                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0, "delay_auto": False}
+                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0, "delay_auto": False, "oracle_ground": ""}
 
 
 @dataclass(frozen=True)
@@ -195,6 +218,7 @@ class WorldSpec:
     servo: str = ""  # identified / hybrid: a kp scale common to every servo (one of SERVO_LOGS; "": none)
     envelope: float = 0.0  # gat / sgat / identified / hybrid: the ANE's noise [rad] added to the world's leg targets
     delay_auto: bool = False  # hybrid: the models bridge the draw's identified latency (experiments.grounding.identified_delay)
+    oracle_ground: str = ""  # oracle:mean=1: its ground, a value of OWN_GROUND (default: its engine's own)
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -207,6 +231,8 @@ class WorldSpec:
         d.pop("name")
         if not self.needs_identification:  # a setting of the identified worlds only: it names no other world
             d["identified_confounded"] = _LATER_OPTIONS["identified_confounded"]
+        if self.oracle_ground == OWN_GROUND[self.oracle_engine]:  # the engine's own ground: the plain world
+            d["oracle_ground"] = _LATER_OPTIONS["oracle_ground"]
         for k in _LATER_OPTIONS:  # options added later hash only when set, so earlier caches stay valid
             if d[k] == _LATER_OPTIONS[k]:
                 d.pop(k)
@@ -291,6 +317,10 @@ def parse_world(text: str) -> WorldSpec:
                 if v not in ("pybullet", "mujoco"):
                     raise ValueError(f"world {text!r}: unknown option value engine={v!r} (pybullet or mujoco)")
                 kw["oracle_engine"] = v
+            elif kind == "oracle" and k == "ground":
+                if v not in OWN_GROUND.values():
+                    raise ValueError(f"world {text!r}: unknown option value ground={v!r} ({' or '.join(OWN_GROUND.values())})")
+                kw["oracle_ground"] = v
             elif kind in ("gat", "sgat", "hybrid") and k in ("alpha", "ensemble", "inverse_command", "hidden", "epochs",
                                                               "real", "sim", "noise", "residual", "method", "mixture", "memory", "shadow",
                                                               "gaits", "state", "history", "commands", "matched",
@@ -365,6 +395,10 @@ def parse_world(text: str) -> WorldSpec:
     if kw.get("oracle_engine") == "mujoco" and not kw.get("oracle_mean"):
         raise ValueError(f"world {text!r}: engine=mujoco builds the real world's mean physics into the sim: "
                          "it needs mean=1")
+    if kw.get("oracle_ground") and not kw.get("oracle_mean"):
+        raise ValueError(f"world {text!r}: ground= walks the real world's mean physics on a given ground: it needs mean=1")
+    if kw.get("oracle_mean"):  # the mean oracles name their ground: the engine's own unless given
+        kw.setdefault("oracle_ground", OWN_GROUND[kw.get("oracle_engine", "pybullet")])
     if kw.get("exploration_noise", 0) < 0 or kw.get("sigma", 0) < 0:
         raise ValueError(f"world {text!r}: noise levels must be >= 0")
     grounding = GroundingConfig(**{**dataclasses.asdict(g), **gkw}) if g is not None else None
@@ -585,13 +619,7 @@ class Fidelity:
                 return json.load(f)["gaits"]
         cfg = self.cfg
         P = cfg.params_class
-        th0 = P.initial()
-        u0 = th0.to_vector()
-        rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, _PANEL]))
-        gaits = [{"name": "theta0", "theta": th0.to_array().tolist()}]
-        for i in range(cfg.gaits):
-            u = np.clip(u0 + rng.uniform(-cfg.box, cfg.box, len(u0)), 0.0, 1.0)
-            gaits.append({"name": f"box{i:02d}", "theta": P.from_vector(u).to_array().tolist()})
+        gaits = drawn_panel(P, cfg.seed, cfg.gaits, cfg.box)
         for name, p in zip(param_gait_names(cfg.params), cfg.params):
             gaits.append({"name": name, "theta": P.load(p).to_array().tolist()})
         atomic_write_text(path, json.dumps({"gaits": gaits}, indent=1))
@@ -797,6 +825,19 @@ class Fidelity:
             atomic_write_text(path, json.dumps(mean_physics_report(self.cfg.profile, self.cfg.robot), indent=1))
         return path
 
+    def _mean_ground_level(self, ground: str) -> float:
+        """The level of the real world's mean ground as ``ground`` ([m]): for ``"real"`` the lumpy
+        terrain's mean amplitude (:func:`experiments.tasks.mean_profile`), for ``"model"`` the RMS
+        height the mean-physics report gives the identified sim's surface (:meth:`_mean_physics`)."""
+        from envs.effects import get_profile  # lazy: loads the engines
+        from experiments.tasks import mean_profile  # lazy: loads the engines
+
+        if ground == "real":
+            return float(mean_profile(get_profile(self.cfg.profile, get_robot(self.cfg.robot))).terrain_amplitude[0])
+        with open(self._mean_physics()) as f:
+            effects = json.load(f)["effects"]
+        return float(effects[0]["value"]) if effects else 0.0
+
     def _model_dir(self, spec: WorldSpec, draw: int) -> str:
         return os.path.join(self.run_dir, "models", f"{spec.key}_d{draw}")
 
@@ -925,6 +966,9 @@ class Fidelity:
             if spec.oracle_engine == "mujoco":  # ... built into the sim (experiments.tasks.mean_physics_report)
                 del base["profile"]
                 base.update(world="identified", identified=[self._mean_physics()])
+            if spec.oracle_ground and spec.oracle_ground != OWN_GROUND[spec.oracle_engine]:
+                # ... on the other engine's ground: the very surface that engine walks for the seed
+                base["ground"] = [spec.oracle_ground, self._mean_ground_level(spec.oracle_ground)]
         elif spec.kind in ("sim", "ane"):
             base["world"] = "sim"
             if spec.kind == "ane":
@@ -1065,6 +1109,7 @@ class Fidelity:
                                            if spec.needs_identification else {}),
                                         **({"oracle_mean": True} if spec.oracle_mean else {}),
                                         **({"oracle_engine": spec.oracle_engine} if spec.oracle_engine != "pybullet" else {}),
+                                        **({"oracle_ground": spec.oracle_ground} if spec.oracle_ground else {}),
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
                                                             for k, c in curve.items()}} if curve else {})}
         out["paired"] = paired_rows(out, n_boot=cfg.bootstrap, seed=cfg.seed)
@@ -1246,9 +1291,11 @@ def fidelity_targets(res: dict, world: str = "sgat") -> list[tuple[str, bool, st
 def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]]:
     """The pairs (world, reference) that :func:`paired_rows` compares, in the worlds' order: every
     world against the plain ``sim`` (does it rank better than the sim it starts from?), a variant
-    with options against its plain kind (``hybrid:gate=0.9`` against ``hybrid``), and the issue's
+    with options against its plain kind (``hybrid:gate=0.9`` against ``hybrid``), the issue's
     comparisons ``sgat`` − ``gat``, ``hybrid`` − ``identified``, ``hybrid`` − ``sgat``, where the run
-    has both."""
+    has both, and any two worlds of one kind one setting apart, the later against the earlier
+    (``hybrid:alpha=0.3:delay=auto`` against ``hybrid:alpha=0.3``; the four mean-physics oracles of
+    engine × ground, edge by edge)."""
     pairs = []
     for n in names:
         if n != "sim" and "sim" in names:
@@ -1257,7 +1304,25 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
         if ":" in n and base in names and base != "sim":
             pairs.append((n, base))
     pairs += [p for p in (("sgat", "gat"), ("hybrid", "identified"), ("hybrid", "sgat")) if p[0] in names and p[1] in names]
+    specs = {}
+    for n in names:
+        try:
+            specs[n] = parse_world(n)
+        except ValueError:  # a name of an earlier round's options: compared by the rules above only
+            continue
+    pairs += [(a, b) for i, a in enumerate(names) for b in names[:i]
+              if a in specs and b in specs and _settings_apart(specs[a], specs[b]) == 1]
     return list(dict.fromkeys(pairs))
+
+
+def _settings_apart(a: WorldSpec, b: WorldSpec) -> int:
+    """How many settings two worlds of one kind differ in (the grounding's counted one by one); a large
+    number for worlds of different kinds."""
+    if a.kind != b.kind:
+        return 1 << 30
+    da, db = dataclasses.asdict(a), dataclasses.asdict(b)
+    ga, gb = da.pop("grounding") or {}, db.pop("grounding") or {}
+    return sum(da[k] != db[k] for k in da if k != "name") + sum(ga.get(k) != gb.get(k) for k in set(ga) | set(gb))
 
 
 def paired_rows(res: dict, *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
@@ -1601,6 +1666,6 @@ def plot_episodes(res: dict, path: str) -> None:
 
 
 __all__ = ["DEFAULT_WORLDS", "KINDS", "Fidelity", "FidelityConfig", "WorldSpec", "episode_counts", "episodes_rows", "episodes_view",
-           "format_ci", "p_text", "paired_rows", "paired_test", "world_pairs",
+           "drawn_panel", "format_ci", "p_text", "paired_rows", "paired_test", "world_pairs",
            "fidelity_targets", "first_world", "format_table",
            "parse_world", "plot", "plot_episodes", "ranking_target"]

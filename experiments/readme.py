@@ -596,7 +596,8 @@ def _blind(res: dict) -> str:
 RENDERERS = {"excite": _excite, "blind": _blind, "bench": _bench, "diagnose": _diagnose, "gym": _gym, "stand": _stand, "cliff": _cliff, "fidelity": _fidelity, "compare": _compare, "table1": _table1, "optimize": _optimize, "walk": _walk, "stress": _stress,
              "benchenvs": _benchenvs, "benchwalk": _benchwalk, "benchgrounding": _benchtext, "benchrerun": _benchtext,
              "benchlatency": _benchtext, "benchground": _benchtext, "benchoverhead": _benchtext,
-             "benchdiagnose": _benchtext, "benchroughness": _benchtext, "benchvisibility": _benchtext}
+             "benchdiagnose": _benchtext, "benchroughness": _benchtext, "benchvisibility": _benchtext,
+             "benchenginegap": _benchtext}
 
 
 def _external(target: str) -> bool:

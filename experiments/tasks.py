@@ -25,6 +25,12 @@ key                       meaning
 ``identified_confounded`` True: also build in the contact terms that only stand in for the identified
                           uneven ground (``sysid.identified.confounded_with_ground``; default
                           :data:`IDENTIFIED_CONFOUNDED`)
+``ground``                ``[kind, level]``: the uneven ground of every episode in place of the world's
+                          own, drawn from the episode seed: ``"real"`` the real world's lumpy terrain of
+                          amplitude ``level`` [m] (``envs.bullet_world.real_ground``), ``"model"`` the
+                          identified sim's Gaussian surface of RMS height ``level`` [m]
+                          (``sysid.identified.model_ground``); for the real and identified worlds (the
+                          oracle yardsticks of ``sgatwalk fidelity``, ``ground=``)
 ``robot``                 ``robots.get_robot`` name (default ``"nao"``; the identified worlds are the NAO's)
 ``record``                return the recording too (columns + metadata)
 ``meta``                  extra metadata for the recording
@@ -81,7 +87,9 @@ def _world(task: dict):
     robot_name = task.get("robot", "nao")
     if reports and robot_name != "nao":
         raise ValueError("the identified worlds model the NAO only")
-    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports, parts, robot_name)
+    ground = _ground(task.get("ground"), world)
+    key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports, parts, robot_name,
+           tuple(task.get("ground") or ()))
     if key not in _WORLDS:
         if len(_WORLDS) >= 8:  # a fidelity sweep builds one identified world per draw: keep a few
             for env in _WORLDS.values():
@@ -90,12 +98,12 @@ def _world(task: dict):
         robot = get_robot(robot_name)
         if world == "real":
             _WORLDS[key] = NaoRealEnv(robot, profile=_real_profile(task.get("profile", "real"), robot),
-                                      terrain=task.get("terrain", "lumpy"))
+                                      terrain=task.get("terrain", "lumpy"), ground=ground)
         elif reports:
             from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
 
             terms, rms = load_identified(list(reports), confounded=parts[2])
-            _WORLDS[key] = IdentifiedSimEnv(terms if parts[0] else {}, rms if parts[1] else 0.0)
+            _WORLDS[key] = IdentifiedSimEnv(terms if parts[0] else {}, rms if parts[1] else 0.0, ground=ground)
         else:
             _WORLDS[key] = NaoSimEnv(robot)
     env = _WORLDS[key]
@@ -105,6 +113,33 @@ def _world(task: dict):
     if world == "grounded":
         env = GroundedEnv(env, _transformer(task["transformer"]))
     return env
+
+
+def _ground(spec, world: str):
+    """The ``seed -> Heightfield`` of a task's ``ground`` (``[kind, level]``), or None without one.
+
+    Raises:
+        ValueError: an unknown kind, a negative level, or a world that does not draw its ground.
+    """
+    if not spec:
+        return None
+    import functools
+
+    kind, level = spec
+    level = float(level)
+    if world not in ("real", "identified"):
+        raise ValueError(f"task ground {spec!r}: only the real and the identified worlds take a ground, not {world!r}")
+    if not level >= 0:
+        raise ValueError(f"task ground {spec!r}: its level must be >= 0 [m]")
+    if kind == "real":
+        from envs.bullet_world import real_ground  # lazy: loads the engines
+
+        return functools.partial(real_ground, amplitude=level)
+    if kind == "model":
+        from sysid.identified import model_ground  # lazy: loads the engines
+
+        return functools.partial(model_ground, rms_height=level)
+    raise ValueError(f"task ground {spec!r}: unknown kind {kind!r} (real or model)")
 
 
 def mean_profile(profile):

@@ -35,7 +35,7 @@ from sysid.candidates import FAMILIES, Term, apply_terms, series_structure
 from sysid.model import ReplayModel, Structure
 from sysid.report import terms_from_labels
 from sysid.roughness import CORRELATION_RADIUS
-from terrain import gaussian
+from terrain import Heightfield, gaussian
 
 #: MuJoCo's constraint Jacobian (``mjOption.jacobian``; MuJoCo documentation, XML reference
 #: ``option/jacobian``) of the identified sim on uneven ground. MuJoCo's CPU engine keeps up to 50
@@ -113,12 +113,27 @@ def load_identified(paths, confounded: bool = True) -> tuple[dict[Term, float], 
     return terms, rms
 
 
+def model_ground(seed: int | None, rms_height: float) -> Heightfield | None:
+    """The identified sim's uneven ground of an episode: a Gaussian random surface of RMS height
+    ``rms_height`` [m] (:func:`terrain.gaussian`, the diagnosis's surface model with its
+    :data:`sysid.roughness.CORRELATION_RADIUS`, and the walking terrains' flat start pad) drawn from
+    the episode seed, or None (flat) for height 0. :class:`IdentifiedSimEnv` walks this ground;
+    another world given it (the real world's ``ground``) walks the very same surface for the same seed."""
+    if rms_height <= 0:
+        return None
+    ss = np.random.SeedSequence([0 if seed is None else int(seed), 0x7e44])
+    return gaussian(np.random.default_rng(ss), rms_height, CORRELATION_RADIUS)
+
+
 class IdentifiedSimEnv(NaoSimEnv):
     """:class:`envs.NaoSimEnv` with identified effects (see the module docstring).
 
     Args:
         terms: Term -> value (SI), e.g. from :func:`load_identified`; an empty dict is the plain sim.
         rms_height: RMS height [m] of the uneven ground (0: the sim's own ground).
+        ground: ``seed -> Heightfield | None``, the uneven ground of each episode in place of
+            :func:`model_ground` of ``rms_height`` (e.g. the real world's lumpy terrain of the same
+            seed, ``envs.bullet_world.real_ground``: the identified physics on the real ground).
         **kwargs: :class:`envs.NaoSimEnv` arguments (robot, fixed_base, physics_dt, ...). A ``terrain``
             given here (or as a reset option) replaces the random surfaces.
 
@@ -128,7 +143,7 @@ class IdentifiedSimEnv(NaoSimEnv):
 
     world = "identified"
 
-    def __init__(self, terms: dict[Term, float] | None = None, rms_height: float = 0.0, **kwargs):
+    def __init__(self, terms: dict[Term, float] | None = None, rms_height: float = 0.0, ground=None, **kwargs):
         self.terms = {Term(t.family, t.target): float(v) for t, v in (terms or {}).items()}
         for t in self.terms:
             if t.family not in FAMILIES or FAMILIES[t.family].stochastic:
@@ -136,6 +151,7 @@ class IdentifiedSimEnv(NaoSimEnv):
         if not rms_height >= 0:
             raise ValueError(f"rms_height must be >= 0, got {rms_height}")
         self.rms_height = float(rms_height)
+        self.ground = ground
         self._fixed_terrain = kwargs.get("terrain") is not None
         super().__init__(**kwargs)
 
@@ -166,9 +182,11 @@ class IdentifiedSimEnv(NaoSimEnv):
 
     def _reset_world(self, seed, options) -> None:
         options = dict(options)
-        if self.rms_height > 0 and "terrain" not in options and not self._fixed_terrain:
-            ss = np.random.SeedSequence([0 if seed is None else int(seed), 0x7e44])
-            options["terrain"] = gaussian(np.random.default_rng(ss), self.rms_height, CORRELATION_RADIUS)
+        if "terrain" not in options and not self._fixed_terrain:
+            if self.ground is not None:
+                options["terrain"] = self.ground(seed)
+            elif self.rms_height > 0:
+                options["terrain"] = model_ground(seed, self.rms_height)
         super()._reset_world(seed, options)
         m, d = self.model, self.data
         for i, (a, q) in enumerate(zip(self._rm.act, self.q0 - self._bias)):

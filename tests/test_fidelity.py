@@ -790,3 +790,85 @@ def test_the_mean_oracle_in_mujoco_builds_the_mean_physics_into_the_identified_s
     assert env.model.body_mass.sum() == pytest.approx(1.015 * plain.model.body_mass.sum(), rel=1e-3)
     env.reset(seed=3)
     assert np.std(env.terrain.heights) == pytest.approx(rms, rel=0.05)
+
+
+def test_the_mean_oracles_swap_grounds_across_the_engines_on_the_same_surfaces(tmp_path):
+    """``ground=real`` walks the MuJoCo mean-physics oracle on the real world's own lumpy terrain and
+    ``ground=model`` the PyBullet one on the identified sim's Gaussian surface: episode for episode
+    (the oracle's seeds, shared by the four worlds) the very heightfield the other engine walks, so
+    that the 2 x 2 of engine and ground differ in one thing at a time."""
+    from experiments.fidelity import Fidelity
+    from experiments.tasks import _world
+
+    assert parse_world("oracle:mean=1:ground=real").key == parse_world("oracle:mean=1").key  # PyBullet's own ground
+    assert parse_world("oracle:mean=1:engine=mujoco:ground=model").key == parse_world("oracle:mean=1:engine=mujoco").key
+    assert parse_world("oracle:mean=1:ground=model").key != parse_world("oracle:mean=1").key
+    for bad, msg in (("oracle:ground=model", "needs mean=1"), ("oracle:mean=1:ground=gravel", "real or model")):
+        with pytest.raises(ValueError, match=msg):
+            parse_world(bad)
+    worlds = ("oracle:mean=1", "oracle:mean=1:ground=model", "oracle:mean=1:engine=mujoco",
+              "oracle:mean=1:engine=mujoco:ground=real")
+    run = Fidelity(FidelityConfig(worlds=worlds, gaits=2, real_trials=2, episodes=2, data_seeds=1), str(tmp_path),
+                   executor=None)
+    gaits = [{"name": "a", "theta": [0.0]}]
+    pb_real, pb_model, mj_model, mj_real = (run._world_tasks(s, 0, {}, gaits) for s in run.specs)
+    assert len({tuple(t["seed"] for t in ts) for ts in (pb_real, pb_model, mj_model, mj_real)}) == 1
+    assert [t["world"] for t in (pb_real[0], pb_model[0], mj_model[0], mj_real[0])] == ["real", "real", "identified",
+                                                                                       "identified"]
+    seed = pb_real[0]["seed"]
+
+    def ground(task):
+        env = _world(task).unwrapped
+        env.reset(seed=seed)
+        return env.terrain.heights
+
+    lumpy_pb, lumpy_mj, gauss_mj, gauss_pb = (ground(t[0]) for t in (pb_real, mj_real, mj_model, pb_model))
+    assert np.array_equal(lumpy_pb, lumpy_mj) and np.array_equal(gauss_mj, gauss_pb)
+    assert not np.allclose(lumpy_pb, gauss_mj, atol=1e-4)
+    # the lumpy terrain of the mean profile (its 1 cm peak), and the surface of the report's RMS height
+    assert np.abs(lumpy_pb).max() == pytest.approx(0.01)
+    assert np.std(gauss_mj) == pytest.approx(run._mean_ground_level("model"), rel=0.05)
+    with pytest.raises(ValueError, match="real or model"):
+        _world({**pb_real[0], "ground": ["gravel", 0.01]})
+
+
+def test_worlds_one_setting_apart_are_paired():
+    """Beside the fixed pairs, any two worlds of one kind that differ in one setting are tested against
+    each other: the four mean-physics oracles edge by edge (engine on each ground, ground in each
+    engine), a variant against the variant with one option fewer; never worlds two settings apart."""
+    from experiments.fidelity import world_pairs
+
+    oracles = ["oracle:mean=1", "oracle:mean=1:ground=model", "oracle:mean=1:engine=mujoco",
+               "oracle:mean=1:engine=mujoco:ground=real"]
+    pairs = world_pairs(oracles, {n: "oracle" for n in oracles})
+    assert sorted(pairs) == sorted([(oracles[1], oracles[0]), (oracles[2], oracles[1]), (oracles[3], oracles[0]),
+                                    (oracles[3], oracles[2])])
+    names = ["sim", "hybrid", "hybrid:alpha=0.3", "hybrid:alpha=0.3:delay=auto", "sgat:alpha=0.3"]
+    pairs = world_pairs(names, {n: n.split(":")[0] for n in names})
+    assert ("hybrid:alpha=0.3:delay=auto", "hybrid:alpha=0.3") in pairs
+    assert ("hybrid:alpha=0.3:delay=auto", "hybrid") in pairs  # a variant against its plain kind, as before
+    assert ("sgat:alpha=0.3", "hybrid:alpha=0.3") not in pairs  # another kind
+    assert world_pairs(["sim", "old:name=1"], {}) == [("old:name=1", "sim")]  # unparsable: the fixed rules only
+
+
+def test_a_run_without_a_terminal_reports_progress_within_a_chunk(tmp_path, monkeypatch):
+    """Episodes are saved in chunks of 150; without a terminal the count and an ETA still go out as the
+    executor's batches end, so 160 real trials (one chunk and a bit, minutes long) show their progress."""
+    import experiments.batch
+    import experiments.episodes
+    from experiments.episodes import EpisodeLog
+
+    def fake_map(ex, tasks, progress=None):
+        for _ in tasks:
+            progress(1)
+        return [{"fitness": 1.0, "speed_cm_s": 1.0, "fell": False, "steps": 750} for _ in tasks]
+
+    monkeypatch.setattr(experiments.batch, "map_episodes", fake_map)
+    monkeypatch.setattr(experiments.episodes, "ETA_EVERY_S", -1.0)  # a line at every batch
+    lines: list[str] = []
+    log = EpisodeLog(str(tmp_path), {}, "run", say=lines.append)
+    log.run(None, [{"key": f"k{i}"} for i in range(160)], "real trials", progress=False)
+    counts = [ln for ln in lines if "ETA" in ln]
+    assert counts[0].startswith("real trials: 1/160, ETA ") and counts[-1].startswith("real trials: 159/160, ETA ")
+    assert len(counts) == 159  # every batch but the last, which ends the run
+    assert lines[-1].startswith("real trials: done in") and len(log.done) == 160
