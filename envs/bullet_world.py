@@ -68,15 +68,15 @@ from robots import RobotModel
 from terrain import Heightfield, lumpy
 
 
-def real_ground(seed: int, amplitude: float) -> Heightfield | None:
+def real_ground(seed: int | None, amplitude: float) -> Heightfield | None:
     """The real world's uneven ground of an episode: the lumpy terrain (:func:`terrain.lumpy`, foam
     under turf) of ``amplitude`` [m] drawn from the episode seed's terrain stream (the second of the
-    three streams spawned from ``numpy.random.SeedSequence(seed)``: effects, terrain, sensor noise),
-    or None (flat) for amplitude 0. :class:`NaoRealEnv` walks this ground; another world given it
-    (the identified sim's ``ground``) walks the very same field for the same seed."""
+    three streams spawned from ``numpy.random.SeedSequence(seed)``: effects, terrain, sensor noise;
+    None counts as seed 0), or None (flat) for amplitude 0. :class:`NaoRealEnv` walks this ground;
+    another world given it (the identified sim's ``ground``) walks the very same field for the same seed."""
     if amplitude <= 0:
         return None
-    terr_ss = np.random.SeedSequence(int(seed)).spawn(3)[1]
+    terr_ss = np.random.SeedSequence(0 if seed is None else int(seed)).spawn(3)[1]
     return lumpy(np.random.default_rng(terr_ss), amplitude=amplitude)
 
 
