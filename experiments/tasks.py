@@ -87,10 +87,10 @@ def _world(task: dict):
     robot_name = task.get("robot", "nao")
     if reports and robot_name != "nao":
         raise ValueError("the identified worlds model the NAO only")
-    ground = _ground(task.get("ground"), world)
     key = (world == "real", task.get("profile", "real"), task.get("terrain", "lumpy"), reports, parts, robot_name,
            tuple(task.get("ground") or ()))
     if key not in _WORLDS:
+        ground = _ground(task.get("ground"), world)  # the world's own: built once with it
         if len(_WORLDS) >= 8:  # a fidelity sweep builds one identified world per draw: keep a few
             for env in _WORLDS.values():
                 env.close()
