@@ -60,11 +60,8 @@ def mujoco_report(profile: str, timeconst: float | None, backlash: bool) -> dict
     contact time constant set (``ground_compliance``) and/or the backlash terms left out."""
     from experiments.tasks import mean_physics_report
 
-    rep = mean_physics_report(profile)
-    model = {k: v for k, v in rep["model"].items() if backlash or not k.startswith("backlash[")}
-    if timeconst is not None:
-        model["ground_compliance"] = timeconst
-    return {**rep, "model": model, "effects": []}  # the ground is the task's: the real world's own fields
+    rep = mean_physics_report(profile, ground_compliance=timeconst, drop=() if backlash else ("backlash",))
+    return {**rep, "effects": []}  # the ground is the task's: the real world's own fields
 
 
 def agreement(mj: np.ndarray, pb: np.ndarray, fell_mj: np.ndarray, fell_pb: np.ndarray, *, n_boot: int = 1000,

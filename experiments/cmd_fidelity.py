@@ -34,7 +34,13 @@ knows the real physics exactly, as one point and without its spread from episode
 with the identified sim's effect models: what the identified world gets if the diagnosis finds every
 effect exactly. ``ground=real`` walks that MuJoCo form on the real world's own lumpy terrain of each
 episode seed, ``ground=model`` the PyBullet form on the identified sim's Gaussian surface of each
-seed: the four mean-physics oracles tell the engines' gap from the ground model's.
+seed: the four mean-physics oracles tell the engines' gap from the ground model's. ``compliance=S``
+(the ground contact's time constant [s], e.g. 0.004: what the diagnosis identifies) and
+``backlash=0`` (no backlash terms, which the MuJoCo form builds as series play hinges) rebuild the
+MuJoCo form with the two settings ``benchmarks/engine_gap_walks.py`` found it carries; ``drop=F+G``
+leaves those effect families out of it (latency, torque_limit, foot_friction, pd_gain,
+coulomb_friction, viscous_damping, link_mass, terrain_roughness): what an identified world that
+misses them loses.
 """
 
 from __future__ import annotations

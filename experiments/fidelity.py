@@ -38,7 +38,12 @@ Worlds (``--worlds``; options after ``:``, e.g. ``sgat:ensemble=5:real=8``):
               physics on the other engine's ground, the very surface of each episode seed (the
               real world's lumpy terrain, ``envs.bullet_world.real_ground``; the identified sim's
               Gaussian surface, ``sysid.identified.model_ground``): with the two plain forms, a
-              2 × 2 of engine and ground that tells the engines' gap from the ground model's
+              2 × 2 of engine and ground that tells the engines' gap from the ground model's;
+              ``compliance=S`` and ``backlash=0`` (MuJoCo form): the ground contact's time
+              constant the diagnosis identifies (S seconds) and no backlash terms (series play
+              hinges), the two settings ``benchmarks/engine_gap_walks.py`` found the form carries;
+              ``drop=F+G``: without those effect families (``experiments.tasks.
+              MEAN_PHYSICS_FAMILIES``), what an identified world that misses them loses
 ============  ==========================================================================
 
 Options of the grounded worlds (``gat``, ``sgat``, ``hybrid``): ``alpha``, ``ensemble``,
@@ -130,7 +135,7 @@ from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation
                                   identify_real, record_excitation_task)
 from experiments.stats import (bootstrap_spearman, brier_score, paired_spearman_difference, pick_regret, spearman,
                                split_half_reliability)
-from experiments.tasks import IDENTIFIED_CONFOUNDED, fit_grounding_task
+from experiments.tasks import IDENTIFIED_CONFOUNDED, MEAN_PHYSICS_FAMILIES, fit_grounding_task
 from experiments.walkfit import GRIDS as WALKFIT_GRIDS
 from sgat.grounding import GroundingConfig
 from robots import ROBOT_NAMES, get_robot
@@ -191,7 +196,8 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 #: every cached world keeps its meaning.
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
-                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0, "delay_auto": False, "oracle_ground": ""}
+                  "oracle_engine": "pybullet", "servo": "", "envelope": 0.0, "delay_auto": False, "oracle_ground": "",
+                 "oracle_compliance": 0.0, "oracle_backlash": True, "oracle_drop": ""}
 
 
 @dataclass(frozen=True)
@@ -219,6 +225,9 @@ class WorldSpec:
     envelope: float = 0.0  # gat / sgat / identified / hybrid: the ANE's noise [rad] added to the world's leg targets
     delay_auto: bool = False  # hybrid: the models bridge the draw's identified latency (experiments.grounding.identified_delay)
     oracle_ground: str = ""  # oracle:mean=1: its ground, a value of OWN_GROUND (default: its engine's own)
+    oracle_compliance: float = 0.0  # oracle:mean=1:engine=mujoco: the ground contact's time constant [s] (0: the sim's)
+    oracle_backlash: bool = True  # oracle:mean=1:engine=mujoco: build the backlash terms (series play hinges)
+    oracle_drop: str = ""  # oracle:mean=1:engine=mujoco: effect families left out, sorted and joined by "+"
 
     def __post_init__(self) -> None:
         if self.history is None:
@@ -317,6 +326,19 @@ def parse_world(text: str) -> WorldSpec:
                 if v not in ("pybullet", "mujoco"):
                     raise ValueError(f"world {text!r}: unknown option value engine={v!r} (pybullet or mujoco)")
                 kw["oracle_engine"] = v
+            elif kind == "oracle" and k == "compliance":
+                kw["oracle_compliance"] = float(v)
+                if not (np.isfinite(kw["oracle_compliance"]) and kw["oracle_compliance"] > 0):
+                    raise ValueError(v)  # reported as a bad value of compliance below
+            elif kind == "oracle" and k == "backlash":
+                kw["oracle_backlash"] = bool(int(v))
+            elif kind == "oracle" and k == "drop":
+                fams = sorted(set(v.split("+")))
+                if "backlash" in fams or set(fams) - set(MEAN_PHYSICS_FAMILIES):
+                    raise ValueError(f"world {text!r}: unknown option value drop={v!r} (families joined by +, of "
+                                     f"{', '.join(f for f in MEAN_PHYSICS_FAMILIES if f != 'backlash')}; "
+                                     "backlash: backlash=0)")
+                kw["oracle_drop"] = "+".join(fams)
             elif kind == "oracle" and k == "ground":
                 if v not in OWN_GROUND.values():
                     raise ValueError(f"world {text!r}: unknown option value ground={v!r} ({' or '.join(OWN_GROUND.values())})")
@@ -395,6 +417,9 @@ def parse_world(text: str) -> WorldSpec:
     if kw.get("oracle_engine") == "mujoco" and not kw.get("oracle_mean"):
         raise ValueError(f"world {text!r}: engine=mujoco builds the real world's mean physics into the sim: "
                          "it needs mean=1")
+    if {"oracle_compliance", "oracle_backlash", "oracle_drop"} & set(kw) and kw.get("oracle_engine") != "mujoco":
+        raise ValueError(f"world {text!r}: compliance=, backlash= and drop= set the MuJoCo form of the mean physics: "
+                         "they need mean=1:engine=mujoco")
     if kw.get("oracle_ground") and not kw.get("oracle_mean"):
         raise ValueError(f"world {text!r}: ground= walks the real world's mean physics on a given ground: it needs mean=1")
     if kw.get("oracle_mean"):  # the mean oracles name their ground: the engine's own unless given
@@ -482,7 +507,7 @@ class FidelityConfig:
     params: tuple = ()
     real_trials: int = 10
     data_seeds: int = 5
-    episodes: int = 4
+    episodes: int = 8  # per gait in a stochastic world; 4 until the thirty-first round (its fidelity against episodes)
     seconds: float = EPISODE_SECONDS
     profile: str = "real"
     identify_fixed_logs: int = 3
@@ -814,15 +839,23 @@ class Fidelity:
                           f"{1000 * r['terrain_rms_height']:.2f} mm ({time.perf_counter() - t0:.0f} s)")
         return out
 
-    def _mean_physics(self) -> str:
+    def _mean_physics(self, spec: WorldSpec | None = None) -> str:
         """The report of the real world's mean physics for the identified sim (``oracle:mean=1:
-        engine=mujoco``; :func:`experiments.tasks.mean_physics_report`), written once into the run."""
+        engine=mujoco``; :func:`experiments.tasks.mean_physics_report`), written once into the run;
+        with ``spec``'s ``compliance=`` and ``backlash=0`` in a folder of its own."""
         from experiments.tasks import mean_physics_report  # lazy: loads the engines
 
-        path = os.path.join(self.run_dir, "oracle", f"mean_physics_{self.cfg.profile}", "report.json")
+        compliance = spec.oracle_compliance if spec is not None and spec.oracle_compliance else None
+        backlash = spec is None or spec.oracle_backlash
+        drop = spec.oracle_drop.split("+") if spec is not None and spec.oracle_drop else []
+        form = (f"_compliance{compliance:g}" if compliance else "") + ("" if backlash else "_nobacklash") \
+            + (f"_drop{'+'.join(drop)}" if drop else "")
+        path = os.path.join(self.run_dir, "oracle", f"mean_physics_{self.cfg.profile}{form}", "report.json")
         if not os.path.exists(path):
             os.makedirs(os.path.dirname(path), exist_ok=True)
-            atomic_write_text(path, json.dumps(mean_physics_report(self.cfg.profile, self.cfg.robot), indent=1))
+            rep = mean_physics_report(self.cfg.profile, self.cfg.robot, ground_compliance=compliance,
+                                      drop=drop + ([] if backlash else ["backlash"]))
+            atomic_write_text(path, json.dumps(rep, indent=1))
         return path
 
     def _mean_ground_level(self, ground: str) -> float:
@@ -965,7 +998,7 @@ class Fidelity:
                 base["profile"] = f"{cfg.profile}:mean"
             if spec.oracle_engine == "mujoco":  # ... built into the sim (experiments.tasks.mean_physics_report)
                 del base["profile"]
-                base.update(world="identified", identified=[self._mean_physics()])
+                base.update(world="identified", identified=[self._mean_physics(spec)])
             if spec.oracle_ground and spec.oracle_ground != OWN_GROUND[spec.oracle_engine]:
                 # ... on the other engine's ground: the very surface that engine walks for the seed
                 base["ground"] = [spec.oracle_ground, self._mean_ground_level(spec.oracle_ground)]
@@ -1110,6 +1143,9 @@ class Fidelity:
                                         **({"oracle_mean": True} if spec.oracle_mean else {}),
                                         **({"oracle_engine": spec.oracle_engine} if spec.oracle_engine != "pybullet" else {}),
                                         **({"oracle_ground": spec.oracle_ground} if spec.oracle_ground else {}),
+                                        **({"oracle_compliance": spec.oracle_compliance} if spec.oracle_compliance else {}),
+                                        **({"oracle_backlash": False} if not spec.oracle_backlash else {}),
+                                        **({"oracle_drop": spec.oracle_drop.split("+")} if spec.oracle_drop else {}),
                                         **({"by_episodes": {str(k): {"draws": c, "summary": _summary(c)}
                                                             for k, c in curve.items()}} if curve else {})}
         out["paired"] = paired_rows(out, n_boot=cfg.bootstrap, seed=cfg.seed)
@@ -1295,7 +1331,9 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
     comparisons ``sgat`` − ``gat``, ``hybrid`` − ``identified``, ``hybrid`` − ``sgat``, where the run
     has both, and any two worlds of one kind one setting apart, the later against the earlier
     (``hybrid:alpha=0.3:delay=auto`` against ``hybrid:alpha=0.3``; the four mean-physics oracles of
-    engine × ground, edge by edge)."""
+    engine × ground, edge by edge; a ``drop=`` ablation against the world it ablates, not against an
+    ablation of other families); and a MuJoCo form of the mean physics rebuilt with ``compliance=``,
+    ``backlash=0`` or ``drop=`` against ``oracle:mean=1``, the PyBullet form it stands for."""
     pairs = []
     for n in names:
         if n != "sim" and "sim" in names:
@@ -1311,8 +1349,19 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
         except ValueError:  # a name of an earlier round's options: compared by the rules above only
             continue
     pairs += [(a, b) for i, a in enumerate(names) for b in names[:i]
-              if a in specs and b in specs and _settings_apart(specs[a], specs[b]) == 1]
+              if a in specs and b in specs and _settings_apart(specs[a], specs[b]) == 1 and _nested_drops(specs[a], specs[b])]
+    if "oracle:mean=1" in names:  # a rebuilt MuJoCo form against the PyBullet mean physics it stands for
+        pairs += [(n, "oracle:mean=1") for n, s in specs.items()
+                  if s.kind == "oracle" and s.oracle_engine == "mujoco"
+                  and (s.oracle_compliance or not s.oracle_backlash or s.oracle_drop)]
     return list(dict.fromkeys(pairs))
+
+
+def _nested_drops(a: WorldSpec, b: WorldSpec) -> bool:
+    """Whether one world's ``drop=`` families hold the other's: an ablation is compared with the world
+    it ablates, not with an ablation of other families."""
+    fa, fb = (set(filter(None, s.oracle_drop.split("+"))) for s in (a, b))
+    return fa <= fb or fb <= fa
 
 
 def _settings_apart(a: WorldSpec, b: WorldSpec) -> int:

@@ -205,8 +205,8 @@ def _fidelity(res: dict) -> str:
             data.append(f"{d0['excitation_logs']} excitation logs ({d0['excitation_seconds']:.0f} s)")
         if w.get("kind") == "oracle":
             data.append(f"it is the real world{' at its mean physics' if w.get('oracle_mean') else ''}"
-                        f"{' built into the sim (MuJoCo)' if w.get('oracle_engine') == 'mujoco' else ''} "
-                        f"({w['episodes']} episodes per gait on fresh seeds)")
+                        f"{' built into the sim (MuJoCo)' if w.get('oracle_engine') == 'mujoco' else ''}"
+                        f"{_mujoco_form(w)} ({w['episodes']} episodes per gait on fresh seeds)")
         lines.append(f"| `{name}` | {s['draws']} | {_f(s['rho']['median'])} [{_f(s['rho']['min'])}, {_f(s['rho']['max'])}] "
                      f"| [{_f(ci[0])}, {_f(ci[1])}] | {_f(s['mae']['median'], '{:.1f}')} | "
                      f"{_f(s['bias']['median'], '{:+.1f}')}, {_f(s['bias']['spread'], '{:.1f}')} | "
@@ -240,7 +240,7 @@ def _fidelity(res: dict) -> str:
                  for t, ok, v in fidelity_targets(res, oracle)]
         what = "at its mean physics, every effect at the middle of its range" if w.get("oracle_mean") else "itself"
         if w.get("oracle_engine") == "mujoco":
-            what += ", built into the sim (MuJoCo) by the identified sim's effect models"
+            what += ", built into the sim (MuJoCo) by the identified sim's effect models" + _mujoco_form(w)
         lines += ["", f"For scale, `{oracle}` (the real world {what}, {w['episodes']} episodes per "
                   "gait on fresh seeds) against the same targets: " + "; ".join(parts) + "."]
     if res.get("wall_s") is not None:
@@ -299,6 +299,15 @@ def _teacher_forcing(fitted: dict) -> str:
 def _own_ceiling(s: dict) -> str:
     c = s.get("world_ceiling")
     return "– (deterministic)" if c is None else f"{_f(c['median'])} [{_f(c['min'])}]"
+
+
+def _mujoco_form(w: dict) -> str:
+    """The settings of a MuJoCo mean-physics oracle's form, as words (``""`` where it has none)."""
+    parts = ([f"a ground contact of {1000 * w['oracle_compliance']:g} ms"] if w.get("oracle_compliance") else []) \
+        + (["no backlash terms"] if w.get("oracle_backlash") is False else [])
+    drop = w.get("oracle_drop") or []
+    return (f" with {' and '.join(parts)}" if parts else "") \
+        + (f"{',' if parts else ''} without {', '.join(f.replace('_', ' ') for f in drop)}" if drop else "")
 
 
 def _pick(res: dict, w: dict) -> str:

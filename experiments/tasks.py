@@ -155,7 +155,13 @@ def mean_profile(profile):
     return dataclasses.replace(profile, name=f"{profile.name}:mean", **mids)
 
 
-def mean_physics_report(profile, robot_name: str = "nao", terrain_samples: int = 16) -> dict:
+#: The effect families of :func:`mean_physics_report`'s model and ground, in its order (``drop=``).
+MEAN_PHYSICS_FAMILIES = ("latency", "torque_limit", "foot_friction", "pd_gain", "backlash", "coulomb_friction",
+                         "viscous_damping", "link_mass", "terrain_roughness")
+
+
+def mean_physics_report(profile, robot_name: str = "nao", terrain_samples: int = 16, *,
+                        ground_compliance: float | None = None, drop=()) -> dict:
     """The real world's mean physics (:func:`mean_profile`) as a report of ``sgatwalk diagnose``, so
     that the identified sim (``sysid.identified.IdentifiedSimEnv``) builds it into MuJoCo: what the
     identified world would be if the diagnosis found every effect exactly (the ``oracle:mean=1:
@@ -172,12 +178,31 @@ def mean_physics_report(profile, robot_name: str = "nao", terrain_samples: int =
     out: the servo damping scale (its middle is 1), the encoder offsets (middle 0) and the sensor
     noises (no deterministic family).
 
+    The MuJoCo form itself, and ablations (thirty-first round; ``benchmarks/engine_gap_walks.py``
+    measures the form against PyBullet): ``ground_compliance`` adds the ground contact's time constant
+    the diagnosis identifies on the real world's stepping logs (the sim's own is
+    ``envs.mujoco_world.GROUND_TIMECONST``; MuJoCo holds it at 2 physics steps or more); ``drop``
+    leaves families out: ``backlash``, which ``sysid.model`` builds as a series play hinge on every
+    joint (a walk unlike the real world's dead-band servos even at zero width), or any other, to ask
+    what an identified world that misses it loses (``terrain_roughness``: flat ground).
+
     Args:
         profile: an ``envs.effects.RealProfile`` or a profile name (``envs.effects.get_profile``).
+        ground_compliance: contact time constant of the ground [s] (None: the sim's own).
+        drop: names of :data:`MEAN_PHYSICS_FAMILIES` to leave out.
 
     Returns:
         ``{"model": {label: value}, "base_model": {}, "effects": [terrain_roughness] or []}``.
+
+    Raises:
+        ValueError: ``ground_compliance`` not finite and > 0; an unknown family in ``drop``.
     """
+    if ground_compliance is not None and not (np.isfinite(ground_compliance) and ground_compliance > 0):
+        raise ValueError(f"ground_compliance must be a time constant > 0 s, got {ground_compliance!r}")
+    drop = set(drop)
+    if drop - set(MEAN_PHYSICS_FAMILIES):
+        raise ValueError(f"unknown effect famil(ies) {', '.join(sorted(drop - set(MEAN_PHYSICS_FAMILIES)))} to drop; "
+                         f"choose from {', '.join(MEAN_PHYSICS_FAMILIES)}")
     from envs.effects import get_profile  # lazy: loads the engines
     from terrain import lumpy
 
@@ -193,8 +218,11 @@ def mean_physics_report(profile, robot_name: str = "nao", terrain_samples: int =
             model[f"{fam}[{j}]"] = mid[eff]
     for link in robot.links:
         model[f"link_mass[{link}]"] = mid["mass_scale"]
+    model = {k: v for k, v in model.items() if k.split("[")[0] not in drop}
+    if ground_compliance is not None:
+        model["ground_compliance"] = float(ground_compliance)
     effects = []
-    if mid["terrain_amplitude"] > 0:
+    if mid["terrain_amplitude"] > 0 and "terrain_roughness" not in drop:
         rms = float(np.mean([lumpy(s, amplitude=mid["terrain_amplitude"]).heights.std() for s in range(terrain_samples)]))
         effects.append({"family": "terrain_roughness", "value": rms})
     return {"model": model, "base_model": {}, "effects": effects}

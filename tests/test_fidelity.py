@@ -832,6 +832,64 @@ def test_the_mean_oracles_swap_grounds_across_the_engines_on_the_same_surfaces(t
         _world({**pb_real[0], "ground": ["gravel", 0.01]})
 
 
+def test_the_rebuilt_mujoco_oracle_walks_the_identified_contact_without_play_hinges(tmp_path):
+    """``oracle:mean=1:engine=mujoco:compliance=0.004:backlash=0``: the MuJoCo form of the mean physics
+    with the ground contact the diagnosis identifies and no backlash terms, from a report of its own
+    beside the plain yardstick's (same seeds, same ground); the plain form's key and model are unchanged;
+    the options belong to the MuJoCo form only and take a time constant > 0."""
+    from experiments.fidelity import Fidelity
+    from experiments.readme import _mujoco_form
+    from experiments.tasks import _world, mean_physics_report
+
+    plain = parse_world("oracle:mean=1:engine=mujoco")
+    assert parse_world("oracle:mean=1:engine=mujoco:backlash=1").key == plain.key
+    rebuilt = parse_world("oracle:mean=1:engine=mujoco:compliance=0.004:backlash=0")
+    assert (rebuilt.oracle_compliance, rebuilt.oracle_backlash) == (0.004, False) and rebuilt.key != plain.key
+    for bad, msg in (("oracle:mean=1:compliance=0.004", "need mean=1:engine=mujoco"),
+                     ("oracle:backlash=0", "need mean=1:engine=mujoco"),
+                     ("oracle:mean=1:engine=mujoco:compliance=0", "bad value for compliance"),
+                     ("oracle:mean=1:engine=mujoco:compliance=inf", "bad value for compliance"),
+                     ("sgat:backlash=0", "unknown option")):
+        with pytest.raises(ValueError, match=msg):
+            parse_world(bad)
+    with pytest.raises(ValueError, match="time constant"):
+        mean_physics_report("real", ground_compliance=-0.004)
+    ablated = parse_world("oracle:mean=1:engine=mujoco:drop=torque_limit+pd_gain+pd_gain")
+    assert ablated.oracle_drop == "pd_gain+torque_limit"  # sorted, once each: one world, one key
+    assert ablated.key == parse_world("oracle:mean=1:engine=mujoco:drop=pd_gain+torque_limit").key != plain.key
+    for bad in ("oracle:mean=1:engine=mujoco:drop=backlash", "oracle:mean=1:engine=mujoco:drop=gravity"):
+        with pytest.raises(ValueError, match="unknown option value drop"):
+            parse_world(bad)
+    with pytest.raises(ValueError, match="unknown effect famil"):
+        mean_physics_report("real", drop=["gravity"])
+    flat = mean_physics_report("real", drop=["pd_gain", "terrain_roughness"])
+    full = mean_physics_report("real")
+    assert flat["effects"] == [] and not any(k.startswith("pd_gain[") for k in flat["model"])
+    assert {k: v for k, v in full["model"].items() if not k.startswith("pd_gain[")} == flat["model"]
+
+    run = Fidelity(FidelityConfig(worlds=(plain.name, rebuilt.name), gaits=2, real_trials=2, episodes=2, data_seeds=1),
+                   str(tmp_path), executor=None)
+    gaits = [{"name": "a", "theta": [0.0]}]
+    old, new = (run._world_tasks(s, 0, {}, gaits) for s in run.specs)
+    assert [t["seed"] for t in old] == [t["seed"] for t in new] and old[0]["identified"] != new[0]["identified"]
+    reports = [json.loads(open(t[0]["identified"][0]).read()) for t in (old, new)]
+    assert reports[0] == mean_physics_report("real")  # the yardstick's report as before
+    assert {k for k in reports[0]["model"] if not k.startswith("backlash[")} | {"ground_compliance"} == set(reports[1]["model"])
+    seed = old[0]["seed"]
+    envs = [_world(t[0]).unwrapped for t in (old, new)]
+    for env in envs:
+        env.reset(seed=seed)
+    hinges = [[e.model.joint(j).name for j in range(e.model.njnt) if e.model.joint(j).name.endswith("__play")] for e in envs]
+    assert len(hinges[0]) >= 20 and hinges[1] == []
+    assert np.allclose(envs[0].model.geom_solref[:, 0], 0.01) and np.allclose(envs[1].model.geom_solref[:, 0], 0.004)
+    assert np.array_equal(envs[0].terrain.heights, envs[1].terrain.heights)  # the same Gaussian surface
+    assert _mujoco_form({"oracle_compliance": 0.004, "oracle_backlash": False}) == \
+        " with a ground contact of 4 ms and no backlash terms"
+    assert _mujoco_form({"oracle_engine": "mujoco"}) == ""
+    assert _mujoco_form({"oracle_backlash": False, "oracle_drop": ["pd_gain", "torque_limit"]}) == \
+        " with no backlash terms, without pd gain, torque limit"
+
+
 def test_worlds_one_setting_apart_are_paired():
     """Beside the fixed pairs, any two worlds of one kind that differ in one setting are tested against
     each other: the four mean-physics oracles edge by edge (engine on each ground, ground in each
@@ -849,6 +907,17 @@ def test_worlds_one_setting_apart_are_paired():
     assert ("hybrid:alpha=0.3:delay=auto", "hybrid") in pairs  # a variant against its plain kind, as before
     assert ("sgat:alpha=0.3", "hybrid:alpha=0.3") not in pairs  # another kind
     assert world_pairs(["sim", "old:name=1"], {}) == [("old:name=1", "sim")]  # unparsable: the fixed rules only
+    rebuilt = ["oracle:mean=1", "oracle:mean=1:engine=mujoco", "oracle:mean=1:engine=mujoco:backlash=0",
+               "oracle:mean=1:engine=mujoco:compliance=0.004:backlash=0"]
+    pairs = world_pairs(rebuilt, {n: "oracle" for n in rebuilt})
+    assert (rebuilt[2], rebuilt[1]) in pairs and (rebuilt[3], rebuilt[2]) in pairs  # one setting apart
+    assert (rebuilt[2], rebuilt[0]) in pairs and (rebuilt[3], rebuilt[0]) in pairs  # a rebuilt form against PyBullet's
+    assert (rebuilt[1], rebuilt[0]) not in pairs and (rebuilt[3], rebuilt[1]) not in pairs  # two settings apart
+    r = rebuilt[3]
+    drops = [r, f"{r}:drop=latency", f"{r}:drop=pd_gain", f"{r}:drop=latency+pd_gain"]
+    pairs = world_pairs(drops, {n: "oracle" for n in drops})
+    assert {(drops[1], r), (drops[2], r), (drops[3], drops[1]), (drops[3], drops[2])} <= set(pairs)
+    assert (drops[2], drops[1]) not in pairs  # ablations of other families: not compared
 
 
 def test_a_run_without_a_terminal_reports_progress_within_a_chunk(tmp_path, monkeypatch):
