@@ -197,7 +197,7 @@ def _seeds(seed: int, purpose: int, *keys: int, n: int) -> list[int]:
 _LATER_OPTIONS = {"identified_terms": True, "identified_ground": True, "state": "legs", "history": 1,
                   "stepping_logs": None, "identified_confounded": True, "oracle_mean": False, "walkfit": "",
                   "oracle_engine": "pybullet", "servo": "", "envelope": 0.0, "delay_auto": False, "oracle_ground": "",
-                 "oracle_compliance": 0.0, "oracle_backlash": True, "oracle_drop": ""}
+                  "oracle_compliance": 0.0, "oracle_backlash": True, "oracle_drop": ""}
 
 
 @dataclass(frozen=True)
@@ -842,7 +842,7 @@ class Fidelity:
     def _mean_physics(self, spec: WorldSpec | None = None) -> str:
         """The report of the real world's mean physics for the identified sim (``oracle:mean=1:
         engine=mujoco``; :func:`experiments.tasks.mean_physics_report`), written once into the run;
-        with ``spec``'s ``compliance=`` and ``backlash=0`` in a folder of its own."""
+        with ``spec``'s ``compliance=``, ``backlash=0`` and ``drop=`` in a folder of its own."""
         from experiments.tasks import mean_physics_report  # lazy: loads the engines
 
         compliance = spec.oracle_compliance if spec is not None and spec.oracle_compliance else None
@@ -1349,7 +1349,8 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
         except ValueError:  # a name of an earlier round's options: compared by the rules above only
             continue
     pairs += [(a, b) for i, a in enumerate(names) for b in names[:i]
-              if a in specs and b in specs and _settings_apart(specs[a], specs[b]) == 1 and _nested_drops(specs[a], specs[b])]
+              if a in specs and b in specs and _settings_apart(specs[a], specs[b]) == 1
+              and _nested_drops(specs[a], specs[b])]
     if "oracle:mean=1" in names:  # a rebuilt MuJoCo form against the PyBullet mean physics it stands for
         pairs += [(n, "oracle:mean=1") for n, s in specs.items()
                   if s.kind == "oracle" and s.oracle_engine == "mujoco"
