@@ -38,9 +38,8 @@ seed: the four mean-physics oracles tell the engines' gap from the ground model'
 (the ground contact's time constant [s], e.g. 0.004: what the diagnosis identifies) and
 ``backlash=0`` (no backlash terms, which the MuJoCo form builds as series play hinges) rebuild the
 MuJoCo form with the two settings ``benchmarks/engine_gap_walks.py`` found it carries; ``drop=F+G``
-leaves those effect families out of it (latency, torque_limit, foot_friction, pd_gain,
-coulomb_friction, viscous_damping, link_mass, terrain_roughness): what an identified world that
-misses them loses.
+leaves those effect families out of it (listed below): what an identified world that misses them
+loses.
 """
 
 from __future__ import annotations
@@ -51,12 +50,14 @@ import sys
 
 from experiments.executors import make_executor
 from experiments.fidelity import DEFAULT_WORLDS, Fidelity, FidelityConfig, format_phases, format_table
+from experiments.tasks import MEAN_PHYSICS_FAMILIES
 import experiments.argtypes as A
 
 
 def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("fidelity", help="how well each training world predicts real gait fitness",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=__doc__ + f"\nEffect families of drop=: {', '.join(MEAN_PHYSICS_FAMILIES)}.\n",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     d = FidelityConfig()
     p.add_argument("--worlds", nargs="+", default=None, metavar="WORLD",
                    help=f"training worlds (default: {' '.join(DEFAULT_WORLDS)}; other robots than the NAO: without identified, hybrid; "

@@ -1333,7 +1333,11 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
     (``hybrid:alpha=0.3:delay=auto`` against ``hybrid:alpha=0.3``; the four mean-physics oracles of
     engine × ground, edge by edge; a ``drop=`` ablation against the world it ablates, not against an
     ablation of other families); and a MuJoCo form of the mean physics rebuilt with ``compliance=``,
-    ``backlash=0`` or ``drop=`` against ``oracle:mean=1``, the PyBullet form it stands for."""
+    ``backlash=0`` or ``drop=`` against ``oracle:mean=1``, the PyBullet form it stands for. Where the
+    run has ``oracle`` (the real world itself on fresh seeds, as many episodes per gait), every world
+    that learns from real data or adds noise (``ane``, ``gat``, ``sgat``, ``identified``, ``hybrid``
+    and their variants) against it: does the world rank the gaits measurably worse than the real
+    world would as a training world?"""
     pairs = []
     for n in names:
         if n != "sim" and "sim" in names:
@@ -1355,7 +1359,14 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
         pairs += [(n, "oracle:mean=1") for n, s in specs.items()
                   if s.kind == "oracle" and s.oracle_engine == "mujoco"
                   and (s.oracle_compliance or not s.oracle_backlash or s.oracle_drop)]
+    if "oracle" in names:  # every learned world against the real world itself
+        pairs += [(n, "oracle") for n in names if kinds.get(n, n.split(":")[0]) in _LEARNED_KINDS]
     return list(dict.fromkeys(pairs))
+
+
+#: World kinds paired against ``oracle`` (:func:`world_pairs`): those that learn from real data or
+#: add noise to the sim, each a stand-in for the real world.
+_LEARNED_KINDS = ("ane", "gat", "sgat", "identified", "hybrid")
 
 
 def _nested_drops(a: WorldSpec, b: WorldSpec) -> bool:

@@ -13,6 +13,14 @@ def test_help_lists_commands(capsys):
     assert "stand" in capsys.readouterr().out
 
 
+def test_fidelity_help_names_every_family_drop_takes(capsys):
+    from experiments.tasks import MEAN_PHYSICS_FAMILIES
+
+    assert main(["fidelity", "--help"]) == 0
+    line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("Effect families of drop="))
+    assert line.removeprefix("Effect families of drop=: ").rstrip(".").split(", ") == list(MEAN_PHYSICS_FAMILIES)
+
+
 def test_stand_json_and_recording(capsys, tmp_path):
     out = tmp_path / "rec.parquet"
     rc = main(["stand", "--world", "sim,real", "--seconds", "1", "--profile", "none", "--record", str(out), "--json"])

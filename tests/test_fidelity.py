@@ -918,6 +918,12 @@ def test_worlds_one_setting_apart_are_paired():
     pairs = world_pairs(drops, {n: "oracle" for n in drops})
     assert {(drops[1], r), (drops[2], r), (drops[3], drops[1]), (drops[3], drops[2])} <= set(pairs)
     assert (drops[2], drops[1]) not in pairs  # ablations of other families: not compared
+    names = ["sim", "ane", "gat", "sgat", "identified", "hybrid:alpha=0.3", "oracle:mean=1", "oracle"]
+    pairs = world_pairs(names, {n: n.split(":")[0] for n in names})
+    against_real = [a for a, b in pairs if b == "oracle"]
+    assert sorted(against_real) == sorted(["ane", "gat", "sgat", "identified", "hybrid:alpha=0.3", "oracle:mean=1"])
+    assert ("oracle", "sim") in pairs and ("sim", "oracle") not in pairs  # the mean physics: as its variant
+    assert not any(b == "oracle" for _, b in world_pairs(names[:-1], {n: n.split(":")[0] for n in names[:-1]}))
 
 
 def test_a_run_without_a_terminal_reports_progress_within_a_chunk(tmp_path, monkeypatch):
