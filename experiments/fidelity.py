@@ -157,6 +157,9 @@ KINDS = ("sim", "ane", "gat", "sgat", "identified", "hybrid", "oracle")
 DEFAULT_WORLDS = KINDS[:-1]
 #: Kinds whose every episode of a gait is the same whatever its seed (:attr:`WorldSpec.deterministic`).
 DETERMINISTIC_KINDS = ("sim", "gat")
+#: World kinds paired against ``oracle`` (:func:`world_pairs`): every kind but the plain sim and the
+#: real world, those that learn from real data or add noise to the sim as stand-ins for the real world.
+_LEARNED_KINDS = tuple(k for k in KINDS if k not in ("sim", "oracle"))
 #: The phases of a run, in run order, whose wall time ``fidelity.json`` reports (``phases_s``): where a
 #: run's time goes (the README's default run: the diagnoses and the world episodes, on busy cores).
 PHASES = ("real trials", "excitation logs", "diagnoses", "servo fits", "grounding walks", "walk fits", "fits",
@@ -1362,11 +1365,6 @@ def world_pairs(names: list[str], kinds: dict[str, str]) -> list[tuple[str, str]
     if "oracle" in names:  # every learned world against the real world itself
         pairs += [(n, "oracle") for n in names if kinds.get(n, n.split(":")[0]) in _LEARNED_KINDS]
     return list(dict.fromkeys(pairs))
-
-
-#: World kinds paired against ``oracle`` (:func:`world_pairs`): those that learn from real data or
-#: add noise to the sim, each a stand-in for the real world.
-_LEARNED_KINDS = ("ane", "gat", "sgat", "identified", "hybrid")
 
 
 def _nested_drops(a: WorldSpec, b: WorldSpec) -> bool:
