@@ -1,8 +1,8 @@
 """What a diagnosis's second screen/refit round costs and what it finds, side by side in one run.
 
 The identified and hybrid worlds identify the real world from 3 fixed-base (in-air) and 3 stepping
-excitation logs (``experiments.identify.identify_real``), in ``--identify-rounds`` screen/refit
-rounds per diagnosis (default 2, ``experiments.grounding.IDENTIFY_ROUNDS``). This records one such
+excitation logs (``experiments.runtime.identify.identify_real``), in ``--identify-rounds`` screen/refit
+rounds per diagnosis (default 2, ``experiments.runtime.grounding.IDENTIFY_ROUNDS``). This records one such
 set of logs of the real world (seed ``--seed``, the shipped engine-gap calibration) and diagnoses
 the very same logs with 1 and with 2 rounds, ``--repeats`` times interleaved, under ``cProfile``.
 Per number of rounds (medians over the repeats): the wall time of the in-air and the stepping
@@ -44,8 +44,8 @@ def rollout_seconds(prof: cProfile.Profile) -> float:
 def diagnose_once(logs_dir: str, out_dir: str, rounds: int, seed: int, calibration: dict) -> dict:
     """Diagnose the logs recorded in ``logs_dir`` again in ``out_dir`` (a copy of the logs, no
     reports) with ``rounds`` rounds: wall time per stage, rollout share, terms and latency."""
-    from experiments.grounding import IDENTIFY_BUDGET_S
-    from experiments.identify import identify_real
+    from experiments.runtime.grounding import IDENTIFY_BUDGET_S
+    from experiments.runtime.identify import identify_real
 
     shutil.rmtree(out_dir, ignore_errors=True)
     for stage in ("fixed", "floating"):
@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.repeats < 1 or args.seed < 0:
         ap.error("--repeats must be >= 1 and --seed >= 0")
-    from experiments.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks,
+    from experiments.runtime.identify import (ENGINE_GAP_SEED, calibrate_engines, excitation_tasks,
                                       record_excitation_task)
 
     load0 = os.getloadavg()[0]
@@ -120,7 +120,7 @@ def main(argv=None) -> int:
     rows.append(f"two rounds / one: in-air diagnosis {out['ratio_fixed_two_vs_one']:.2f}x, whole identification "
                 f"{out['ratio_wall_two_vs_one']:.2f}x")
     out["text"] = "\n".join(rows)
-    from experiments.readme import finish_benchmark
+    from tools.readme import finish_benchmark
 
     finish_benchmark(out, "benchmarks/bench_diagnose_rounds.py", argv, save_name=args.save, as_json=args.json, load_before=load0)
     return 0

@@ -92,7 +92,7 @@ def main(argv=None):
     out["text"] = "\n".join(lines)
     print(out["text"])
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/bench_envs.py", sys.argv[1:] if argv is None else list(argv), out,
                        load_before)

@@ -6,9 +6,9 @@ each, in the plain sim and in the grounded sim (an SGAT transformer fitted first
 first grounding step fits it: 4 real and 4 sim walks of θ0, α 0.5, 5-member ensemble). Per world, in
 one process (one core), interleaved over ``--repeats``:
 
-* **batched**: the generation as the executors run it (``experiments.batch.map_episodes``: lock-step
+* **batched**: the generation as the executors run it (``experiments.runtime.batch.map_episodes``: lock-step
   batches of ``popsize / workers``, here run one after the other on this core);
-* **single**: the same episodes one at a time (``experiments.tasks.run_episode``, the path before
+* **single**: the same episodes one at a time (``experiments.runtime.tasks.run_episode``, the path before
   batching), on a sample of ``--single`` episodes;
 * **bare, sequential**: ``mujoco.mj_step(m, d, nstep=10)`` with each episode's own applied actions,
   one episode after the other on one ``MjData`` (the physics alone, cache-hot);
@@ -38,11 +38,11 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import numpy as np  # noqa: E402
 
 from envs import Recording  # noqa: E402
-from experiments.batch import chunk_tasks, map_episodes, run_batch  # noqa: E402
-from experiments.executors import SerialExecutor  # noqa: E402
-from experiments.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, REAL_WALKS, SIM_WALKS, fit_nao_grounding  # noqa: E402
-from experiments.optimize import OptimizeConfig  # noqa: E402
-from experiments.tasks import _world, run_episode  # noqa: E402
+from experiments.runtime.batch import chunk_tasks, map_episodes, run_batch  # noqa: E402
+from experiments.runtime.executors import SerialExecutor  # noqa: E402
+from experiments.runtime.grounding import DEFAULT_GROUNDING, EXPLORATION_NOISE, REAL_WALKS, SIM_WALKS, fit_nao_grounding  # noqa: E402
+from experiments.optimize.run import OptimizeConfig  # noqa: E402
+from experiments.runtime.tasks import _world, run_episode  # noqa: E402
 from walk_engine import GaitParams  # noqa: E402
 
 
@@ -183,7 +183,7 @@ def main(argv=None) -> int:
     out["load_before"], out["load_after"] = load_before, os.getloadavg()[0]
     out["table"] = format_table(out)
     if args.save:
-        from experiments.readme import save
+        from tools.readme import save
 
         cmd = "python benchmarks/bench_generation.py " + " ".join(a for a in (argv if argv is not None else sys.argv[1:])
                                                                    if not a.startswith("--save") and a != args.save)

@@ -43,7 +43,7 @@ import gymnasium as gym  # noqa: E402
 import mujoco  # noqa: E402
 
 from envs import NaoSimEnv  # noqa: E402
-from experiments.fitness import run_walk  # noqa: E402
+from experiments.runtime.fitness import run_walk  # noqa: E402
 from sysid.identified import GROUND_JACOBIAN  # noqa: E402
 from sysid.roughness import CORRELATION_RADIUS  # noqa: E402
 from terrain import gaussian  # noqa: E402
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
                      f"{g['mj_step_us']:12.0f} {g['mj_step_ratio']:7.2f} {g['env_step_us']:13.0f} {g['env_step_ratio']:7.2f}")
     out["text"] = "\n".join(lines)
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/bench_ground.py", list(argv if argv is not None else sys.argv[1:]), out, load0)
     print(json.dumps(out) if args.json else out["text"], flush=True)

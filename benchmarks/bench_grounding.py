@@ -40,9 +40,9 @@ def main(argv=None):
     import mujoco
 
     from envs import NaoSimEnv
-    from experiments.fitness import run_walk
+    from experiments.runtime.fitness import run_walk
     from sgat.models import ForwardModel, InverseModel
-    from experiments.grounding import grounding_spec
+    from experiments.runtime.grounding import grounding_spec
     from sgat.transformer import ActionTransformer, GroundedEnv
     from walk_engine import GaitParams
 
@@ -101,8 +101,8 @@ def main(argv=None):
            "transformer_share_of_grounded": 750 * med["transformer call"] / med["grounded walk (SGAT)"]}
 
     if args.generation:
-        from experiments.executors import make_executor
-        from experiments.tasks import run_episode
+        from experiments.runtime.executors import make_executor
+        from experiments.runtime.tasks import run_episode
 
         with tempfile.TemporaryDirectory() as tmp:
             tr.save(tmp)
@@ -120,7 +120,7 @@ def main(argv=None):
             out.update(generation_s=wall, generation_workers=ex.workers)
     out["text"] = "\n".join(lines)
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/bench_grounding.py", sys.argv[1:] if argv is None else list(argv), out,
                        load_before)

@@ -60,9 +60,9 @@ def lookup_round(fields, xs, ys) -> dict:
 def grounding_data(seconds: float):
     """4 real walks of θ0 and 4 sim walks with the exploration noise (the shape of the first grounding
     step's data; seeds of this benchmark's own, 100+ and 200+), recorded on a pool of 2."""
-    from experiments.executors import ProcessExecutor
-    from experiments.grounding import EXPLORATION_NOISE, REAL_WALKS, SIM_WALKS
-    from experiments.tasks import run_episode
+    from experiments.runtime.executors import ProcessExecutor
+    from experiments.runtime.grounding import EXPLORATION_NOISE, REAL_WALKS, SIM_WALKS
+    from experiments.runtime.tasks import run_episode
     from walk_engine import GaitParams
 
     theta = GaitParams().to_array().tolist()
@@ -81,7 +81,7 @@ def fit_round(real, sim, ex) -> dict:
     """One round of the grounding fit, both ways. Returns seconds and whether every weight agrees."""
     import torch
 
-    from experiments.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, fit_nao_grounding
+    from experiments.runtime.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, fit_nao_grounding
 
     def weights(fit):
         tr = fit.transformer
@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     if min(args.episodes, args.steps, args.repeats, args.workers) < 1 or not args.rms > 0 or not args.seconds > 0:
         ap.error("--episodes, --steps, --repeats and --workers must be >= 1, --rms and --seconds > 0")
     load0 = os.getloadavg()[0]
-    from experiments.executors import ProcessExecutor
+    from experiments.runtime.executors import ProcessExecutor
     from sysid.roughness import CORRELATION_RADIUS
     from terrain import gaussian
 
@@ -154,7 +154,7 @@ def main(argv=None) -> int:
         f"{ft['ratio']:8.2f} {str(ft['bit_identical']).lower():>13s}",
     ])
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/bench_overhead.py", list(argv if argv is not None else sys.argv[1:]), out, load0)
     print(json.dumps(out) if args.json else out["text"], flush=True)

@@ -151,7 +151,7 @@ def main(argv=None):
     result.update(target_s=0.3, target_met=med_tot < 0.3, text="\n".join(lines))
     print(f"files in {out}")
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/bench_rerun.py", sys.argv[1:] if argv is None else list(argv), result,
                        load_before)

@@ -2,7 +2,7 @@
 
 The stepping diagnosis fits terrain roughness by simulating every stepping log on random surfaces
 of each RMS height of a grid (``sysid.roughness.RMS_HEIGHTS``) and replaying the simulated logs:
-the largest part of an identification (``experiments.identify.identify_real``). Since the
+the largest part of an identification (``experiments.runtime.identify.identify_real``). Since the
 twenty-fifth round the grid is simulated bottom-up, only as far as the fit needs it
 (``fit_roughness(adaptive=True)``). This records one set of excitation logs of the real world per
 seed (3 in-air, 3 stepping; the shipped engine-gap calibration) and identifies the very same logs
@@ -44,8 +44,8 @@ def identify_once(logs_dir: str, out_dir: str, seed: int, calibration: dict, ada
     adaptive or the whole RMS-height grid: wall time, the stepping report's runtime and roughness fit,
     and the identified effects."""
     import sysid.roughness as roughness
-    from experiments.grounding import IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS
-    from experiments.identify import identify_real
+    from experiments.runtime.grounding import IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS
+    from experiments.runtime.identify import identify_real
 
     shutil.rmtree(out_dir, ignore_errors=True)
     for stage in ("fixed", "floating"):
@@ -78,7 +78,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.repeats < 1 or min(args.seeds) < 0:
         ap.error("--repeats must be >= 1 and every seed >= 0")
-    from experiments.identify import ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, record_excitation_task
+    from experiments.runtime.identify import ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, record_excitation_task
     from sysid.roughness import RMS_HEIGHTS
 
     load0 = os.getloadavg()[0]
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     rows.append(f"whole grid / adaptive (median over seeds): identification {out['ratio_wall_whole_vs_adaptive']:.2f}x "
                 f"(median {out['saved_s_median']:.0f} s saved), stepping diagnosis {out['ratio_stepping_whole_vs_adaptive']:.2f}x")
     out["text"] = "\n".join(rows)
-    from experiments.readme import finish_benchmark
+    from tools.readme import finish_benchmark
 
     finish_benchmark(out, "benchmarks/bench_roughness_grid.py", argv, save_name=args.save, as_json=args.json, load_before=load0)
     return 0 if out["all_identical"] else 1

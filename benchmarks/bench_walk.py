@@ -50,7 +50,7 @@ def bench_rollouts(episodes: int = 5, seconds: float = 7.5) -> dict:
     import mujoco
 
     from envs import NaoSimEnv
-    from experiments.fitness import run_walk
+    from experiments.runtime.fitness import run_walk
 
     env = NaoSimEnv()
     walls, speeds = [], []
@@ -85,7 +85,7 @@ def main(argv=None) -> dict:
     if args.json:
         atomic_write_text(args.json, text)
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/bench_walk.py", sys.argv[1:] if argv is None else list(argv),
                        {**res, "text": text}, res["load_avg_1min"])

@@ -44,9 +44,9 @@ def main(argv=None) -> int:
         ap.error("--walks must be >= 2 (the fit is cross-validated over walks)")
     from common.defaults import CONTROL_DT
     from envs import ObservationLayout, Recording
-    from experiments.fidelity import _GROUND_SIM, _seeds
-    from experiments.grounding import DEFAULT_HISTORY, EXPLORATION_NOISE, identified_latency, nao_spec
-    from experiments.readme import finish_benchmark
+    from experiments.fidelity.run import _GROUND_SIM, _seeds
+    from experiments.runtime.grounding import DEFAULT_HISTORY, EXPLORATION_NOISE, identified_latency, nao_spec
+    from tools.readme import finish_benchmark
     from robots import get_robot
     from sgat.grounding import command_visibility
 

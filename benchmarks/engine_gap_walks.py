@@ -3,11 +3,11 @@ same lumpy ground, gait by gait.
 
 The mean-physics yardstick of ``sgatwalk fidelity`` (``oracle:mean=1:engine=mujoco``: the real
 world's effects at the middle of their ranges, built into the MuJoCo sim by the identified sim's
-effect models, ``experiments.tasks.mean_physics_report``) ranks a panel's gaits worse than the same
+effect models, ``experiments.runtime.tasks.mean_physics_report``) ranks a panel's gaits worse than the same
 physics in PyBullet (``oracle:mean=1``); the thirtieth round's fidelity runs swap the grounds between
 the two (``ground=real`` / ``ground=model``) and find the ground model costs nothing. This splits the
 rest. A panel of gaits (``sgatwalk fidelity``'s: θ0 and ``--gaits`` drawn in the ±0.15 box around it,
-``experiments.fidelity.drawn_panel``) walks ``--episodes`` episodes each, on seeds shared by every
+``experiments.fidelity.run.drawn_panel``) walks ``--episodes`` episodes each, on seeds shared by every
 world, per profile:
 
 * ``pybullet``: the real world at the profile's mean physics (``PROFILE:mean``, its sensor noise
@@ -56,9 +56,9 @@ PROFILES = ("real-ground", "real-flat", "real")
 
 
 def mujoco_report(profile: str, timeconst: float | None, backlash: bool) -> dict:
-    """The profile's mean-physics report (``experiments.tasks.mean_physics_report``) with the ground's
+    """The profile's mean-physics report (``experiments.runtime.tasks.mean_physics_report``) with the ground's
     contact time constant set (``ground_compliance``) and/or the backlash terms left out."""
-    from experiments.tasks import mean_physics_report
+    from experiments.runtime.tasks import mean_physics_report
 
     rep = mean_physics_report(profile, ground_compliance=timeconst, drop=() if backlash else ("backlash",))
     return {**rep, "effects": []}  # the ground is the task's: the real world's own fields
@@ -70,7 +70,7 @@ def agreement(mj: np.ndarray, pb: np.ndarray, fell_mj: np.ndarray, fell_pb: np.n
     ρ of the per-gait means with a 90 % percentile interval from resampling the episode seeds (the
     same columns of both), mean absolute difference and bias (MuJoCo − PyBullet) of the means, and the
     share of episodes that fall in exactly one engine."""
-    from experiments.stats import spearman
+    from experiments.runtime.stats import spearman
 
     rng = np.random.default_rng(seed)
     E = mj.shape[1]
@@ -97,12 +97,12 @@ def main(argv=None) -> int:
     if args.seed < 0 or args.gaits < 2 or args.episodes < 2:
         ap.error("--seed must be >= 0, --gaits >= 2 and --episodes >= 2")
     from envs.effects import get_profile
-    from experiments.batch import map_episodes
-    from experiments.executors import make_executor
-    from experiments.fidelity import drawn_panel
-    from experiments.readme import finish_benchmark
-    from experiments.stats import split_half_reliability
-    from experiments.tasks import mean_profile
+    from experiments.runtime.batch import map_episodes
+    from experiments.runtime.executors import make_executor
+    from experiments.fidelity.run import drawn_panel
+    from tools.readme import finish_benchmark
+    from experiments.runtime.stats import split_half_reliability
+    from experiments.runtime.tasks import mean_profile
     from walk_engine import GaitParams
 
     load0 = os.getloadavg()[0]

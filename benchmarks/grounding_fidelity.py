@@ -33,12 +33,12 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from envs import NaoSimEnv, Recording
-    from experiments.executors import make_executor
-    from experiments.tasks import run_episode
+    from experiments.runtime.executors import make_executor
+    from experiments.runtime.tasks import run_episode
     from sgat.grounding import fit_transformer, recording_transitions
     from walk_engine import GaitParams
 
-    from experiments.grounding import grounding_spec
+    from experiments.runtime.grounding import grounding_spec
     from sgat.transformer import ActionTransformer
 
     theta = GaitParams.initial().to_array().tolist()

@@ -177,7 +177,7 @@ def main(argv=None) -> int:
         f.write(summarize(rows, args.world, world_classes, args.noise))
     print(summarize(rows, args.world, world_classes, args.noise))
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         res = {"world": args.world, "floating": args.floating, "excitation": args.excitation, "seed0": args.seed0,
                "seeds": args.seeds, "two_effect": args.two_effect, "logs": args.logs, "seconds": args.seconds,

@@ -60,7 +60,7 @@ def truth(logs) -> dict:
 
 
 def run_condition(name: str, effects, seed: int, work: str, calibration: dict) -> dict:
-    from experiments.identify import USE_GROUND_TRUTH, record_excitation_task
+    from experiments.runtime.identify import USE_GROUND_TRUTH, record_excitation_task
     from sysid.candidates import Term
     from sysid.data import load_logs
     from sysid.diagnose import fit_terms
@@ -100,7 +100,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (for the README)")
     args = ap.parse_args(argv)
     from experiments.cli import limit_blas_threads
-    from experiments.identify import ENGINE_GAP_DIR
+    from experiments.runtime.identify import ENGINE_GAP_DIR
 
     limit_blas_threads()
     load_before = os.getloadavg()[0]
@@ -116,7 +116,7 @@ def main(argv=None) -> dict:
     print("\n".join(lines))
     out = {"seed": args.seed, "delay_s": DELAY_S, "rows": rows, "text": "\n".join(lines)}
     if args.save:
-        from experiments.readme import save_benchmark
+        from tools.readme import save_benchmark
 
         save_benchmark(args.save, "benchmarks/sysid_latency_bias.py", sys.argv[1:] if argv is None else list(argv), out,
                        load_before)

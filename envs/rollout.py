@@ -125,7 +125,7 @@ def assemble_recording(base, O: np.ndarray, C: np.ndarray, A: np.ndarray, G: np.
         m: rows recorded; seed, seconds, fell, reason, fall_time, meta: the episode's metadata.
         terrain: the episode's heightfield (None: flat) if not ``base.terrain``.
 
-    Used by :func:`rollout` and by batched rollouts (``experiments.batch``), so both write the same
+    Used by :func:`rollout` and by batched rollouts (``experiments.runtime.batch``), so both write the same
     recording bit for bit.
     """
     robot = base.robot

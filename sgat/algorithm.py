@@ -10,7 +10,7 @@ Each grounding step i:
 3. **evaluate** (optional): measure the candidate in the real world, log it;
 
 then π_{i+1} becomes the current policy. What collects, fits, improves and evaluates is passed in,
-so the loop is the same for ``experiments.optimize`` (the NAO walk), ``experiments.gym_sim2real``
+so the loop is the same for ``experiments.optimize.run`` (the NAO walk), ``experiments.gym.run``
 (InvertedPendulum, HalfCheetah) and ``sgat.tabular`` (Cliff Walking).
 
 The loop state is a plain dict (``progress``) updated after every stage and handed to ``save``: a run

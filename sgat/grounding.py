@@ -274,7 +274,7 @@ class GroundingConfig:
             forward model: the grounded sim replays each real walk's commands, and the states it
             visits, labelled with the real walk's next states (:func:`dad_transitions`), join the
             forward model's training data; the forward models are refitted, the inverse models kept
-            (:func:`experiments.grounding.fit_nao_grounding`). A one-step forward model is fitted on
+            (:func:`experiments.runtime.grounding.fit_nao_grounding`). A one-step forward model is fitted on
             real states only, but in the grounded sim it predicts from the states the grounded sim
             reaches; DAD teaches it where the real robot went from those. 0: the paper.
         gate: the correction gated by the ensemble's disagreement (:class:`sgat.transformer.ActionTransformer`
@@ -473,7 +473,7 @@ def fit_grounding(real: Transitions, sim: Transitions, spec: GroundingSpec, cfg:
     under ``real`` before the bootstrap resampling. ``previous``: a fit of the same data whose
     inverse models (and sim models) are kept: only the forward models are fitted again.
     ``map_fn``: a ``map(fn, tasks) -> list`` that fits the ensemble's members side by side (e.g. an
-    ``experiments.executors`` executor's ``map``: one member per worker). Each member is fitted from
+    ``experiments.runtime.executors`` executor's ``map``: one member per worker). Each member is fitted from
     its own seed with the same operations wherever it runs, so the fit does not depend on it (given one
     torch thread per process, as the executors set).
 

@@ -8,10 +8,10 @@ import torch
 from common.defaults import CONTROL_DT
 from envs import NaoSimEnv
 from envs.batch import SimBatch
-from experiments.batch import chunk_tasks, expected_generation_seconds, map_episodes, run_batch
-from experiments.executors import ProcessExecutor, SerialExecutor
-from experiments.grounding import grounding_spec
-from experiments.tasks import run_episode
+from experiments.runtime.batch import chunk_tasks, expected_generation_seconds, map_episodes, run_batch
+from experiments.runtime.executors import ProcessExecutor, SerialExecutor
+from experiments.runtime.grounding import grounding_spec
+from experiments.runtime.tasks import run_episode
 from sgat.models import ForwardModel, InverseModel
 from sgat.transformer import ActionTransformer
 from walk_engine import GaitParams, WalkEngine
@@ -110,7 +110,7 @@ def test_generation_estimate_extrapolates_a_trial_batch_of_the_tasks_own_world(m
     does not run batched (the real world) is priced as one episode at a time."""
     import types
 
-    import experiments.batch as B
+    import experiments.runtime.batch as B
 
     clock = [0.0]
     calls = []
@@ -238,7 +238,7 @@ def test_sim_batch_rejects_bad_actions_and_other_worlds():
 def test_stress_trials_in_lockstep_equal_single_trials():
     """Stress sweeps batch their sim trials, each on its own heightfield: rows (but the wall time)
     and recordings equal run_trial's."""
-    from experiments import stress as S
+    from experiments.stress import run as S
 
     cfg = S.make_config(world="sim", amplitude="0,0.02,0.04", trials=2, seconds=2.0)
     tasks = S.plan_tasks(cfg)

@@ -14,7 +14,7 @@ def test_help_lists_commands(capsys):
 
 
 def test_fidelity_help_names_every_family_drop_takes(capsys):
-    from experiments.tasks import MEAN_PHYSICS_FAMILIES
+    from experiments.runtime.tasks import MEAN_PHYSICS_FAMILIES
 
     assert main(["fidelity", "--help"]) == 0
     line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("Effect families of drop="))
@@ -69,7 +69,7 @@ def test_json_output_is_reproducible_and_timings_are_opt_in(capsys):
 
 def test_the_command_runs_numpy_blas_with_omp_num_threads(monkeypatch):
     """``sgatwalk`` limits the BLAS already loaded (numpy imported before ``main``, as
-    ``python -m experiments.readme run`` does) to ``OMP_NUM_THREADS`` (1 unless set): the rounding of
+    ``python -m tools.readme run`` does) to ``OMP_NUM_THREADS`` (1 unless set): the rounding of
     threaded reductions, and so the engine-gap calibration, depends on the thread count."""
     import numpy as np
     from threadpoolctl import threadpool_info

@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-import experiments.argtypes as A
+import experiments.cli.argtypes as A
 from experiments import cli
 
 NUMERIC_BAD = ["-5", "nan", "inf", "1e12", "abc"]
@@ -65,7 +65,7 @@ def test_every_number_option_has_a_bounded_range():
                 loose.append(f"{cmd} {act.option_strings}: plain {act.type.__name__}")
             elif isinstance(act.type, A.Number) and (act.type.lo is None or act.type.hi is None):
                 loose.append(f"{cmd} {act.option_strings}: unbounded")
-    assert not loose, "numeric options without a range (experiments.argtypes): " + "; ".join(loose)
+    assert not loose, "numeric options without a range (experiments.cli.argtypes): " + "; ".join(loose)
 
 
 @pytest.mark.parametrize("cmd,flag,value", list(_cases()))

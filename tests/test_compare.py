@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
-from experiments.compare import compare, format_compare, load_results, panel_key
-from experiments.fidelity import _summary, ranking_target
-from experiments.stats import brier_score, spearman
+from experiments.compare.run import compare, format_compare, load_results, panel_key
+from experiments.fidelity.run import _summary, ranking_target
+from experiments.runtime.stats import brier_score, spearman
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 GAITS = ["theta0"] + [f"box{i:02d}" for i in range(7)]
@@ -175,7 +175,7 @@ def test_readme_ranking_is_the_ranking_of_the_saved_fidelity_results():
 def test_rows_carry_the_episodes_per_gait_so_runs_of_one_world_tell_apart():
     """Two runs of one world on one panel with 4 and 16 episodes per gait are two rows, each with its
     count in the row, the text table and the README table; results saved before the field show '-'."""
-    from experiments import readme
+    from tools import readme
 
     four, sixteen = _world("sgat", NOISY), _world("sgat", EXACT)
     four["episodes"], sixteen["episodes"] = 4, 16
@@ -190,7 +190,7 @@ def test_rows_carry_the_episodes_per_gait_so_runs_of_one_world_tell_apart():
 
 
 def test_identified_worlds_of_old_and_new_results_rank_under_todays_names():
-    from experiments.fidelity import canonical_world_name
+    from experiments.fidelity.run import canonical_world_name
 
     # before the fourteenth round plain `identified` built in the confounded contact terms and
     # `identified:confounded=0` left them out; results since then record the setting
@@ -243,7 +243,7 @@ def test_paired_across_runs_tests_one_world_of_two_runs_on_their_shared_trials()
     text = format_compare(res)
     assert "the same world in two runs" in text and "rounds1 - rounds2" in text
     assert "_src" not in json.dumps(res)  # the rows stay plain JSON
-    from experiments.readme import RENDERERS
+    from tools.readme import RENDERERS
 
     md = RENDERERS["compare"](json.loads(json.dumps(res)))  # the README block, from the saved JSON
     assert "| rounds1 − rounds2 | -" in md and "| again − rounds2 |" in md

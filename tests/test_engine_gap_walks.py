@@ -27,7 +27,7 @@ def test_the_mujoco_variants_carry_the_contact_and_the_play_hinges_they_name(tmp
     """``stiff ground`` sets every contact's time constant to 4 ms, ``no play hinges`` builds no
     backlash hinge, and every variant walks the very lumpy field PyBullet walks for the seed."""
     from envs.bullet_world import NaoRealEnv, real_ground
-    from experiments.tasks import _world
+    from experiments.runtime.tasks import _world
 
     seen = {}
     for name, (tc, backlash) in VARIANTS.items():

@@ -8,7 +8,7 @@ import pytest
 sys.path.insert(0, os.path.dirname(__file__))  # so worker processes can import the task module
 import _executor_tasks as T  # noqa: E402
 
-from experiments.executors import ProcessExecutor, SerialExecutor, TaskFailed, make_executor  # noqa: E402
+from experiments.runtime.executors import ProcessExecutor, SerialExecutor, TaskFailed, make_executor  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -59,7 +59,7 @@ def test_make_executor():
 def test_serial_pool_and_ray_give_identical_walk_fitness():
     """Walk episodes (the optimizer's tasks) through all three executors, a local Ray cluster too."""
     pytest.importorskip("ray")
-    from experiments.tasks import run_episode
+    from experiments.runtime.tasks import run_episode
     from walk_engine import GaitParams
 
     theta = GaitParams.initial().to_array().tolist()

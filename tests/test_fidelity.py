@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
-from experiments.executors import SerialExecutor
-from experiments.fidelity import FidelityConfig, _summary, episode_counts, episodes_rows, episodes_view, parse_world
+from experiments.runtime.executors import SerialExecutor
+from experiments.fidelity.run import FidelityConfig, _summary, episode_counts, episodes_rows, episodes_view, parse_world
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--gaits", "2", "--real-trials", "2", "--data-seeds", "2", "--episodes", "2", "--seconds", "1.5",
@@ -86,7 +86,7 @@ def test_identify_rounds_is_part_of_a_runs_identity_and_old_runs_keep_theirs(tmp
     """A run with the default two rounds per diagnosis keeps the config every run before the setting
     saved (no key), so those resume; a run made with one round records it, and resuming it with two
     is refused (its identifications were made with one)."""
-    from experiments.episodes import EpisodeLog
+    from experiments.runtime.rundir import EpisodeLog
 
     old = FidelityConfig().to_dict()
     assert FidelityConfig().identify_rounds == 2 and "identify_rounds" not in old
@@ -102,13 +102,13 @@ def test_identify_rounds_is_part_of_a_runs_identity_and_old_runs_keep_theirs(tmp
 def test_identifications_with_more_stepping_logs_share_the_fixed_base_stage(tmp_path, monkeypatch):
     """``identified:stepping=N`` identifies each draw again from N stepping logs (another folder, the
     same seed) on the draw's own fixed-base stage, and reports the excitation data it used."""
-    import experiments.fidelity as fid
+    import experiments.fidelity.run as fid
 
     calls = []
 
     def fake_identify(out_dir, *, n_fixed, n_floating, fixed_dir, seed, rounds, **kw):
         calls.append((os.path.relpath(out_dir, tmp_path), n_floating, os.path.relpath(fixed_dir, tmp_path), seed))
-        assert rounds == 1  # the run's identify_rounds (default experiments.grounding.IDENTIFY_ROUNDS, 2)
+        assert rounds == 1  # the run's identify_rounds (default experiments.runtime.grounding.IDENTIFY_ROUNDS, 2)
         rep = os.path.join(out_dir, "floating", "report.json")  # a ground compliance standing in for the ground
         os.makedirs(os.path.dirname(rep), exist_ok=True)
         comp = {"family": "ground_compliance", "joints": [], "links": [], "value": 0.03}
@@ -152,8 +152,8 @@ def test_a_walk_fitted_identified_world_adds_the_fitted_actuation_to_its_draws_r
     """``identified:walkfit=actuation``: per draw, the actuation fitted to the draw's real walks of θ0 (the
     walks SGAT's grounding records, ``real_d<draw>``) is one more report over the diagnosis's, and the
     world counts those walks as its real data besides the excitation logs."""
-    import experiments.fidelity as fid
-    import experiments.walkfit as walkfit
+    import experiments.fidelity.run as fid
+    import experiments.runtime.walkfit as walkfit
 
     def fake_identify(out_dir, *, n_fixed, n_floating, **kw):
         rep = os.path.join(out_dir, "floating", "report.json")
@@ -208,7 +208,7 @@ def test_servo_fitted_identified_worlds_add_the_common_kp_scale_to_their_draws_r
     again with the in-air fit under them (a folder of its own, the draw's fixed-base stage; the fit's
     report between the two stages'), ``servo=refit`` the same on the in-air fit that refits the in-air
     model's terms too (another fit and folder). The option leaves every other world's cache key alone."""
-    import experiments.fidelity as fid
+    import experiments.fidelity.run as fid
 
     calls = []
 
@@ -357,7 +357,7 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert res["worlds"]["sgat"]["data_gaits"] == 1 and res["worlds"]["sim"]["data_gaits"] is None
     assert res["worlds"]["sim"]["draws"][0]["world_ceiling"] is None  # one deterministic episode
     # GAT is deterministic (its members averaged), so one episode per gait is its answer; SGAT samples
-    from experiments.tasks import run_episode
+    from experiments.runtime.tasks import run_episode
 
     assert res["worlds"]["gat"]["episodes"] == 1 and res["worlds"]["sgat"]["episodes"] == 2
     assert res["worlds"]["gat"]["draws"][0]["world_ceiling"] is None
@@ -391,7 +391,7 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
     assert res2["worlds"]["sgat"] == res["worlds"]["sgat"]
     assert res2["wall_s"] > res["wall_s"] > 0  # the run's time accumulates over its invocations (timing.json)
     # ... and so does its split over the phases (phases.json): the first invocation ran them all
-    from experiments.fidelity import PHASES
+    from experiments.fidelity.run import PHASES
 
     ph, ph2 = res["phases_s"], res2["phases_s"]
     assert list(ph) == [p for p in PHASES if p not in ("excitation logs", "diagnoses", "servo fits", "walk fits")]  # no identified world here
@@ -408,7 +408,7 @@ def test_tiny_fidelity_run_and_resume(tmp_path, capsys):
 def test_params_with_one_file_name_stay_apart(tmp_path, capsys):
     """Table I writes ``thetas/sgat_step1.json`` in every seed's directory: given together, each is
     its own gait (its own name and real trials), not the first one's cached results again."""
-    from experiments.fidelity import param_gait_names
+    from experiments.fidelity.run import param_gait_names
     from walk_engine import GaitParams
 
     th0 = GaitParams.initial()
@@ -437,7 +437,7 @@ def test_gait_groups_score_each_world_on_the_drawn_and_the_given_gaits_apart():
     """A world exact on the drawn gaits and 5 points optimistic on the optimized ones (given as θ
     files) shows no bias on the first group and +5 on the second, per file name too; it ranks the
     drawn gaits perfectly, and a world that rates the given gaits in reverse picks their worst."""
-    from experiments.fidelity import GROUP_MIN_RANK, format_groups, gait_groups, group_rows
+    from experiments.fidelity.run import GROUP_MIN_RANK, format_groups, gait_groups, group_rows
 
     drawn, per_name = GROUP_MIN_RANK, 3
     names = ["theta0"] + [f"box{i:02d}" for i in range(drawn - 1)]
@@ -510,7 +510,7 @@ def test_table1_resumes_after_sigkill(tmp_path):
         sl = t["seed_level"]
         assert sl is None or (sl["n_seeds"] == 2 and sl["mean_diff"] == pytest.approx(np.mean(t["per_seed_diff"]))
                               and sl["ci"][0] <= sl["mean_diff"] <= sl["ci"][1])
-    from experiments.table1 import seed_agreement
+    from experiments.table1.run import seed_agreement
 
     t = {"a": "sgat", "b": "gat", "fitness": {"mean_diff": -2.0}, "per_seed_diff": [-3.0, 1.0, -4.0]}
     assert seed_agreement(t) == "; GAT fitter on 2 of 3 optimization seeds"
@@ -554,7 +554,7 @@ def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
     """More methods given to a finished Table I run: every seed's optimization run gains them (its real
     grounding walks reused), only the new gaits walk the real trials, the old rows stay as they were,
     and a noise-enveloped method is tested against its base method and against ANE."""
-    from experiments.table1 import comparisons
+    from experiments.table1.run import comparisons
 
     assert comparisons(("sgat", "gat", "ane", "sgat+ane", "hybrid+ane")) == [  # only pairs of methods run: no hybrid
         ("sgat", "gat"), ("sgat+ane", "sgat"), ("sgat+ane", "ane"), ("hybrid+ane", "ane")]
@@ -581,7 +581,7 @@ def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
 def test_table1_pairs_a_run_with_a_baseline_run(tmp_path, capsys):
     """compare_runs pairs (method, step, seed) gaits trial by trial: a run whose every trial is 1 point
     fitter than the baseline's and falls once less shows exactly that; runs on other trials are refused."""
-    from experiments.table1 import Table1Config, baseline_verdict, compare_runs, load_baseline
+    from experiments.table1.run import Table1Config, baseline_verdict, compare_runs, load_baseline
 
     rng = np.random.default_rng(3)
     base = {"theta0": {"fitness": [1.0, 2.0], "fell": [0, 1]}}
@@ -631,7 +631,7 @@ def test_a_world_s_own_episode_noise_caps_its_ceiling(tmp_path):
     """``world_ceiling``: the split-half ceiling of a stochastic world's own episodes. A world whose
     episodes differ only by small noise around each gait's value gets a ceiling near 1; one whose
     episode noise swamps the gaits' differences gets a low one; the deterministic sim gets none."""
-    from experiments.fidelity import Fidelity, format_table
+    from experiments.fidelity.run import Fidelity, format_table
 
     cfg = FidelityConfig(worlds=("sim", "ane", "ane:sigma=0.1"), gaits=11, real_trials=6, episodes=8, bootstrap=50)
     run = Fidelity(cfg, str(tmp_path), executor=None)
@@ -674,7 +674,7 @@ def test_a_world_s_own_episode_noise_caps_its_ceiling(tmp_path):
 def test_the_oracle_world_walks_the_real_world_on_fresh_seeds_per_draw(tmp_path):
     """``oracle``: real episodes, on seeds that are neither the real trials' nor another draw's, and
     the same seeds for every gait of a draw (paired like every training world)."""
-    from experiments.fidelity import Fidelity
+    from experiments.fidelity.run import Fidelity
 
     assert parse_world("oracle").per_draw and "oracle" not in FidelityConfig().worlds
     with pytest.raises(ValueError, match="unknown option"):
@@ -690,7 +690,7 @@ def test_the_oracle_world_walks_the_real_world_on_fresh_seeds_per_draw(tmp_path)
     assert not set(seeds0) & {t["seed"] for t in d1}
     sim_seeds = {t["seed"] for t in run._world_tasks(run.specs[0], 0, {}, gaits)}
     assert not set(seeds0) & sim_seeds
-    from experiments.fidelity import _REAL, _seeds
+    from experiments.fidelity.run import _REAL, _seeds
 
     assert not set(seeds0) & set(_seeds(cfg.seed, _REAL, n=cfg.real_trials))  # not the real trials' seeds
 
@@ -699,7 +699,7 @@ def test_a_noise_enveloped_world_adds_the_ane_noise_to_its_episodes_only(tmp_pat
     """``sgat:ane=0.05`` (``optimize --methods sgat+ane``): the world's episodes carry the noise, its
     grounding is SGAT's; a GAT world with it is no longer deterministic; the plain worlds keep their
     cache keys (the option hashes only when set)."""
-    from experiments.fidelity import Fidelity
+    from experiments.fidelity.run import Fidelity
 
     w, g = parse_world("sgat:ane=0.05"), parse_world("gat:ane=0.03")
     assert (w.envelope, w.grounding, w.kind) == (0.05, parse_world("sgat").grounding, "sgat")
@@ -720,11 +720,11 @@ def test_a_noise_enveloped_world_adds_the_ane_noise_to_its_episodes_only(tmp_pat
 
 def test_the_mean_oracle_walks_the_real_world_at_the_middle_of_every_effect_range(tmp_path):
     """``oracle:mean=1``: the real world's episodes on the oracle's own seeds, with every effect fixed
-    at the middle of its range (``experiments.tasks.mean_profile``): an episode draws exactly those
+    at the middle of its range (``experiments.runtime.tasks.mean_profile``): an episode draws exactly those
     values, whatever its seed, while the plain real world draws others."""
     from envs.effects import EFFECTS, PROFILES
-    from experiments.fidelity import Fidelity
-    from experiments.tasks import _real_profile, _world, mean_profile
+    from experiments.fidelity.run import Fidelity
+    from experiments.runtime.tasks import _real_profile, _world, mean_profile
 
     m = parse_world("oracle:mean=1")
     assert m.oracle_mean and not parse_world("oracle").oracle_mean and m.key != parse_world("oracle").key
@@ -753,11 +753,11 @@ def test_the_mean_oracle_walks_the_real_world_at_the_middle_of_every_effect_rang
 
 def test_the_mean_oracle_in_mujoco_builds_the_mean_physics_into_the_identified_sim(tmp_path):
     """``oracle:mean=1:engine=mujoco``: the real world's mean physics as a diagnosis report
-    (``experiments.tasks.mean_physics_report``), walked in the identified sim on the oracle's seeds;
+    (``experiments.runtime.tasks.mean_physics_report``), walked in the identified sim on the oracle's seeds;
     the sim's model carries every value (latency in the actuator delay, the weaker servos and torque
     limits in the actuators, the heavier links) and its ground is as rough as the lumpy terrain."""
-    from experiments.fidelity import Fidelity
-    from experiments.tasks import _world, mean_physics_report
+    from experiments.fidelity.run import Fidelity
+    from experiments.runtime.tasks import _world, mean_physics_report
     from robots import get_robot
     from terrain import lumpy
 
@@ -797,8 +797,8 @@ def test_the_mean_oracles_swap_grounds_across_the_engines_on_the_same_surfaces(t
     ``ground=model`` the PyBullet one on the identified sim's Gaussian surface: episode for episode
     (the oracle's seeds, shared by the four worlds) the very heightfield the other engine walks, so
     that the 2 x 2 of engine and ground differ in one thing at a time."""
-    from experiments.fidelity import Fidelity
-    from experiments.tasks import _world
+    from experiments.fidelity.run import Fidelity
+    from experiments.runtime.tasks import _world
 
     assert parse_world("oracle:mean=1:ground=real").key == parse_world("oracle:mean=1").key  # PyBullet's own ground
     assert parse_world("oracle:mean=1:engine=mujoco:ground=model").key == parse_world("oracle:mean=1:engine=mujoco").key
@@ -837,9 +837,9 @@ def test_the_rebuilt_mujoco_oracle_walks_the_identified_contact_without_play_hin
     with the ground contact the diagnosis identifies and no backlash terms, from a report of its own
     beside the plain yardstick's (same seeds, same ground); the plain form's key and model are unchanged;
     the options belong to the MuJoCo form only and take a time constant > 0."""
-    from experiments.fidelity import Fidelity
-    from experiments.readme import _mujoco_form
-    from experiments.tasks import _world, mean_physics_report
+    from experiments.fidelity.run import Fidelity
+    from tools.readme import _mujoco_form
+    from experiments.runtime.tasks import _world, mean_physics_report
 
     plain = parse_world("oracle:mean=1:engine=mujoco")
     assert parse_world("oracle:mean=1:engine=mujoco:backlash=1").key == plain.key
@@ -894,7 +894,7 @@ def test_worlds_one_setting_apart_are_paired():
     """Beside the fixed pairs, any two worlds of one kind that differ in one setting are tested against
     each other: the four mean-physics oracles edge by edge (engine on each ground, ground in each
     engine), a variant against the variant with one option fewer; never worlds two settings apart."""
-    from experiments.fidelity import world_pairs
+    from experiments.fidelity.run import world_pairs
 
     oracles = ["oracle:mean=1", "oracle:mean=1:ground=model", "oracle:mean=1:engine=mujoco",
                "oracle:mean=1:engine=mujoco:ground=real"]
@@ -929,17 +929,17 @@ def test_worlds_one_setting_apart_are_paired():
 def test_a_run_without_a_terminal_reports_progress_within_a_chunk(tmp_path, monkeypatch):
     """Episodes are saved in chunks of 150; without a terminal the count and an ETA still go out as the
     executor's batches end, so 160 real trials (one chunk and a bit, minutes long) show their progress."""
-    import experiments.batch
-    import experiments.episodes
-    from experiments.episodes import EpisodeLog
+    import experiments.runtime.batch
+    import experiments.runtime.rundir
+    from experiments.runtime.rundir import EpisodeLog
 
     def fake_map(ex, tasks, progress=None):
         for _ in tasks:
             progress(1)
         return [{"fitness": 1.0, "speed_cm_s": 1.0, "fell": False, "steps": 750} for _ in tasks]
 
-    monkeypatch.setattr(experiments.batch, "map_episodes", fake_map)
-    monkeypatch.setattr(experiments.episodes, "ETA_EVERY_S", -1.0)  # a line at every batch
+    monkeypatch.setattr(experiments.runtime.batch, "map_episodes", fake_map)
+    monkeypatch.setattr(experiments.runtime.rundir, "ETA_EVERY_S", -1.0)  # a line at every batch
     lines: list[str] = []
     log = EpisodeLog(str(tmp_path), {}, "run", say=lines.append)
     log.run(None, [{"key": f"k{i}"} for i in range(160)], "real trials", progress=False)

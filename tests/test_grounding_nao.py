@@ -6,7 +6,7 @@ import pytest
 from envs import NaoSimEnv
 from envs.wrappers import ActionMismatch
 from sgat.grounding import Transitions, fit_transformer, trajectory_transitions
-from experiments.grounding import grounding_spec
+from experiments.runtime.grounding import grounding_spec
 from sgat.transformer import GroundedEnv
 
 
@@ -138,7 +138,7 @@ def test_dad_transitions_label_the_replay_s_states_with_the_real_next_states():
     """Row t: the replay's state history at t and the real walk's action at t, labelled with
     s^real_{t+1} - s_replay_t; a replay that is the real walk itself gives the real transitions."""
     from envs.rollout import CommandLog, rollout
-    from experiments.grounding import nao_spec
+    from experiments.runtime.grounding import nao_spec
     from sgat.grounding import dad_transitions, recording_observations, recording_transitions
 
     sim, real = NaoSimEnv(fixed_base=True), _damped_world()
@@ -170,7 +170,7 @@ def test_dad_rounds_pull_the_grounded_replay_toward_the_real_walk():
     import dataclasses
 
     from envs.rollout import CommandLog, rollout
-    from experiments.grounding import fit_nao_grounding, nao_spec
+    from experiments.runtime.grounding import fit_nao_grounding, nao_spec
     from sgat.grounding import GroundingConfig, recording_observations
 
     sim, real = NaoSimEnv(fixed_base=True), _damped_world()
@@ -211,7 +211,7 @@ def test_identified_delay_is_the_latency_in_whole_control_steps(tmp_path, latenc
     latency term, no delay."""
     import json
 
-    from experiments.grounding import identified_delay
+    from experiments.runtime.grounding import identified_delay
 
     model = {"pd_gain[RAnklePitch]": 0.9, **({"latency": latency} if latency is not None else {})}
     path = tmp_path / "report.json"

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from experiments.gym_envs import GaussianActionNoise, body_names, make_env, scale_body_masses, set_state_from_obs
+from experiments.gym.envs import GaussianActionNoise, body_names, make_env, scale_body_masses, set_state_from_obs
 
 
 def _ip_nominal():

@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from experiments import gym_sim2real as G
-from experiments.gym_config import GymConfig
-from experiments.gym_envs import make_env
+from experiments.gym import run as G
+from experiments.gym.config import GymConfig
+from experiments.gym.envs import make_env
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 

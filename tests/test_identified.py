@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from envs import NaoSimEnv
-from experiments.fitness import run_walk
+from experiments.runtime.fitness import run_walk
 from sysid.candidates import Term
 from sysid.diagnose import diagnose
 from sysid.identified import IdentifiedSimEnv, load_identified
@@ -129,7 +129,7 @@ def test_contact_terms_that_only_stand_in_for_the_ground_can_be_left_out(tmp_pat
     term, one without a declared ground, and the fixed-base terms stay."""
     import json
 
-    from experiments.tasks import _world
+    from experiments.runtime.tasks import _world
     from sysid.identified import confounded_with_ground
 
     assert confounded_with_ground(_stepping_report()) == {"ground_compliance"}

@@ -1,4 +1,4 @@
-"""The real world's identification for the identified and hybrid worlds (``experiments.identify``):
+"""The real world's identification for the identified and hybrid worlds (``experiments.runtime.identify``):
 the engine-gap calibration that ships with the package, and excitation logs recorded ahead of the
 diagnoses."""
 
@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-import experiments.identify as ident
-from experiments.identify import (ENGINE_GAP_LOGS, ENGINE_GAP_SECONDS, ENGINE_GAP_SEED, calibrate_engines,
+import experiments.runtime.identify as ident
+from experiments.runtime.identify import (ENGINE_GAP_LOGS, ENGINE_GAP_SECONDS, ENGINE_GAP_SEED, calibrate_engines,
                                   engine_gap_key, excitation_tasks, record_excitation_task, shipped_calibration)
 
 
@@ -28,7 +28,7 @@ def _close(a, b, rtol):
 def test_the_shipped_engine_gap_is_for_these_engines_and_robot():
     """The package's calibrations match the pinned engines, the robot model and the code that records
     and diagnoses (else every run would record and calibrate them again: after a change in that code,
-    regenerate them with ``python -m experiments.identify --engine-gap``), and only the logs they were
+    regenerate them with ``python -m experiments.runtime.identify --engine-gap``), and only the logs they were
     computed from select them."""
     for kind in ("fixed", "floating"):
         cal = shipped_calibration(kind, seed=ENGINE_GAP_SEED, n_logs=ENGINE_GAP_LOGS, seconds=ENGINE_GAP_SECONDS)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
-from experiments.optimize import CheckpointError, Optimizer
+from experiments.optimize.run import CheckpointError, Optimizer
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--grounding-steps", "1", "--popsize", "4", "--generations", "3", "--seconds", "0.6",
@@ -97,7 +97,7 @@ def test_command_history_grounds_the_optimization(tmp_path, capsys):
 def test_shadow_state_reaches_every_grounded_method(tmp_path, capsys):
     """``--shadow τ`` [s] becomes the transformer's shadow_memory in control steps for SGAT, GAT and
     hybrid; a negative τ, or τ with the matched transformer, is refused with the setting named."""
-    from experiments.optimize import OptimizeConfig, Optimizer
+    from experiments.optimize.run import OptimizeConfig, Optimizer
 
     opt = Optimizer(OptimizeConfig(shadow=0.03, methods=("sgat",)), str(tmp_path / "r"), None)
     for m in ("sgat", "gat", "hybrid"):
@@ -115,8 +115,8 @@ def test_the_default_method_is_hybrid_for_the_nao_and_sgat_for_the_other_robots(
     refused for them)."""
     import argparse
 
-    from experiments.cmd_optimize import config_from_args, register
-    from experiments.optimize import OptimizeConfig, default_methods
+    from experiments.cli.optimize import config_from_args, register
+    from experiments.optimize.run import OptimizeConfig, default_methods
 
     assert OptimizeConfig().methods == default_methods("nao") == ("hybrid",)
     sub = argparse.ArgumentParser().add_subparsers()
@@ -164,7 +164,7 @@ def test_a_noise_enveloped_method_trains_its_base_grounding_in_a_noisier_world(t
     leaves the run's SGAT rows as they were."""
     import torch
 
-    from experiments.optimize import OptimizeConfig, base_method, uses_identification
+    from experiments.optimize.run import OptimizeConfig, base_method, uses_identification
 
     assert (base_method("hybrid+ane"), base_method("sgat"), uses_identification("identified+ane")) == \
         ("hybrid", "sgat", True)
@@ -199,7 +199,7 @@ def test_wrong_shape_weights_are_rejected(tmp_path):
     """A transformer directory whose weights do not fit the grounding spec."""
     from envs import NaoSimEnv
     from sgat.models import ForwardModel, InverseModel, ModelFileError
-    from experiments.grounding import grounding_spec
+    from experiments.runtime.grounding import grounding_spec
     from sgat.transformer import ActionTransformer
 
     spec = grounding_spec(NaoSimEnv())
@@ -216,7 +216,7 @@ def test_wrong_shape_weights_are_rejected(tmp_path):
 def test_grounding_data_accumulates_across_steps(tmp_path):
     """Step i is grounded on the walks of θ_0 .. θ_{i-1} of its own method (GARAT's data
     accumulation); ``aggregate=False`` keeps only θ_{i-1}'s."""
-    from experiments.optimize import OptimizeConfig
+    from experiments.optimize.run import OptimizeConfig
     from walk_engine import GaitParams
 
     th0 = GaitParams.initial().to_array()
@@ -241,11 +241,11 @@ def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_rep
     on its log line when a diagnosis still ran out of it. Its engine-gap calibration is the testbed's
     constant (``ENGINE_GAP_SEED``, the one the package ships and ``sgatwalk fidelity`` uses), whatever
     the run's seed."""
-    import experiments.optimize as opt_mod
-    from experiments.fidelity import FidelityConfig
-    from experiments.grounding import IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS
-    from experiments.identify import ENGINE_GAP_SEED
-    from experiments.optimize import OptimizeConfig
+    import experiments.optimize.run as opt_mod
+    from experiments.fidelity.run import FidelityConfig
+    from experiments.runtime.grounding import IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS
+    from experiments.runtime.identify import ENGINE_GAP_SEED
+    from experiments.optimize.run import OptimizeConfig
 
     assert FidelityConfig().identify_budget_s == IDENTIFY_BUDGET_S >= 180.0
     assert FidelityConfig().identify_rounds == OptimizeConfig().identify_rounds == IDENTIFY_ROUNDS
@@ -265,7 +265,7 @@ def test_identification_budget_is_the_shared_safety_net_and_a_binding_one_is_rep
         Optimizer(OptimizeConfig(methods=("hybrid",), seed=len(hit) + 3), str(tmp_path / f"run{len(hit)}"), None,
                   log=lines.append)._identify()
         assert seen["time_budget_s"] == IDENTIFY_BUDGET_S and seen.get("stepping_budget_s") is None
-        assert seen["rounds"] == IDENTIFY_ROUNDS == 2  # experiments.grounding: one round biases the latency
+        assert seen["rounds"] == IDENTIFY_ROUNDS == 2  # experiments.runtime.grounding: one round biases the latency
         warned = [ln for ln in lines if "WARNING" in ln]
         assert len(warned) == len(hit) and all("floating diagnosis ran out" in ln for ln in warned)
     assert cal_seeds == [ENGINE_GAP_SEED, ENGINE_GAP_SEED]
@@ -277,8 +277,8 @@ def test_identified_worlds_leave_the_confounded_contact_terms_out_unless_asked_a
     builds them in, and a run saved before the setting existed resumes with them, as it began."""
     import argparse
 
-    from experiments.cmd_optimize import config_from_args, register
-    from experiments.optimize import OptimizeConfig, config_from_state
+    from experiments.cli.optimize import config_from_args, register
+    from experiments.optimize.run import OptimizeConfig, config_from_state
 
     opt = Optimizer(OptimizeConfig(methods=("identified", "hybrid")), str(tmp_path / "run"), None)
     opt.state = {"identification": {"reports": ["f.json", "s.json"]}}
@@ -289,7 +289,7 @@ def test_identified_worlds_leave_the_confounded_contact_terms_out_unless_asked_a
     register(ap.add_subparsers())
     assert config_from_args(ap.parse_args(["optimize", "--methods", "hybrid", "--confounded-terms"])).identified_confounded
     assert not config_from_args(ap.parse_args(["optimize", "--methods", "hybrid"])).identified_confounded
-    from experiments import cmd_table1
+    from experiments.cli import table1 as cmd_table1
 
     ap1 = argparse.ArgumentParser()
     cmd_table1.register(ap1.add_subparsers())

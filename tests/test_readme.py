@@ -4,12 +4,12 @@ import json
 
 import pytest
 
-from experiments import readme
-from experiments.fidelity import fidelity_targets, first_world
+from tools import readme
+from experiments.fidelity.run import fidelity_targets, first_world
 
 
 def test_readme_blocks_match_saved_results():
-    assert readme.main(["--check"]) == 0, "README.md is stale: run python -m experiments.readme"
+    assert readme.main(["--check"]) == 0, "README.md is stale: run python -m tools.readme"
 
 
 def test_render_fills_a_block_from_its_results_file(tmp_path):
@@ -140,7 +140,7 @@ def test_fidelity_block_tabulates_fidelity_against_episodes_per_gait():
     """A result with ``by_episodes`` gets one row per stochastic world and a column per count: worst ρ
     [median] (bold where the ranking target is met), the bias spread (not for a one-draw world) and,
     for SGAT, hybrid and oracle worlds, the targets met at that count; a result without it gets none."""
-    from experiments.fidelity import _summary
+    from experiments.fidelity.run import _summary
 
     def world(kind, rhos, bias, brier=0.2):
         draws = [{"draw": i, "rho": r, "bias": b, "mae": abs(b), "brier": brier, "pick_regret": 0.0}

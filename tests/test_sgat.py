@@ -625,7 +625,7 @@ def test_ensemble_members_fitted_on_a_process_pool_equal_the_serial_fit():
     fitted side by side in worker processes is the serial fit, every weight bit for bit, with the
     sim's own models (residual noise, matched) and a refit of the forward models only (``previous``,
     as the DAD rounds refit); the members differ from one another (bootstrap resamples, seeds)."""
-    from experiments.executors import ProcessExecutor
+    from experiments.runtime.executors import ProcessExecutor
     from sgat.grounding import GroundingConfig, fit_grounding
 
     spec = _spec()

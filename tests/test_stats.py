@@ -1,11 +1,11 @@
-"""experiments.stats: intervals and tests against hand-computed values; fidelity metrics on constructed worlds."""
+"""experiments.runtime.stats: intervals and tests against hand-computed values; fidelity metrics on constructed worlds."""
 
 import math
 
 import numpy as np
 import pytest
 
-from experiments import stats as S
+from experiments.runtime import stats as S
 
 
 def test_wilson_hand_computed():

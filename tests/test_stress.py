@@ -6,8 +6,8 @@ import shutil
 import pytest
 
 from experiments import cli
-from experiments import stress as S
-from experiments.executors import SerialExecutor, make_executor
+from experiments.stress import run as S
+from experiments.runtime.executors import SerialExecutor, make_executor
 from walk_engine import GaitParams
 
 

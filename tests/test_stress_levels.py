@@ -7,8 +7,8 @@ the flat level's (4/4 vs 0/4 gives [0.51, 1] vs [0, 0.49]).
 
 import pytest
 
-from experiments import stress as S
-from experiments.executors import SerialExecutor, make_executor
+from experiments.stress import run as S
+from experiments.runtime.executors import SerialExecutor, make_executor
 
 
 def _check_rising(rows, flat_without_falls=True):

@@ -142,7 +142,7 @@ def test_excite_cli_design_and_segments(tmp_path, capfd):
 
 
 def test_diagnose_families_plus_adds_to_the_defaults():
-    from experiments.cmd_diagnose import _families
+    from experiments.cli.diagnose import _families
     from sysid.candidates import FIXED_BASE_FAMILIES
     from sysid.synthetic import synthetic_logs
 

@@ -35,7 +35,7 @@ def test_walk_json_and_record(tmp_path, capsys):
 
 def test_walk_human_output_defaults_to_theta0(capsys):
     """The printed line is the --json result of the same (deterministic) walk of θ0, in words."""
-    from experiments.cmd_walk import format_walk
+    from experiments.cli.walk import format_walk
     from walk_engine import GaitParams
 
     code, out, _ = _run(capsys, "--seconds", "1")

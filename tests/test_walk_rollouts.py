@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from common.spatial import quat_yaw
-from experiments.fitness import FALL_PENALTY, run_walk, walk_fitness
+from experiments.runtime.fitness import FALL_PENALTY, run_walk, walk_fitness
 from walk_engine import GaitParams, WalkCommand
 
 
@@ -114,8 +114,8 @@ def test_real_profile_is_hard_but_not_hopeless_for_theta0():
     differently in the last bits) rather than ten: at a fall rate near 0.5 a single block of ten
     lands outside [3, 9] falls about 8 % of the time (measured blocks: 2, 4, 8 falls). The 40
     trials run on a pool of 2 (``run_episode``: the same walks as ``run_walk(world="real", seed=s)``)."""
-    from experiments.executors import make_executor
-    from experiments.tasks import run_episode
+    from experiments.runtime.executors import make_executor
+    from experiments.runtime.tasks import run_episode
 
     theta0, higher = GaitParams().to_array().tolist(), GaitParams(step_height=0.03).to_array().tolist()
     tasks = ([{"world": "real", "theta": theta0, "seed": s} for s in range(100, 130)]

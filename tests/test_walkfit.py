@@ -1,4 +1,4 @@
-"""The walk-level fit of the identified sim's actuation (``experiments.walkfit``)."""
+"""The walk-level fit of the identified sim's actuation (``experiments.runtime.walkfit``)."""
 
 import json
 import os
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from envs import Recording
-from experiments.executors import SerialExecutor
-from experiments.tasks import run_episode
-from experiments.walkfit import (GRIDS, candidates, describe_terms, fit_walk_terms, moment_distance,
+from experiments.runtime.executors import SerialExecutor
+from experiments.runtime.tasks import run_episode
+from experiments.runtime.walkfit import (GRIDS, candidates, describe_terms, fit_walk_terms, moment_distance,
                                  statistic_names, tracking_statistics)
 from robots import get_robot
 

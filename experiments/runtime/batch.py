@@ -1,0 +1,319 @@
+"""Batched walk episodes: many :func:`experiments.runtime.tasks.run_episode` tasks in lock-step in one worker.
+
+:func:`run_batch` takes a list of ``run_episode`` task dicts and returns exactly what
+``[run_episode(t) for t in tasks]`` returns, bit for bit (``tests/test_batch.py``), faster: tasks of
+a MuJoCo world (``sim``, ``identified``, ``grounded`` on either, ANE exploration noise) run as one
+:class:`envs.batch.SimBatch` (one ``MjModel``, one ``MjData`` per episode; a model per episode
+where the world builds one per episode, as the identified sim on its random ground) driven by one
+:class:`walk_engine.batch.BatchWalkEngine` (the ZMP engine vectorized over the episodes), the
+grounding transformer called once per control step for the batch (each episode with its own
+generator and ensemble member) and the ANE noise per episode. Tasks of the PyBullet ``real``
+world run one by one through ``run_episode``.
+
+Per control step each active episode costs its ``mj_step`` calls plus a few microseconds of
+array work; episodes that fall leave the batch. ``benchmarks/bench_generation.py`` measures the
+ratio to bare ``mj_step``.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+
+import numpy as np
+
+from common.defaults import CONTROL_DT, EPISODE_SECONDS
+from envs.batch import SimBatch
+from envs.mujoco_world import NaoSimEnv
+from envs.rollout import assemble_recording
+from envs.wrappers import ActionMismatch
+from experiments.runtime.fitness import walk_fitness, walk_meta
+from experiments.runtime.grounding import nao_spec
+from experiments.runtime.tasks import IDENTIFIED_CONFOUNDED, _transformer, _world, episode_result, run_episode
+from walk_engine import GaitParams
+from walk_engine.batch import BatchWalkEngine
+
+
+def _batchable(task: dict) -> bool:
+    # BatchWalkEngine vectorizes the NAO's closed-form legs; other robots' episodes run one by one
+    return task["world"] in ("sim", "grounded", "identified") and task.get("robot", "nao") == "nao"
+
+
+def _group_key(task: dict) -> tuple:
+    """Tasks that share a world (and so a template env) and a duration."""
+    return (task["world"], task.get("transformer"), float(task.get("seconds", EPISODE_SECONDS)),
+            tuple(task.get("identified") or ()), bool(task.get("identified_terms", True)),
+            bool(task.get("identified_ground", True)), bool(task.get("identified_confounded", IDENTIFIED_CONFOUNDED)))
+
+
+def run_batch(tasks: list[dict]) -> list[dict]:
+    """Run walk episodes in lock-step where the world allows it; results in task order.
+
+    Args:
+        tasks: :func:`experiments.runtime.tasks.run_episode` task dicts (any worlds, any mix).
+
+    Returns:
+        ``[run_episode(t) for t in tasks]``, bit-identical (recordings included when asked).
+
+    Raises:
+        ValueError: what ``run_episode`` raises for a bad task (unknown world, missing reports).
+    """
+    tasks = list(tasks)
+    out: list = [None] * len(tasks)
+    groups: dict = {}
+    for i, t in enumerate(tasks):
+        if _batchable(t):
+            groups.setdefault(_group_key(t), []).append(i)
+        else:
+            out[i] = run_episode(t)
+    for idx in groups.values():
+        for i, r in zip(idx, _run_sim_group([tasks[i] for i in idx])):
+            out[i] = r
+    return out
+
+
+def _run_sim_group(tasks: list[dict]) -> list[dict]:
+    """One group of sim-world tasks with the same world, transformer and duration."""
+    env = _world({**tasks[0], "action_noise": 0.0}).unwrapped
+    tr = _transformer(tasks[0]["transformer"]) if tasks[0]["world"] == "grounded" else None
+    walks = lockstep_walks(env, [t["theta"] for t in tasks], [int(t["seed"]) for t in tasks],
+                           float(tasks[0].get("seconds", EPISODE_SECONDS)),
+                           action_noise=[float(t.get("action_noise", 0.0) or 0.0) for t in tasks], transformer=tr)
+    return [episode_result(t, rec, res) for t, (rec, res) in zip(tasks, walks)]
+
+
+def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=None, action_noise=None,
+                   transformer=None) -> list:
+    """Walk B gaits of the ZMP engine in the sim ``env`` in lock-step (see the module docstring).
+
+    Args:
+        env: a :class:`envs.NaoSimEnv`, or a subclass with ``batch_hooks`` (the identified sim), the
+            template (its state is restored afterwards).
+        thetas: B gait parameter vectors (SI, 16); seeds: B episode seeds; seconds: episode length [s].
+        terrains: B heightfields (or None: the env's own ground) to walk on, each episode its own.
+        action_noise: B std [rad] of Gaussian noise on the applied leg targets (the ANE baseline or
+            exploration noise, as :class:`envs.wrappers.ActionMismatch` with the episode's seed).
+        transformer: an :class:`sgat.ActionTransformer` grounding every episode (the grounded sim,
+            as :class:`sgat.GroundedEnv`; each episode its own generator and ensemble member).
+
+    Returns:
+        B ``(Recording, WalkResult)``, each bit-identical to
+        :func:`experiments.runtime.fitness.run_walk` of that episode alone in the same (wrapped) world.
+
+    Raises:
+        ValueError: B differs between the arguments.
+    """
+    B = len(thetas)
+    seeds = [int(s) for s in seeds]
+    terrains = list(terrains) if terrains is not None else None
+    sigma = list(action_noise) if action_noise is not None else [0.0] * B
+    if len(seeds) != B or len(sigma) != B or (terrains is not None and len(terrains) != B):
+        raise ValueError(f"lockstep_walks: {B} gaits but {len(seeds)} seeds, {len(sigma)} noise levels"
+                         + ("" if terrains is None else f", {len(terrains)} terrains"))
+    n = int(round(seconds / env.control_dt))
+    sim = SimBatch(env, B)
+    # the wrappers of experiments.runtime.tasks._world, one per episode (their state is per episode)
+    noise = [ActionMismatch(env, noise_std=s, index=nao_spec().action_index, seed=seeds[i]) if s > 0 else None
+             for i, s in enumerate(sigma)]
+    noisy = np.array([x is not None for x in noise])
+    tr = transformer
+    grounded = tr is not None and not tr.is_identity
+    if grounded:  # sgat.GroundedEnv per episode: its generator, its ensemble member, its state history
+        eps = [copy.copy(tr) for _ in range(B)]
+        spec = tr.spec
+        H = np.empty((B, spec.history, spec.state_dim))
+        P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
+        E = np.empty((B, tr.delay, spec.action_dim)) if tr.delay else None  # ... and the actions sent before (a delay)
+        Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
+        Hs = np.empty_like(H) if tr.shadow_memory else None  # each episode's shadow state history
+        D = np.empty((B, spec.state_dim))  # the predicted state changes Δŝ of the step
+    params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
+    engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
+    sim.reset(seeds, terrains)
+    for i in range(B):
+        if noise[i] is not None:
+            noise[i].reseed(seeds[i])
+        if grounded:
+            eps[i].reset(seeds[i])
+            H[i] = spec.states(sim.obs[i])
+            if Hs is not None:
+                Hs[i] = H[i]
+            if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
+                Z[i] = eps[i].correlate(eps[i].rng.standard_normal((n, tr.noise_dim)))
+    engine.reset(sim.obs)
+    layout = env.layout
+    na = env.action_space.shape[0]
+    O = np.empty((B, n, layout.size))
+    C = np.empty((B, n, na))
+    A = np.empty((B, n, na))
+    G = np.full((B, n, 22), np.nan)
+    rows = np.zeros(B, dtype=int)
+    fall_time: list = [None] * B
+    actions = np.zeros((B, na))
+    for k in range(n):
+        idx = np.flatnonzero(sim.active)
+        if not len(idx):
+            break
+        O[idx, k] = sim.obs[idx]
+        G[idx, k, :19] = sim.gt[idx]
+        cmd = engine.step(sim.obs, idx)
+        C[idx, k] = cmd
+        act = cmd.copy()
+        if grounded:
+            ai = spec.action_index
+            past = None
+            if P is not None:
+                if k == 0:  # padded with the first command, as sgat.GroundedEnv and sgat.grounding.stack_past
+                    P[idx] = cmd[:, ai][:, None]
+                past = P[idx].reshape(len(idx), -1)
+            sent = None
+            if E is not None:
+                if k == 0:  # padded with the first command, as sgat.GroundedEnv pads
+                    E[idx] = cmd[:, ai][:, None]
+                sent = E[idx].reshape(len(idx), -1)
+            dout = np.empty((len(idx), spec.state_dim)) if Hs is not None else None
+            act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
+                                               None if Z is None else Z[idx, k], past,
+                                               None if Hs is None else Hs[idx].reshape(len(idx), -1), dout, sent)
+            if E is not None:
+                E[idx] = np.concatenate([E[idx, 1:], act[:, ai][:, None]], axis=1)
+            if Hs is not None:
+                D[idx] = Hs[idx, -1] + dout  # the targets ŝ_{t+1}
+            if P is not None:
+                P[idx] = np.concatenate([P[idx, 1:], cmd[:, ai][:, None]], axis=1)
+        actions[idx] = act
+        for j in np.flatnonzero(noisy[idx]).tolist():
+            actions[idx[j]] = noise[idx[j]].perturb(act[j])
+        sim.step(actions)
+        A[idx, k] = sim.applied[idx]
+        rows[idx] = k + 1
+        ended = idx[~sim.active[idx]]
+        for i in ended:
+            fall_time[i] = (k + 1) * env.control_dt
+        if grounded:
+            live = idx[sim.active[idx]]
+            s_new = spec.states(sim.obs[live])
+            H[live] = np.concatenate([H[live, 1:], s_new[:, None]], axis=1)
+            if Hs is not None:
+                Hs[live] = np.concatenate([Hs[live, 1:], tr.relax_shadow(D[live], s_new)[:, None]], axis=1)
+    out = []
+    for i in range(B):
+        rec = assemble_recording(env, O[i], C[i], A[i], G[i], int(rows[i]), seed=seeds[i], seconds=seconds,
+                                 fell=sim.reason[i] is not None, reason=sim.reason[i], fall_time=fall_time[i],
+                                 meta=walk_meta(params[i]), terrain=sim.terrain(i))
+        out.append((rec, walk_fitness(rec, seconds)))
+    return out
+
+
+#: Most episodes in one batch by default: a paper-scale population (150) on 2 workers is 2 batches;
+#: the per-episode overhead barely falls beyond ~75 (benchmarks/bench_generation.py).
+MAX_BATCH = 75
+
+
+def chunk_tasks(tasks: list[dict], workers: int = 1, batch_size: int | None = None, key=None) -> list[list[int]]:
+    """Split task indices into batches for :func:`run_batch` (or another batched task function).
+
+    Tasks that can run in lock-step (same world, transformer and duration; or the same ``key(task)``
+    when a key function is given, None meaning "not batchable") are cut into
+    ``ceil(n / workers)``-sized batches (at most ``batch_size``, default :data:`MAX_BATCH`), so
+    every worker gets a share; every other task is a batch of its own.
+
+    Returns:
+        Lists of indices into ``tasks``, every index exactly once.
+
+    Raises:
+        ValueError: workers or batch_size < 1.
+    """
+    if workers < 1 or (batch_size is not None and batch_size < 1):
+        raise ValueError(f"workers and batch_size must be >= 1, got {workers}, {batch_size}")
+    cap = MAX_BATCH if batch_size is None else int(batch_size)
+    groups: dict = {}
+    out: list[list[int]] = []
+    key = key or (lambda t: _group_key(t) if _batchable(t) else None)
+    for i, t in enumerate(tasks):
+        k = key(t)
+        if k is not None:
+            groups.setdefault(k, []).append(i)
+        else:
+            out.append([i])
+    for idx in groups.values():
+        size = min(cap, -(-len(idx) // workers))
+        out.extend(idx[k:k + size] for k in range(0, len(idx), size))
+    return out
+
+
+def map_episodes(ex, tasks: list[dict], progress=None, batch_size: int | None = None) -> list[dict]:
+    """``[run_episode(t) for t in tasks]`` on the executor ``ex``, sent as batches (:func:`chunk_tasks`).
+
+    The results are bit-identical whatever the batch size and the number of workers
+    (``tests/test_batch.py``). ``progress(n)`` is called with the number of episodes of each
+    finished batch.
+    """
+    tasks = list(tasks)
+    chunks = chunk_tasks(tasks, getattr(ex, "workers", 1), batch_size)
+    res = ex.map(run_batch, [[tasks[i] for i in c] for c in chunks], progress=progress,
+                 weights=[len(c) for c in chunks])
+    out: list = [None] * len(tasks)
+    for c, r in zip(chunks, res):
+        for i, x in zip(c, r):
+            out[i] = x
+    return out
+
+
+#: Control steps of the two trial walks that price a generation (:func:`expected_generation_seconds`):
+#: their difference gives the time per control step, the shorter one the time per batch besides.
+TRIAL_STEPS = (10, 110)
+
+
+def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict:
+    """How long a generation of ``episodes`` episodes like ``task`` should take on ``workers`` cores,
+    timed on a trial of the task's own world in this process.
+
+    The executors cut a generation into batches (:func:`chunk_tasks`: ``ceil(episodes / workers)``
+    episodes each, at most :data:`MAX_BATCH`) of which each worker runs ``rounds`` one after the other.
+    The trial walks one such batch of the task (its world, ground, transformer and gait; seeds 0, 1,
+    ...) twice, for :data:`TRIAL_STEPS` control steps (after a 2-step walk that builds the world and
+    loads the transformer, as a worker's first batch does): the difference of the two times is the
+    batch's time per control step (the physics of every episode, the walk engine, the transformer and
+    the bookkeeping), the shorter one less its steps the time per batch besides (the episodes' resets:
+    the identified sim compiles a model per episode on its own ground). A task that does not run
+    batched (the real world, a robot other than the NAO) is timed as one episode the same way. The
+    trial costs about 120 control steps of one batch (about 2 s for the hybrid default's batches of 6).
+
+    The estimate assumes that no episode falls (a fallen episode leaves its batch): a generation
+    whose episodes fall ends sooner. The trial walks the gait's first 1.1 s, whose start in double
+    support costs more per step than the walk after it (for θ0 on the identified ground, a fifth to
+    a third more than its 5 s walk's average, measured): the estimate reads high even where none
+    falls. It is timed on a shared machine and varies by a fifth between calls there.
+
+    Args:
+        task: an :func:`experiments.runtime.tasks.run_episode` task dict (its ``seconds`` is the episode
+            length; ``seed``, ``record`` and ``meta`` are replaced for the trial).
+        episodes: episodes per generation (>= 1).
+        workers: worker processes (>= 1).
+
+    Returns:
+        ``{"expected_s", "batch": episodes per batch, "rounds": batches per worker, "step_ms": time per
+        control step of a batch [ms], "batch_fixed_s": time per batch besides its steps [s]}``.
+
+    Raises:
+        ValueError: episodes or workers < 1; what ``run_episode`` raises for a bad task.
+    """
+    if episodes < 1 or workers < 1:
+        raise ValueError(f"episodes and workers must be >= 1, got {episodes}, {workers}")
+    n = int(round(float(task.get("seconds", EPISODE_SECONDS)) / CONTROL_DT))
+    base = {k: v for k, v in task.items() if k not in ("record", "meta")}
+    chunks = chunk_tasks([base] * episodes, workers)  # the generation's batches, as map_episodes cuts them
+    size, rounds = len(chunks[0]), -(-len(chunks) // workers)
+    # run_batch walks a task that does not run batched one episode at a time, as the executors do
+    run_batch([{**base, "seed": 0, "seconds": 2 * CONTROL_DT}])  # the world built, the transformer loaded (cached per process)
+    took = []
+    for steps in TRIAL_STEPS:
+        trial = [{**base, "seed": k, "seconds": steps * CONTROL_DT} for k in range(size)]
+        t0 = time.perf_counter()
+        run_batch(trial)
+        took.append(time.perf_counter() - t0)
+    step = max(0.0, (took[1] - took[0]) / (TRIAL_STEPS[1] - TRIAL_STEPS[0]))
+    fixed = max(0.0, took[0] - TRIAL_STEPS[0] * step)
+    return {"expected_s": rounds * (fixed + n * step), "batch": size, "rounds": rounds, "step_ms": 1e3 * step,
+            "batch_fixed_s": fixed}
