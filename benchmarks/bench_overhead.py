@@ -1,4 +1,5 @@
-"""What a hybrid optimization spends besides the physics, old way against new, side by side in one run.
+"""What does a hybrid optimization spend besides the physics? The old way against the new, side by side
+in one run.
 
 Two pieces of ``sgatwalk optimize``'s default (hybrid) run that are bookkeeping, not simulation:
 
@@ -7,21 +8,22 @@ Two pieces of ``sgatwalk optimize``'s default (hybrid) run that are bookkeeping,
   random surface. Timed for ``--episodes`` episodes (a worker's share of a 12-candidate generation on 2
   cores: 6) on their own surfaces (``terrain.gaussian``, the identified sim's correlation radius, 4 cm
   cells), over ``--steps`` control steps of torso positions within the surfaces and beyond their
-  edges: one :func:`envs.base.ground_height` call per episode (the batch's code before the
-  twenty-first round) against one :class:`envs.base.GroundStack` call for the batch (the fields
-  stacked once per batch). The heights must agree bit for bit.
-* **The grounding fit's ensemble.** A grounding step fits 5 forward/inverse pairs (the default
-  ensemble) on 4 real and 4 sim walks of θ0 (the first grounding step's data: real world against the
-  sim with the 0.02 rad exploration noise); timed fitted one after another in this process (as
-  ``optimize`` fitted them before the twenty-first round) against one member per worker of a warm
-  process pool of ``--workers`` (``fit_grounding``'s ``map_fn``, what ``optimize`` passes now). Every
-  weight must agree bit for bit.
+  edges: one :func:`envs.base.ground_height` call per episode (the batch's earlier code) against one
+  :class:`envs.base.GroundStack` call for the batch (the fields stacked once per batch). The heights
+  must agree bit for bit.
+* **The grounding fit's ensemble.** A grounding step fits the ensemble of the world ``sgat`` (5
+  forward/inverse pairs at its defaults, its history and models) on its real and sim walks of θ0 (the
+  first grounding step's data: the real world against the sim with the world's exploration noise);
+  timed fitted one after another in this process (as ``optimize`` fitted them before) against one
+  member per worker of a warm process pool of ``--workers`` (``fit_grounding``'s ``map_fn``, what
+  ``optimize`` passes now). Every weight must agree bit for bit.
 
-Interleaved over ``--repeats`` rounds; medians and their ratios (old / new: above 1, the new way is
-faster). Prints a table or, with ``--json``, one JSON object; ``--save NAME`` also writes
-``docs/results/NAME.json`` for the README (with the load average).
+Interleaved over ``--repeats`` repeats; medians and their ratios (old / new: above 1, the new way is
+faster). Prints a table or, with ``--json``, one JSON object (its ``"text"`` the table); progress goes
+to stderr. Exits 1 unless both ways agree bit for bit. Defaults (3 repeats) take about 1.5 minutes
+on 2 idle cores.
 
-Usage: ``python benchmarks/bench_overhead.py [--episodes 6] [--steps 750] [--repeats 3] [--workers 2] [--save benchoverhead]``
+Usage: ``python benchmarks/bench_overhead.py [--episodes 6] [--steps 750] [--repeats 3] [--workers 2] [--json]``
 """
 
 from __future__ import annotations
@@ -40,8 +42,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 
-def lookup_round(fields, xs, ys) -> dict:
-    """One round of the fall check's lookups, both ways. Returns seconds per control step and whether
+def lookup_times(fields, xs, ys) -> dict:
+    """The fall check's lookups over every step, both ways. Returns seconds per control step and whether
     the heights agree."""
     from envs.base import GroundStack, ground_height
 
@@ -57,41 +59,52 @@ def lookup_round(fields, xs, ys) -> dict:
     return {"old_s": t_old / len(xs), "new_s": t_new / len(xs), "same": bool(np.array_equal(old, new))}
 
 
+#: The training world whose grounding data and ensemble are timed.
+WORLD = "sgat"
+
+
 def grounding_data(seconds: float):
-    """4 real walks of θ0 and 4 sim walks with the exploration noise (the shape of the first grounding
-    step's data; seeds of this benchmark's own, 100+ and 200+), recorded on a pool of 2."""
+    """The real walks of θ0 and the sim walks with the exploration noise of the world :data:`WORLD`
+    (the first grounding step's data; seeds of this benchmark's own, 100+ and 200+), recorded on a
+    pool of 2."""
+    from envs import Recording
+    from experiments.runtime.batch import map_episodes
     from experiments.runtime.executors import ProcessExecutor
-    from experiments.runtime.grounding import EXPLORATION_NOISE, REAL_WALKS, SIM_WALKS
-    from experiments.runtime.tasks import run_episode
+    from experiments.runtime.tasks import EpisodeTask
+    from experiments.runtime.worlds import parse_world
     from walk_engine import GaitParams
 
-    theta = GaitParams().to_array().tolist()
-    tasks = ([{"world": "real", "theta": theta, "seed": 100 + i, "seconds": seconds, "record": True} for i in range(REAL_WALKS)]
-             + [{"world": "sim", "theta": theta, "seed": 200 + i, "seconds": seconds, "record": True,
-                 "action_noise": EXPLORATION_NOISE} for i in range(SIM_WALKS)])
+    spec = parse_world(WORLD)
+    n_real = int(spec.get("real"))
+    theta = GaitParams().to_array()
+    tasks = ([EpisodeTask("real", theta, 100 + i, seconds, record=True) for i in range(n_real)]
+             + [EpisodeTask("sim", theta, 200 + i, seconds, record=True, action_noise=float(spec.get("explore")))
+                for i in range(int(spec.get("sim")))])
     with ProcessExecutor(2) as ex:
-        res = ex.map(run_episode, tasks)
-    from envs import Recording
-
-    recs = [Recording(*r["recording"]) for r in res]
-    return recs[:REAL_WALKS], recs[REAL_WALKS:]
+        res = map_episodes(ex, tasks)
+    recs = [Recording(*r.recording) for r in res]
+    return recs[:n_real], recs[n_real:]
 
 
-def fit_round(real, sim, ex) -> dict:
-    """One round of the grounding fit, both ways. Returns seconds and whether every weight agrees."""
+def fit_times(real, sim, ex) -> dict:
+    """The grounding fit, both ways. Returns seconds and whether every weight agrees."""
     import torch
 
-    from experiments.runtime.grounding import DEFAULT_GROUNDING, DEFAULT_HISTORY, fit_nao_grounding
+    from experiments.runtime.grounding import fit_walk_grounding
+    from experiments.runtime.worlds import parse_world
+
+    spec = parse_world(WORLD)
+    cfg, history = spec.grounding_config(), int(spec.get("history"))
 
     def weights(fit):
         tr = fit.transformer
         return [p for m in list(tr.forwards) + list(tr.inverses) for p in m.state_dict().values()]
 
     t0 = time.perf_counter()
-    a = fit_nao_grounding(real, sim, DEFAULT_GROUNDING, history=DEFAULT_HISTORY, seed=1)
+    a = fit_walk_grounding(real, sim, cfg, history=history, seed=1)
     t_old = time.perf_counter() - t0
     t0 = time.perf_counter()
-    b = fit_nao_grounding(real, sim, DEFAULT_GROUNDING, history=DEFAULT_HISTORY, seed=1, map_fn=ex.map)
+    b = fit_walk_grounding(real, sim, cfg, history=history, seed=1, map_fn=ex.map)
     t_new = time.perf_counter() - t0
     wa, wb = weights(a), weights(b)
     same = len(wa) == len(wb) and all(torch.equal(x, y) for x, y in zip(wa, wb))
@@ -103,22 +116,24 @@ def _warm(_):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog="About 1.5 minutes at the defaults on 2 idle cores. Exits 1 unless both ways "
+                                        "agree bit for bit.")
     ap.add_argument("--episodes", type=int, default=6, help="episodes of one batch (default 6)")
     ap.add_argument("--steps", type=int, default=750, help="control steps of the lookup (default 750: 7.5 s)")
-    ap.add_argument("--repeats", type=int, default=3, help="interleaved rounds (default 3)")
+    ap.add_argument("--repeats", type=int, default=3, help="interleaved repeats (default 3)")
     ap.add_argument("--workers", type=int, default=2, help="process pool of the ensemble fit (default 2)")
-    ap.add_argument("--rms", type=float, default=0.00285, help="RMS height of the random surfaces [m]")
-    ap.add_argument("--seconds", type=float, default=7.5, help="length of the grounding walks [s]")
-    ap.add_argument("--json", action="store_true")
-    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json")
+    ap.add_argument("--rms", type=float, default=0.00285, help="RMS height of the random surfaces [m] (default 0.00285)")
+    ap.add_argument("--seconds", type=float, default=7.5, help="length of the grounding walks [s] (default 7.5)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object (its \"text\": the table)")
     args = ap.parse_args(argv)
     if min(args.episodes, args.steps, args.repeats, args.workers) < 1 or not args.rms > 0 or not args.seconds > 0:
         ap.error("--episodes, --steps, --repeats and --workers must be >= 1, --rms and --seconds > 0")
-    load0 = os.getloadavg()[0]
-    from experiments.runtime.executors import ProcessExecutor
+    from experiments.runtime.executors import ProcessExecutor, limit_blas_threads
     from sysid.roughness import CORRELATION_RADIUS
     from terrain import gaussian
+
+    limit_blas_threads()  # one BLAS thread, as optimize's workers, also where numpy was loaded before
 
     rng = np.random.default_rng(0)
     fields = [gaussian(np.random.default_rng(s), args.rms, CORRELATION_RADIUS) for s in range(args.episodes)]
@@ -126,18 +141,18 @@ def main(argv=None) -> int:
     # torso paths: walks from the origin, some past the fields' edges (the lookup clips to the edge)
     xs = np.cumsum(rng.normal(0.0, 0.01, (args.steps, args.episodes)), axis=0) * (1.5 * hx / 0.3)
     ys = np.cumsum(rng.normal(0.0, 0.01, (args.steps, args.episodes)), axis=0) * (1.5 * hy / 0.3)
-    print("[bench_overhead] recording 4 real and 4 sim walks of θ0", file=sys.stderr, flush=True)
+    print(f"[bench_overhead] recording the grounding walks of θ0 of the world {WORLD}", file=sys.stderr, flush=True)
     real, sim = grounding_data(args.seconds)
     look, fits = [], []
     with ProcessExecutor(args.workers) as ex:
         ex.map(_warm, range(args.workers))  # a warm pool, as optimize's is by its first fit
         for r in range(args.repeats):
-            look.append(lookup_round(fields, xs, ys))
-            fits.append(fit_round(real, sim, ex))
-            print(f"[bench_overhead] round {r + 1}/{args.repeats} done", file=sys.stderr, flush=True)
+            look.append(lookup_times(fields, xs, ys))
+            fits.append(fit_times(real, sim, ex))
+            print(f"[bench_overhead] repeat {r + 1}/{args.repeats} done", file=sys.stderr, flush=True)
     med = lambda rs, k: statistics.median(x[k] for x in rs)  # noqa: E731
     out = {"episodes": args.episodes, "steps": args.steps, "repeats": args.repeats, "workers": args.workers,
-           "rms_height": args.rms,
+           "rms_height": args.rms, "world": WORLD, "grounding_walks": [len(real), len(sim)],
            "lookup": {"old_us_per_step": 1e6 * med(look, "old_s"), "new_us_per_step": 1e6 * med(look, "new_s"),
                       "ratio": med(look, "old_s") / med(look, "new_s"), "bit_identical": all(x["same"] for x in look)},
            "ensemble_fit": {"members": fits[0]["members"], "old_s": med(fits, "old_s"), "new_s": med(fits, "new_s"),
@@ -146,17 +161,13 @@ def main(argv=None) -> int:
     lookup_name = f"fall-check ground lookup, {args.episodes} episodes [us/step]"
     fit_name = f"ensemble fit, {ft['members']} members, {args.workers} workers [s]"
     out["text"] = "\n".join([
-        f"medians of {args.repeats} interleaved rounds; old / new: above 1, the new way is faster",
+        f"medians of {args.repeats} interleaved repeats; old / new: above 1, the new way is faster",
         f"{'piece':44s} {'old':>10s} {'new':>10s} {'old/new':>8s} {'bit-identical':>13s}",
         f"{lookup_name:44s} {lk['old_us_per_step']:10.0f} "
         f"{lk['new_us_per_step']:10.0f} {lk['ratio']:8.1f} {str(lk['bit_identical']).lower():>13s}",
         f"{fit_name:44s} {ft['old_s']:10.1f} {ft['new_s']:10.1f} "
         f"{ft['ratio']:8.2f} {str(ft['bit_identical']).lower():>13s}",
     ])
-    if args.save:
-        from tools.readme import save_benchmark
-
-        save_benchmark(args.save, "benchmarks/bench_overhead.py", list(argv if argv is not None else sys.argv[1:]), out, load0)
     print(json.dumps(out) if args.json else out["text"], flush=True)
     return 0 if lk["bit_identical"] and ft["bit_identical"] else 1
 

@@ -1,21 +1,24 @@
-"""The uneven-ground fit's adaptive RMS-height grid against the whole grid, side by side in one run.
+"""What does the uneven-ground fit's adaptive RMS-height grid save against the whole grid, and does it
+identify exactly the same? Both side by side in one run.
 
 The stepping diagnosis fits terrain roughness by simulating every stepping log on random surfaces
 of each RMS height of a grid (``sysid.roughness.RMS_HEIGHTS``) and replaying the simulated logs:
-the largest part of an identification (``experiments.runtime.identify.identify_real``). Since the
-twenty-fifth round the grid is simulated bottom-up, only as far as the fit needs it
-(``fit_roughness(adaptive=True)``). This records one set of excitation logs of the real world per
-seed (3 in-air, 3 stepping; the shipped engine-gap calibration) and identifies the very same logs
-twice per repeat, interleaved: with the whole grid (``adaptive=False``, patched in for this run)
-and with the adaptive one. Per seed: wall time of the whole identification and of the stepping
-diagnosis (medians over the repeats), the RMS heights simulated, the fitted height and its interval,
-and whether the two identifications agree exactly (every identified effect's value, the roughness
-fit's decision, height and interval: they must).
+the largest part of an identification (``experiments.runtime.identify.identify_real``). The grid is
+simulated bottom-up, only as far as the fit needs it (``fit_roughness(adaptive=True)``). This
+records one set of excitation logs of the real world per seed (3 in-air, 3 stepping; the shipped
+engine-gap calibration) and identifies the very same logs twice per repeat, interleaved: with the
+whole grid (``adaptive=False``, patched in for this run) and with the adaptive one. Per seed: wall
+time of the whole identification and of the stepping diagnosis (medians over the repeats), the RMS
+heights simulated, the fitted height and its interval, and whether the two identifications agree
+exactly (every identified effect's value, the roughness fit's decision, height and interval: they
+must); over the seeds, the medians of the ratios whole / adaptive.
 
-Prints a table or, with ``--json``, one JSON object; ``--save NAME`` also writes
-``docs/results/NAME.json`` for the README (with the load average).
+Prints a table or, with ``--json``, one JSON object (its ``"text"`` the table); progress goes to
+stderr. Exits 1 unless every identification agrees. The default (seed 0, 1 repeat) takes about
+4 minutes on 2 idle cores (2 more where the shipped engine-gap calibration is stale and is computed
+afresh); each further seed or repeat adds about as much (``--seeds 0 1 2``: about 12 minutes).
 
-Usage: ``python benchmarks/bench_roughness_grid.py [--seeds 0 1 2] [--repeats 1] [--save benchroughness-grid]``
+Usage: ``python benchmarks/bench_roughness_grid.py [--seeds 0] [--repeats 1] [--json]``
 """
 
 from __future__ import annotations
@@ -69,19 +72,24 @@ def identify_once(logs_dir: str, out_dir: str, seed: int, calibration: dict, ada
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2],
-                    help="seeds of the excitation logs and of the real world's draws (default 0 1 2)")
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog="About 4 minutes at the defaults on 2 idle cores, as much again per further "
+                                        "seed or repeat. Exits 1 unless the two grids identify the same.")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0],
+                    help="seeds of the excitation logs and of the real world's draws (default 0)")
     ap.add_argument("--repeats", type=int, default=1, help="interleaved repeats per seed and grid (default 1)")
-    ap.add_argument("--json", action="store_true", help="print one JSON object")
-    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json")
+    ap.add_argument("--json", action="store_true", help="print one JSON object (its \"text\": the table)")
     args = ap.parse_args(argv)
     if args.repeats < 1 or min(args.seeds) < 0:
         ap.error("--repeats must be >= 1 and every seed >= 0")
     from experiments.runtime.identify import ENGINE_GAP_SEED, calibrate_engines, excitation_tasks, record_excitation_task
     from sysid.roughness import RMS_HEIGHTS
+    from experiments.runtime.executors import limit_blas_threads
 
-    load0 = os.getloadavg()[0]
+    # one BLAS thread, also where numpy was loaded before this module set OMP_NUM_THREADS (a runner, a
+    # test): with numpy's own two threads the two grids' identifications were seen to differ
+    limit_blas_threads()
+
     med = statistics.median
     out = {"seeds": {}, "repeats": args.repeats, "cpus": os.cpu_count(), "grid_mm": [1000 * g for g in RMS_HEIGHTS]}
     with tempfile.TemporaryDirectory(prefix="bench_roughness_") as tmp:
@@ -130,9 +138,7 @@ def main(argv=None) -> int:
     rows.append(f"whole grid / adaptive (median over seeds): identification {out['ratio_wall_whole_vs_adaptive']:.2f}x "
                 f"(median {out['saved_s_median']:.0f} s saved), stepping diagnosis {out['ratio_stepping_whole_vs_adaptive']:.2f}x")
     out["text"] = "\n".join(rows)
-    from tools.readme import finish_benchmark
-
-    finish_benchmark(out, "benchmarks/bench_roughness_grid.py", argv, save_name=args.save, as_json=args.json, load_before=load0)
+    print(json.dumps(out) if args.json else out["text"], flush=True)
     return 0 if out["all_identical"] else 1
 
 

@@ -1,86 +1,172 @@
-"""How faithful is the grounded sim? Grounding-state choices and the blend α, measured.
+"""How faithful is the grounded sim? Held-out one-step errors of its models by state history, and θ0's
+walk in it by blend α, beside the real world and the plain sim, in one run.
 
-1. Walk θ0 in the real world (PyBullet, "real" profile) and in the sim with exploration noise.
-2. For each grounding state -- ``legs`` (leg q, dq: the default), ``legs+imu`` (plus torso gyro,
-   roll, pitch), ``legs`` with a 2-frame history -- fit GAT and SGAT models on all but the last
-   episode and report held-out one-step errors: the forward model's normalized MSE of Δs on real
-   data (1.0 = no better than predicting the mean change) and the inverse model's RMS action error
-   on sim data [mrad] (the exploration noise sets the scale).
-3. Walk θ0 in the grounded sims (default state) for each blend α of ``--alphas`` (default 1, the
-   paper's formula, and 0.5) and compare speed and falls with the real world and the plain sim.
+1. Walk θ0 ``--real`` times in the real world (PyBullet, "real" profile) and ``--sim`` times in the
+   sim with the grounded world's exploration noise on the leg targets (``explore``).
+2. For GAT and SGAT with the options of ``--options`` (default: none, the default grounding of the
+   worlds ``gat`` and ``sgat``: linear models, ensemble of 5, α 0.5; ``experiments.runtime.worlds``),
+   fit the models (``experiments.runtime.grounding.fit_walk_grounding``) on all but the last episode
+   of each world, with the grounding state (leg q and dq) over each history of ``--histories``
+   (default 1, the paper's, 2, and the world's own, 6 at the defaults), and report held-out one-step
+   errors of the ensemble's member 0 (fitted on all the transitions: the same whatever the ensemble's
+   size, so the other histories fit it alone) on the last episodes: the forward model's normalized MSE
+   of Δs on real data (1.0 = no better than predicting the mean change) and the inverse model's RMS
+   action error on sim data [mrad] (the exploration noise sets the scale).
+3. Walk θ0 ``--trials`` times (seeds shared by every world) in the real world, the plain sim and the
+   grounded sims of the world's own history for each blend α of ``--alphas`` (default 1, the paper's
+   formula, and 0.5, the default): speed mean ± std and median [cm/s], its difference to the real
+   world's mean, and falls.
 
-Usage: ``python benchmarks/grounding_fidelity.py [--real 6] [--sim 6] [--trials 6] [--alphas 1 0.5] [--workers 2]``.
+Prints the tables, or one JSON object with ``--json`` (its ``"text"`` the tables); progress goes to
+stderr. Defaults take about 1 minute on 2 idle cores.
+
+Usage: ``python benchmarks/grounding_fidelity.py [--real 6] [--sim 6] [--trials 6] [--alphas 1 0.5] [--json]``
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import statistics
+import sys
 import tempfile
 import time
 
-import numpy as np
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+import numpy as np  # noqa: E402
+
+METHODS = ("gat", "sgat")
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--real", type=int, default=6, help="real episodes (the last one is held out)")
-    ap.add_argument("--sim", type=int, default=6, help="sim episodes with exploration noise")
-    ap.add_argument("--noise", type=float, default=0.05, help="exploration noise [rad]")
-    ap.add_argument("--trials", type=int, default=6, help="θ0 walks per world")
+def heldout_errors(fit, real_h, sim_h, real_train) -> dict:
+    """Member 0's one-step errors on the held-out transitions: forward nMSE of Δs on real data (scaled
+    by the training rows' std per state entry) and inverse RMS action error on sim data [rad]."""
+    tr = fit.transformer
+    mu, _ = tr.forwards[0].predict(real_h.forward_input())
+    nmse = float(np.mean(((mu - real_h.dS) / real_train.dS.std(0)) ** 2))
+    inv = tr.inverses[0].predict(np.hstack([sim_h.H, sim_h.dS]))
+    return {"forward_nmse": nmse, "inverse_rms_rad": float(np.sqrt(np.mean((inv - sim_h.A) ** 2)))}
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 epilog="About 1 minute at the defaults on 2 idle cores.")
+    ap.add_argument("--real", type=int, default=6, help="real episodes of θ0 (the last one held out; default 6)")
+    ap.add_argument("--sim", type=int, default=6, help="sim episodes of θ0 with exploration noise (the last one held out; default 6)")
+    ap.add_argument("--options", default="",
+                    help="world options of both grounded worlds, e.g. hidden=64x64:explore=0.05 (default: none)")
+    ap.add_argument("--histories", type=int, nargs="+", default=None,
+                    help="state histories [frames] to fit (default 1 2; the world's own, which the walks use, always)")
+    ap.add_argument("--trials", type=int, default=6, help="θ0 walks per world (default 6)")
     ap.add_argument("--alphas", type=float, nargs="+", default=[1.0, 0.5],
-                    help="blend factors α of the grounded sims to walk θ0 in")
-    ap.add_argument("--workers", type=int, default=None)
+                    help="blend factors α of the grounded sims to walk θ0 in (default 1 0.5)")
+    ap.add_argument("--seconds", type=float, default=7.5, help="episode length [s] (default 7.5, the paper's)")
+    ap.add_argument("--workers", type=int, default=None, help="worker processes (default: one per core)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object (its \"text\": the tables)")
     args = ap.parse_args(argv)
+    if min(args.real, args.sim) < 2 or args.trials < 1 or not args.seconds > 0:
+        ap.error("--real and --sim must be >= 2 (one is held out), --trials >= 1, --seconds > 0")
+    if any(not 0.0 <= a <= 1.0 for a in args.alphas):
+        ap.error("--alphas must lie in [0, 1]")
 
-    from envs import NaoSimEnv, Recording
-    from experiments.runtime.executors import make_executor
-    from experiments.runtime.tasks import run_episode
-    from sgat.grounding import fit_transformer, recording_transitions
+    from experiments.runtime.worlds import parse_world
+
+    try:
+        specs = {m: parse_world(f"{m}:{args.options}" if args.options else m) for m in METHODS}
+    except ValueError as exc:
+        ap.error(str(exc))
+    if any(s.get("delay") for s in specs.values()):
+        ap.error("--options: a delay grounds the identified sim (hybrid), not the plain sim")
+    own = int(specs["sgat"].get("history"))
+    histories = sorted(set(args.histories if args.histories else [1, 2, own]) | {own})
+    if min(histories) < 1:
+        ap.error("--histories must be >= 1")
+    noise = float(specs["sgat"].get("explore"))
+
+    import dataclasses
+
+    from envs import ObservationLayout, Recording
+    from experiments.runtime.batch import map_episodes
+    from experiments.runtime.executors import limit_blas_threads, make_executor
+    from experiments.runtime.grounding import fit_walk_grounding, walk_spec
+    from experiments.runtime.tasks import EpisodeTask
+    from robots import get_robot
+    from sgat.grounding import recording_transitions
+    from sgat.transformer import ActionTransformer
     from walk_engine import GaitParams
 
-    from experiments.runtime.grounding import grounding_spec
-    from sgat.transformer import ActionTransformer
-
-    theta = GaitParams.initial().to_array().tolist()
-    base = {"theta": theta, "seconds": 7.5, "profile": "real"}
+    limit_blas_threads()
     t0 = time.perf_counter()
+
+    def say(msg):
+        print(f"[grounding_fidelity {time.perf_counter() - t0:5.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    theta = GaitParams.initial().to_array()
+    layout = ObservationLayout(get_robot("nao"))
+    lines: list[str] = []
+    out: dict = {"real": args.real, "sim": args.sim, "explore_rad": noise, "trials": args.trials, "seconds": args.seconds,
+                 "worlds": {m: s.name for m, s in specs.items()}, "histories": histories, "heldout": {}, "walks": {}}
     with make_executor(args.workers) as ex:
-        res = ex.map(run_episode, [{**base, "world": "real", "seed": 100 + i, "record": True} for i in range(args.real)]
-                     + [{**base, "world": "sim", "seed": 200 + i, "record": True, "action_noise": args.noise}
-                        for i in range(args.sim)])
-        real = [Recording(*r["recording"]) for r in res[:args.real]]
-        sim = [Recording(*r["recording"]) for r in res[args.real:]]
-        print(f"data: {sum(map(len, real))} real / {sum(map(len, sim))} sim transitions ({time.perf_counter() - t0:.0f} s)")
-        env = NaoSimEnv()
-        print("\nheld-out one-step errors (last episode of each world held out)")
-        print(f"{'grounding state':22s} {'method':6s} {'forward nMSE':>12s} {'inverse RMS [mrad]':>19s}")
+        say(f"recording {args.real} real and {args.sim} sim walks of θ0")
+        res = map_episodes(ex, [EpisodeTask("real", theta, 100 + i, args.seconds, record=True) for i in range(args.real)]
+                           + [EpisodeTask("sim", theta, 200 + i, args.seconds, record=True, action_noise=noise)
+                              for i in range(args.sim)])
+        real = [Recording(*r.recording) for r in res[:args.real]]
+        sim = [Recording(*r.recording) for r in res[args.real:]]
+        lines.append(f"data: {sum(map(len, real))} real / {sum(map(len, sim))} sim transitions of θ0 "
+                     f"(sim exploration noise {noise:g} rad)")
+        lines += ["", "held-out one-step errors (last episode of each world held out; ensemble member 0)",
+                  f"{'grounding state':22s} {'world':28s} {'forward nMSE':>12s} {'inverse RMS [mrad]':>19s}"]
         fits = {}
-        for variant, k in (("legs", 1), ("legs+imu", 1), ("legs", 2)):
-            spec = grounding_spec(env, variant, k)
-            R, Rh = recording_transitions(real[:-1], env.layout, spec), recording_transitions(real[-1:], env.layout, spec)
-            S, Sh = recording_transitions(sim[:-1], env.layout, spec), recording_transitions(sim[-1:], env.layout, spec)
-            for m in ("gat", "sgat"):
-                f = fit_transformer(R, S, spec, method=m, alpha=1.0, seed=0, fit_kwargs={"lr": 3e-3, "max_epochs": 150})
-                mu, _ = f.transformer.forward.predict(np.hstack([Rh.H, Rh.A]))
-                nmse = float(np.mean(((mu - Rh.dS) / R.dS.std(0)) ** 2))
-                inv = float(np.sqrt(np.mean((f.transformer.inverse.predict(np.hstack([Sh.H, Sh.dS])) - Sh.A) ** 2)))
-                print(f"{variant + f' (k={k})':22s} {m:6s} {nmse:12.3f} {1000 * inv:19.1f}")
-                fits[(variant, k, m)] = f
-        # grounded sims with the default state
-        print(f"\nθ0 walking, {args.trials} trials per world (speed mean ± std [cm/s], falls)")
-        rows = [("real (PyBullet, 'real' profile)", "real", {}), ("sim (MuJoCo)", "sim", {})]
+        for h in histories:
+            spec = walk_spec(h, "nao")
+            R, Rh = recording_transitions(real[:-1], layout, spec), recording_transitions(real[-1:], layout, spec)
+            Sh = recording_transitions(sim[-1:], layout, spec)
+            for m, s in specs.items():
+                cfg = s.grounding_config()
+                if h != own:
+                    cfg = dataclasses.replace(cfg, ensemble=1)
+                say(f"fitting {m} with history {h} ({cfg.ensemble} member(s))")
+                fit = fit_walk_grounding(real[:-1], sim[:-1], cfg, history=h, seed=0, map_fn=ex.map)
+                err = heldout_errors(fit, Rh, Sh, R)
+                out["heldout"][f"{m} history {h}"] = {"world": s.name, "history": h, **err}
+                lines.append(f"{f'legs q, dq (k={h})':22s} {s.name:28s} {err['forward_nmse']:12.3f} "
+                             f"{1000 * err['inverse_rms_rad']:19.1f}")
+                if h == own:
+                    fits[m] = fit
+        rows = [("real (PyBullet, 'real' profile)", "real", None), ("sim (MuJoCo)", "sim", None)]
         with tempfile.TemporaryDirectory() as tmp:
-            for m in ("gat", "sgat"):
+            for m in METHODS:
+                tr = fits[m].transformer
                 for alpha in args.alphas:
-                    tr = fits[("legs", 1, m)].transformer
-                    path = f"{tmp}/{m}_{alpha}"
-                    ActionTransformer(tr.spec, tr.forward, tr.inverse, method=m, alpha=alpha).save(path)
-                    rows.append((f"grounded {m.upper()}, alpha {alpha}", "grounded", {"transformer": path}))
-            for label, world, kw in rows:
-                out = ex.map(run_episode, [{**base, "world": world, "seed": 300 + i, **kw} for i in range(args.trials)])
-                sp = np.array([o["speed_cm_s"] for o in out])
-                print(f"{label:34s} {sp.mean():6.2f} ± {sp.std(ddof=1):5.2f}   falls {sum(o['fell'] for o in out)}/{len(out)}")
-    print(f"\ntotal {time.perf_counter() - t0:.0f} s")
+                    path = os.path.join(tmp, f"{m}_{alpha:g}")
+                    ActionTransformer(tr.spec, tr.forwards, tr.inverses, method=m, alpha=alpha, seed=tr.seed).save(path)
+                    rows.append((f"grounded {m.upper()} (k={own}), alpha {alpha:g}", "sim", path))
+            say(f"walking θ0 {args.trials} times in {len(rows)} worlds")
+            tasks = [EpisodeTask(world, theta, 300 + i, args.seconds, transformer=path)
+                     for _, world, path in rows for i in range(args.trials)]
+            walked = map_episodes(ex, tasks)
+    lines += ["", f"θ0 walking, {args.trials} trials per world on shared seeds (speed [cm/s]; Δ real: the mean's "
+                  "difference to the real world's)",
+              f"{'world':36s} {'mean ± std':>14s} {'median':>7s} {'Δ real':>7s} {'falls':>6s}"]
+    real_mean = None
+    for j, (label, _, _) in enumerate(rows):
+        ep = walked[j * args.trials:(j + 1) * args.trials]
+        sp = np.array([e.speed_cm_s for e in ep])
+        real_mean = float(sp.mean()) if real_mean is None else real_mean
+        std = float(sp.std(ddof=1)) if len(sp) > 1 else 0.0
+        falls = int(sum(e.fell for e in ep))
+        out["walks"][label] = {"speed_mean": float(sp.mean()), "speed_std": std, "speed_median": float(statistics.median(sp)),
+                               "speed_minus_real": float(sp.mean()) - real_mean, "falls": falls, "trials": len(ep)}
+        lines.append(f"{label:36s} {sp.mean():6.2f} ± {std:5.2f} {statistics.median(sp):7.2f} "
+                     f"{sp.mean() - real_mean:+7.2f} {falls:>3d}/{len(ep)}")
+    out["wall_s"] = time.perf_counter() - t0
+    say(f"done ({out['wall_s']:.0f} s)")
+    out["text"] = "\n".join(lines)
+    print(json.dumps(out) if args.json else out["text"], flush=True)
+    return out
 
 
 if __name__ == "__main__":

@@ -63,12 +63,17 @@ def atomic_write_json(path: str | os.PathLike, obj: Any, indent: int | None = 1)
 
 
 def jsonable(obj: Any, private: bool = True) -> Any:
-    """``obj`` as strict JSON values: NumPy scalars and arrays to Python, non-finite floats to None.
+    """``obj`` as strict JSON values: NumPy scalars and arrays to Python, dataclasses to dicts of their
+    fields, non-finite floats to None.
 
     ``private=False`` drops dict keys that start with ``_`` (internal fields of a report).
     """
+    import dataclasses
+
     import numpy as np
 
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        obj = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
     if isinstance(obj, dict):
         return {str(k): jsonable(v, private) for k, v in obj.items() if private or not str(k).startswith("_")}
     if isinstance(obj, (list, tuple)):

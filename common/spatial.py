@@ -107,3 +107,31 @@ def quat_from_rpy(roll, pitch, yaw=0.0) -> np.ndarray:
 
 __all__ = ["cross", "quat_from_rpy", "quat_mul", "quat_roll_pitch", "quat_rotate", "quat_to_mat", "quat_yaw",
            "roll_pitch"]
+
+
+def rot_x(a: float) -> np.ndarray:
+    """Rotation matrix (3, 3) about x by ``a`` [rad]."""
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(a: float) -> np.ndarray:
+    """Rotation matrix (3, 3) about y by ``a`` [rad]."""
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(a: float) -> np.ndarray:
+    """Rotation matrix (3, 3) about z by ``a`` [rad]."""
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def axis_rotation(axis: np.ndarray, a: float) -> np.ndarray:
+    """Rodrigues rotation (3, 3) about the unit ``axis`` by ``a`` [rad]."""
+    x, y, z = axis
+    c, s = math.cos(a), math.sin(a)
+    C = 1.0 - c
+    return np.array([[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
+                     [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
+                     [z * x * C - y * s, z * y * C + x * s, c + z * z * C]])

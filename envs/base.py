@@ -36,6 +36,7 @@ import numpy as np
 from common.defaults import CONTROL_DT, PHYSICS_DT
 from common.spatial import quat_to_mat, roll_pitch
 from robots import RobotModel, nao_h25
+from robots.observation import ObservationLayout
 from terrain import Heightfield
 from terrain.heightfield import triangulated_height
 
@@ -46,34 +47,6 @@ FALL_TILT = math.radians(45.0)
 #: Joint speeds above this [rad/s] mean the simulation blew up.
 UNSTABLE_JOINT_SPEED = 200.0
 FOOT_CONTACT_FORCE = 1.0  # [N] a foot with less normal force has no CoP
-
-
-class ObservationLayout:
-    """Names and slices of the observation vector's fields (see module docstring)."""
-
-    def __init__(self, robot: RobotModel):
-        self.sizes = {"q": len(robot.joint_names), "dq": len(robot.joint_names), "gyro": 3, "acc": 3,
-                      "angle": 2, "fsr": 2, "cop": 4}
-        self.slices: dict[str, slice] = {}
-        i = 0
-        for k, n in self.sizes.items():
-            self.slices[k] = slice(i, i + n)
-            i += n
-        self.size = i
-        j = robot.joint_names
-        self.names: list[str] = ([f"q.{n}" for n in j] + [f"dq.{n}" for n in j] + ["gyro.x", "gyro.y", "gyro.z"]
-                                 + ["acc.x", "acc.y", "acc.z", "angle.roll", "angle.pitch", "fsr.L", "fsr.R",
-                                    "cop.Lx", "cop.Ly", "cop.Rx", "cop.Ry"])
-
-    def split(self, obs: np.ndarray) -> dict[str, np.ndarray]:
-        """Field name -> view of ``obs`` (works on (..., size) arrays)."""
-        return {k: obs[..., s] for k, s in self.slices.items()}
-
-    def __getitem__(self, key: str) -> slice:
-        return self.slices[key]
-
-
-
 
 
 def make_terrain(terrain) -> Heightfield | None:
@@ -151,8 +124,8 @@ class StepState:
     foot_cop_world: np.ndarray  # (2, 3) CoP of each foot (NaN without contact)
 
 
-class NaoEnv(gym.Env):
-    """Common control loop of :class:`envs.NaoSimEnv` and :class:`envs.NaoRealEnv` (abstract).
+class HumanoidEnv(gym.Env):
+    """Common control loop of :class:`envs.SimWorld` and :class:`envs.RealWorld` (abstract).
 
     Args:
         robot: the robot (default :func:`robots.nao_h25`).
@@ -333,3 +306,7 @@ class NaoEnv(gym.Env):
         reward = float(st.base_linvel[0])  # forward speed [m/s]; the walk fitness is computed from recordings
         truncated = self.max_episode_seconds is not None and self.time >= self.max_episode_seconds - 1e-9
         return obs, reward, reason is not None, bool(truncated), info
+
+
+#: The name of this class when the project modelled the NAO only (kept for user code that uses it).
+NaoEnv = HumanoidEnv

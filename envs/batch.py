@@ -1,13 +1,13 @@
 """Many episodes of the MuJoCo sim in lock-step: one ``MjModel``, one ``MjData`` per episode.
 
-:class:`SimBatch` runs B episodes of a :class:`envs.NaoSimEnv` side by side (or of a subclass that
+:class:`SimBatch` runs B episodes of a :class:`envs.SimWorld` side by side (or of a subclass that
 says what it changes through ``batch_hooks()``: the identified sim's encoder offsets and series
 hinges). Every control step it applies B
 actions, advances each ``MjData`` by ``n_substeps`` (``mujoco.mj_step(m, d, nstep)``, one C call per
 episode, GIL released) and builds the B observations and ground-truth rows with the per-episode
 work cut to array reads, the contact force sums and three 3x3 products; the arithmetic is the same,
-operation by operation, as :meth:`envs.NaoEnv.step`, so each episode's observations, applied actions,
-ground truth and fall decisions are **bit-identical** to stepping a ``NaoSimEnv`` alone
+operation by operation, as :meth:`envs.HumanoidEnv.step`, so each episode's observations, applied actions,
+ground truth and fall decisions are **bit-identical** to stepping a ``SimWorld`` alone
 (``tests/test_batch.py``). Episodes that end (a fall, an unstable simulation) leave the active set.
 
 Resets go through the template env itself (a fresh ``MjData`` per episode, or the model the env
@@ -27,7 +27,7 @@ import numpy as np
 from common.spatial import cross, quats_to_mats, roll_pitch
 from envs.base import (FALL_TILT, FOOT_CONTACT_FORCE, GRAVITY, UNSTABLE_JOINT_SPEED, GroundStack, ground_height,
                        make_terrain)
-from envs.mujoco_world import NaoSimEnv, foot_contact_sums
+from envs.mujoco_world import SimWorld, foot_contact_sums
 from envs.rollout import gt_row
 
 _COS_TILT = math.cos(FALL_TILT)
@@ -37,7 +37,7 @@ class SimBatch:
     """B lock-step episodes of the plain MuJoCo sim ``env`` (see the module docstring).
 
     Args:
-        env: a :class:`envs.NaoSimEnv`, or a subclass with ``batch_hooks()`` (its time steps, robot and
+        env: a :class:`envs.SimWorld`, or a subclass with ``batch_hooks()`` (its time steps, robot and
             lookups are shared; its model too unless an episode gets its own ground).
         size: the number of episodes B (>= 1).
 
@@ -46,14 +46,14 @@ class SimBatch:
     applied actions, ``active`` (B,) bool, ``reason`` (list of fall reasons or None).
 
     Raises:
-        TypeError: a subclass of ``NaoSimEnv`` without ``batch_hooks()`` (it may change the physics in
+        TypeError: a subclass of ``SimWorld`` without ``batch_hooks()`` (it may change the physics in
             ways the batch does not know), or another env.
         ValueError: size < 1.
     """
 
-    def __init__(self, env: NaoSimEnv, size: int):
-        if type(env) is not NaoSimEnv and not hasattr(env, "batch_hooks"):
-            raise TypeError(f"SimBatch runs the plain NaoSimEnv or a subclass with batch_hooks(), got {type(env).__name__}")
+    def __init__(self, env: SimWorld, size: int):
+        if type(env) is not SimWorld and not hasattr(env, "batch_hooks"):
+            raise TypeError(f"SimBatch runs the plain SimWorld or a subclass with batch_hooks(), got {type(env).__name__}")
         if size < 1:
             raise ValueError(f"batch size must be >= 1, got {size}")
         self.env = env
@@ -65,7 +65,7 @@ class SimBatch:
         self._uneven = self._grounds.uneven
         self._fall_height = env.fall_height
         self.datas = [None] * self.size
-        # what a subclass changes (NaoSimEnv.batch_hooks): targets minus ctrl_offset go to the servos;
+        # what a subclass changes (SimWorld.batch_hooks): targets minus ctrl_offset go to the servos;
         # the measured angle adds the series hinges (i, qpos address, qvel address); q_offset is added
         # to the observed angles
         hooks = env.batch_hooks() if hasattr(env, "batch_hooks") else {}
@@ -89,7 +89,7 @@ class SimBatch:
         self.reason: list = [None] * self.size
         self._prev_acc_vel = np.zeros((self.size, 3))
         self._warn = np.zeros(self.size, dtype=np.int64)
-        self._bad = np.array([int(w) for w in NaoSimEnv._BAD])
+        self._bad = np.array([int(w) for w in SimWorld._BAD])
         self._ground_id, self._geom_foot = env._ground, env._geom_foot.copy()
         # joint addresses as slices where they are contiguous (a view copies faster than a gather)
         self._qadr, self._dadr = (slice(int(a[0]), int(a[-1]) + 1) if np.array_equal(a, np.arange(a[0], a[-1] + 1)) else a
@@ -110,7 +110,7 @@ class SimBatch:
             raise ValueError(f"{len(terrains)} terrains for {B} episodes")
         try:
             for i, s in enumerate(seeds):
-                if terrains is not None:  # NaoSimEnv._reset_world with a terrain option: a model on that ground
+                if terrains is not None:  # SimWorld._reset_world with a terrain option: a model on that ground
                     env._terrain = make_terrain(terrains[i])
                     env._build()
                 else:
@@ -143,7 +143,7 @@ class SimBatch:
 
         Raises:
             ValueError: wrong shape, or an active row with NaN or infinite targets (named by
-                episode and joint), as :meth:`envs.NaoEnv.validate_action` raises.
+                episode and joint), as :meth:`envs.HumanoidEnv.validate_action` raises.
         """
         env = self.env
         m, models = self.model, self.models
@@ -187,7 +187,7 @@ class SimBatch:
                 if len(s_qadr):
                     sq[j], sdq[j] = d.qpos[s_qadr], d.qvel[s_dadr]
                 warn[j] = d.warning.number
-                if d.ncon:  # envs.NaoSimEnv._state: the contacts, summed per foot below
+                if d.ncon:  # envs.SimWorld._state: the contacts, summed per foot below
                     con = d.contact
                     c_g1.append(con.geom1)
                     c_g2.append(con.geom2)
@@ -209,7 +209,7 @@ class SimBatch:
             dq[:, i_joint] += sdq[:, k]
         q[warn[:, self._bad].sum(axis=1) > self._warn[idx]] = np.nan  # MuJoCo reset the state after a bad qpos/qvel/qacc: "unstable"
         self.applied[idx] = applied
-        # envs.NaoEnv._fall_reason
+        # envs.HumanoidEnv._fall_reason
         absmax = (np.abs(dq).max(axis=1) + np.abs(q).max(axis=1) + np.abs(pos).max(axis=1)
                   + np.abs(quat).max(axis=1))
         unstable = ~np.isfinite(absmax) | (np.abs(dq).max(axis=1) > UNSTABLE_JOINT_SPEED)
@@ -218,13 +218,13 @@ class SimBatch:
             low = tilt = np.zeros(n, dtype=bool)
         else:
             with np.errstate(all="ignore"):
-                if self._uneven:  # each episode's own ground, as NaoEnv._fall_reason
+                if self._uneven:  # each episode's own ground, as HumanoidEnv._fall_reason
                     floor_z = self._grounds.height(idx, pos[:, 0], pos[:, 1])
                 else:
                     floor_z = ground_height(None, pos[:, 0], pos[:, 1])
                 low = pos[:, 2] - floor_z < self._fall_height
             tilt = ~low & (R[:, 2, 2] < _COS_TILT)
-        # envs.NaoEnv._observe (the obs of an unstable episode stays the last one)
+        # envs.HumanoidEnv._observe (the obs of an unstable episode stays the last one)
         ok = ~unstable
         RT = R.transpose(0, 2, 1)
         gyro = np.matmul(RT, ang[:, :, None])[:, :, 0]
@@ -237,9 +237,9 @@ class SimBatch:
             if has.any():
                 M = sole_mat[has, k].reshape(-1, 3, 3).transpose(0, 2, 1)
                 cop_s[has, 2 * k: 2 * k + 2] = np.matmul(M, (cop[has, k] - sole_pos[has, k])[:, :, None])[:, :2, 0]
-        q_obs = q if self._q_offset is None else q + self._q_offset  # NaoEnv._sensor_noise of the subclass
+        q_obs = q if self._q_offset is None else q + self._q_offset  # HumanoidEnv._sensor_noise of the subclass
         obs = np.concatenate([q_obs, dq, gyro, acc, roll[:, None], pitch[:, None], force, cop_s], axis=1)
-        # envs.NaoEnv._info: the whole-robot CoP
+        # envs.HumanoidEnv._info: the whole-robot CoP
         tot = force.sum(axis=1)
         cw = np.zeros((n, 3))
         for k in (0, 1):

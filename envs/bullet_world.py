@@ -62,7 +62,7 @@ with _quiet_fd(2):
 from pybullet_utils.bullet_client import BulletClient
 
 from common.spatial import cross, quat_to_mat
-from envs.base import NaoEnv, StepState, make_terrain
+from envs.base import HumanoidEnv, StepState, make_terrain
 from envs.effects import EffectDraw, RealProfile, get_profile
 from robots import RobotModel
 from terrain import Heightfield, lumpy
@@ -72,7 +72,7 @@ def real_ground(seed: int | None, amplitude: float) -> Heightfield | None:
     """The real world's uneven ground of an episode: the lumpy terrain (:func:`terrain.lumpy`, foam
     under turf) of ``amplitude`` [m] drawn from the episode seed's terrain stream (the second of the
     three streams spawned from ``numpy.random.SeedSequence(seed)``: effects, terrain, sensor noise;
-    None counts as seed 0), or None (flat) for amplitude 0. :class:`NaoRealEnv` walks this ground;
+    None counts as seed 0), or None (flat) for amplitude 0. :class:`RealWorld` walks this ground;
     another world given it (the identified sim's ``ground``) walks the very same field for the same seed."""
     if amplitude <= 0:
         return None
@@ -108,12 +108,12 @@ def add_heightfield(client: BulletClient, terrain: Heightfield, friction: float 
     return body
 
 
-class NaoRealEnv(NaoEnv):
+class RealWorld(HumanoidEnv):
     """The PyBullet "real" world.
 
     Args:
         robot, fixed_base, physics_dt, control_dt, initial_pose, hang_height, max_episode_seconds:
-            see :class:`envs.base.NaoEnv`.
+            see :class:`envs.base.HumanoidEnv`.
         profile: effect profile name (``"real"`` default, scaled to the robot's actuators by
             :func:`envs.effects.real_profile_for`; ``"none"``), dict of ranges or
             :class:`envs.effects.RealProfile`.
@@ -333,3 +333,7 @@ class NaoRealEnv(NaoEnv):
             f["acc"] += rng.normal(0.0, e.accel_noise, 3)
         if e.angle_noise_rad > 0:
             f["angle"] += rng.normal(0.0, e.angle_noise_rad, 2)
+
+
+#: The name of this class when the project modelled the NAO only (kept for user code that uses it).
+NaoRealEnv = RealWorld

@@ -24,7 +24,7 @@ import mujoco
 import numpy as np
 
 from common.spatial import cross, quat_to_mat
-from envs.base import NaoEnv, StepState, make_terrain
+from envs.base import HumanoidEnv, StepState, make_terrain
 from envs.effects import NOMINAL_FOOT_FRICTION
 from robots import RobotModel
 from terrain import Heightfield
@@ -140,12 +140,12 @@ def foot_contact_sums(geom1, geom2, normal, pos, geom_foot, ground, episode=None
     return force.reshape(episodes, 2), mom.reshape(episodes, 2, 3)
 
 
-class NaoSimEnv(NaoEnv):
+class SimWorld(HumanoidEnv):
     """The MuJoCo "sim" world: deterministic, flat by default, optional heightfield.
 
     Args:
         robot, fixed_base, physics_dt, control_dt, initial_pose, hang_height, max_episode_seconds:
-            see :class:`envs.base.NaoEnv`.
+            see :class:`envs.base.HumanoidEnv`.
         terrain: None/"flat" (plane at z = 0) or a :class:`terrain.Heightfield`; a per-episode
             terrain can be passed as ``reset(options={"terrain": hf})``.
         friction: sliding friction of all contacts.
@@ -264,3 +264,7 @@ class NaoSimEnv(NaoEnv):
             if base_angvel is not None:
                 d.qvel[3:6] = R.T @ np.asarray(base_angvel)  # free joint angular velocity is local
         mujoco.mj_forward(self.model, d)
+
+
+#: The name of this class when the project modelled the NAO only (kept for user code that uses it).
+NaoSimEnv = SimWorld

@@ -46,10 +46,9 @@ import os
 from dataclasses import dataclass, field
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from robots import ROBOT_NAMES, RobotModel, get_robot, nao_h25
+from robots.observation import ObservationLayout
 from common.files import atomic_path
 
 SCHEMA_VERSION = 1
@@ -75,12 +74,8 @@ class RecordingError(ValueError):
 
 
 def _joint_groups(robot: RobotModel) -> dict[str, tuple[str, ...]]:
-    return {
-        "cmd": tuple(f"cmd.{n}" for n in robot.actuated_joint_names),
-        "app": tuple(f"app.{n}" for n in robot.actuated_joint_names),
-        "q": tuple(f"q.{n}" for n in robot.joint_names),
-        "dq": tuple(f"dq.{n}" for n in robot.joint_names),
-    }
+    layout = ObservationLayout(robot)
+    return {g: layout.columns(g) for g in ("cmd", "app", "q", "dq")}
 
 
 @dataclass
@@ -217,8 +212,10 @@ class Recording:
             raise RecordingError(f"column 't' is not strictly increasing (row {int(np.argmax(np.diff(t) <= 0)) + 1})")
 
     # ---------------------------------------------------------------- Parquet
-    def to_table(self) -> pa.Table:
+    def to_table(self):
         names = (["t"] if "t" in self.columns else []) + sorted(c for c in self.columns if c != "t")
+        import pyarrow as pa  # lazy: a recording is read and written by few commands
+
         table = pa.table({c: pa.array(self.columns[c], type=pa.float64()) for c in names})
         return table.replace_schema_metadata({META_KEY: json.dumps(self.meta, default=_json_default).encode()})
 
@@ -232,6 +229,8 @@ class Recording:
         path = os.fspath(path)
         if os.path.isdir(path):
             raise ValueError(f"{path!r} is a directory; give a file name for the recording (e.g. walk.parquet)")
+        import pyarrow.parquet as pq  # lazy: see to_table
+
         try:
             with atomic_path(path, suffix=".parquet") as tmp:
                 pq.write_table(self.to_table(), tmp)
@@ -247,6 +246,9 @@ class Recording:
             FileNotFoundError: no such file.
             RecordingError: not a Parquet file, no ``sgatwalk`` metadata, or a schema violation.
         """
+        import pyarrow as pa  # lazy: see to_table
+        import pyarrow.parquet as pq
+
         path = os.fspath(path)
         if not os.path.exists(path):
             raise FileNotFoundError(f"no recording at {path!r}")

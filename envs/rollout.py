@@ -52,7 +52,7 @@ def rollout(env, controller: Controller | Callable[[np.ndarray], Any], seed: int
     """Reset ``env`` with ``seed`` and run ``controller`` for ``seconds`` (or until the episode ends).
 
     Args:
-        env: an :class:`envs.NaoEnv` or a wrapper of one (e.g. ``sgat.GroundedEnv``); the applied
+        env: an :class:`envs.HumanoidEnv` or a wrapper of one (e.g. ``sgat.GroundedEnv``); the applied
             action is read from ``info["applied_action"]``.
         controller: see :class:`Controller`.
         seed: episode seed (terrain, effects, noise in the real world).

@@ -1,7 +1,8 @@
 """Robot descriptions: the NAO-like H25 model generated from one Python spec, and the humanoids of
 ``example-robot-data`` (Unitree G1, PAL Talos); each one URDF for both engines."""
 
-from robots.nao import Frame, Geom, Inertial, JointSpec, RobotModel, nao_h25
+from robots.model import Frame, Geom, Inertial, JointSpec, LegGeometry, RobotModel
+from robots.nao import nao_h25
 
 #: Robot names the CLI accepts (``--robot``), default first.
 ROBOT_NAMES = ("nao", "g1", "talos")
@@ -24,4 +25,4 @@ def get_robot(name: str = "nao") -> RobotModel:
     raise KeyError(f"unknown robot {name!r}; known: {', '.join(ROBOT_NAMES)}")
 
 
-__all__ = ["Frame", "Geom", "Inertial", "JointSpec", "ROBOT_NAMES", "RobotModel", "get_robot", "nao_h25"]
+__all__ = ["Frame", "Geom", "Inertial", "JointSpec", "LegGeometry", "ROBOT_NAMES", "RobotModel", "get_robot", "nao_h25"]

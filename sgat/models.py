@@ -97,25 +97,14 @@ class _Model(nn.Module):
     # -- training --------------------------------------------------------------------------
     def fit(self, X: np.ndarray, Y: np.ndarray, *, val_fraction: float = 0.2, batch_size: int = 128,
             lr: float = 1e-3, weight_decay: float = 0.0, max_epochs: int = 300, patience: int = 15,
-            seed: int = 0, progress=None, zero_init: bool = False, input_mask=None) -> FitReport:
+            seed: int = 0, progress=None) -> FitReport:
         """Train on inputs ``X`` (N, n_in) and targets ``Y`` (N, n_out) (unnormalised).
 
         A random ``val_fraction`` of the rows (seeded) is held out; training stops after
         ``patience`` epochs without a better validation loss and restores the best weights.
-        ``zero_init`` (linear models, ``hidden=()``): start from zero weights instead of PyTorch's
-        random ones, so input directions the data hardly excite (collinear inputs, such as the
-        frames of a state history) keep near-zero weights instead of random ones. Gradient descent
-        from zero stays in the span of the data and tends to the minimum-norm least-squares fit
-        (exactly so for plain gradient descent on the squared error; Adam and early stopping keep it
-        close), which then extrapolates to states unlike the data without arbitrary slopes.
-        ``input_mask`` (linear models): a boolean (n_out, n_in) array; output i may use input j only
-        where it is True. The other weights start at zero and get zero gradients (so Adam never
-        moves them), and the fitted model is a plain linear model with structural zeros: saving,
-        loading and inference need no mask.
 
         Raises:
-            ValueError: wrong shapes, non-finite data, fewer than 10 rows; an ``input_mask`` of the
-                wrong shape, or one given to a model with hidden layers.
+            ValueError: wrong shapes, non-finite data, fewer than 10 rows.
         """
         X = np.asarray(X, dtype=np.float64)
         Y = np.asarray(Y, dtype=np.float64)
@@ -125,28 +114,12 @@ class _Model(nn.Module):
             raise ValueError(f"{self.kind}: need at least 10 samples, got {len(X)}")
         if not (np.all(np.isfinite(X)) and np.all(np.isfinite(Y))):
             raise ValueError(f"{self.kind}: training data contain NaN or infinite values")
-        mask = None if input_mask is None else np.asarray(input_mask, dtype=bool)
-        if mask is not None and self.hidden:
-            raise ValueError(f"{self.kind}: an input mask needs a linear model (hidden=()), got hidden={self.hidden}")
-        if mask is not None and mask.shape != (self.n_out, self.n_in):
-            raise ValueError(f"{self.kind}: input mask must be ({self.n_out}, {self.n_in}), got {mask.shape}")
         g = torch.Generator().manual_seed(int(seed))
         torch.manual_seed(int(seed))
         for m in self.net.modules():  # initial weights from the seed, not from earlier torch use
             if isinstance(m, nn.Linear):
                 m.reset_parameters()
         nn.init.zeros_(self.net.skip.weight)
-        if zero_init and not self.hidden:
-            for m in self.net.body:
-                nn.init.zeros_(m.weight)
-                nn.init.zeros_(m.bias)
-        hooks = []
-        if mask is not None:  # structural zeros: zero start, zero gradients
-            keep = torch.as_tensor(mask, dtype=torch.float64)
-            for w in (self.net.body[0].weight, self.net.skip.weight):
-                with torch.no_grad():
-                    w.mul_(keep)
-                hooks.append(w.register_hook(lambda grad: grad * keep))
         perm = np.random.default_rng(seed).permutation(len(X))
         n_val = max(1, int(round(val_fraction * len(X))))
         vi, ti = perm[:n_val], perm[n_val:]
@@ -180,8 +153,6 @@ class _Model(nn.Module):
                 bad += 1
                 if bad >= patience:
                     break
-        for h in hooks:
-            h.remove()
         self.net.load_state_dict(best_state)
         self.fitted = torch.ones((), dtype=torch.bool)
         self._np = None
@@ -393,26 +364,18 @@ class ForwardModel(_Model):
 
 
 class InverseModel(_Model):
-    """``f_sim^-1``: (state history, state change[, commanded action]) -> action applied in the sim.
+    """``f_sim^-1``: (state history, state change) -> action applied in the sim.
 
     Args:
         state_dim, action_dim, history, hidden: as :class:`ForwardModel`.
-        command_input: also condition on the agent's commanded action ``a_t`` (a *denoising* inverse
-            model). Trained on sim walks whose applied actions are the commands plus exploration noise
-            ε ~ N(0, σ²), it learns E[a_applied | s_t, Δs, a_t]: the sim action nearest the command
-            (under that Gaussian prior) that explains the state change. A one-step change of a PD-driven
-            walking robot says little about its target (the contact forces are unobserved), so an
-            inverse model without the command regresses toward the commands it saw; with it, the
-            command is the prior and Δs the evidence (docs/grounding_history.md).
-
         commands: d, the actions applied before ``a_t`` that the model also sees, for a sim with an
             actuation delay of d control steps (``GroundingConfig.delay``): there ``a_t`` first moves the
             state d + 1 steps later, while the d actions applied before it are still on their way, so
             the model answers ``s_{t+d+1} - s_t`` given those (:func:`sgat.grounding.command_visibility`
             measures the lead at which a sim shows its commands). 0 (default): the paper's one-step model.
 
-    Input layout: ``[s_{t-k+1}, ..., s_t, a_{t-d}, ..., a_{t-1}, s_{t+d+1} - s_t]`` (+ ``a_t`` with
-    ``command_input``), size k*S + d*A + S (+ A); output: action (A).
+    Input layout: ``[s_{t-k+1}, ..., s_t, a_{t-d}, ..., a_{t-1}, s_{t+d+1} - s_t]``, size k*S + d*A + S;
+    output: action (A).
 
     Raises:
         ValueError: commands < 0.
@@ -421,26 +384,26 @@ class InverseModel(_Model):
     kind = "inverse"
 
     def __init__(self, state_dim: int, action_dim: int, *, history: int = 1, hidden=(64, 64),
-                 command_input: bool = False, commands: int = 0):
+                 commands: int = 0):
         self.state_dim, self.action_dim, self.history = int(state_dim), int(action_dim), int(history)
-        self.command_input = bool(command_input)
         self.commands = int(commands)
         if self.commands < 0:
             raise ValueError(f"commands must be >= 0, got {commands}")
-        super().__init__((self.history + 1) * self.state_dim + (self.commands + int(self.command_input)) * self.action_dim,
+        super().__init__((self.history + 1) * self.state_dim + self.commands * self.action_dim,
                          self.action_dim, hidden)
 
     def config(self) -> dict:
-        cfg = {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history,
-               "command_input": self.command_input}
+        cfg = {**super().config(), "state_dim": self.state_dim, "action_dim": self.action_dim, "history": self.history}
         if self.commands:  # left out at 0, so models saved before it load unchanged
             cfg["commands"] = self.commands
         return cfg
 
     @classmethod
     def from_config(cls, cfg: dict) -> "InverseModel":
+        if cfg.get("command_input"):
+            raise ModelFileError("an inverse model that sees the commanded action: this version does not have it")
         return cls(cfg["state_dim"], cfg["action_dim"], history=cfg["history"], hidden=tuple(cfg["hidden"]),
-                   command_input=bool(cfg.get("command_input", False)), commands=int(cfg.get("commands", 0)))
+                   commands=int(cfg.get("commands", 0)))
 
     def _loss(self, out, y):
         return ((out - y) ** 2).mean()

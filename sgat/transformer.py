@@ -7,16 +7,14 @@ Before the first fit the transformer is the identity.
 
 What is grounded is a :class:`GroundingSpec`: which observation entries form the grounding state
 and which action entries are transformed. For the NAO the default is what a NAO measures of its
-legs -- the 12 leg encoder angles and 12 leg joint velocities -- and the 11 actuated leg joint
-targets; arms and head pass through unchanged (they hardly affect the walk, and grounding them
-would triple the model's output size). Alternatives are ``"legs+imu"`` (adds torso gyro and
-roll/pitch) and a history of k frames.
+legs -- the 12 leg encoder angles and 12 leg joint velocities, over a history of k frames -- and the
+11 actuated leg joint targets; arms and head pass through unchanged (they hardly affect the walk,
+and grounding them would triple the model's output size).
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections import deque
 from dataclasses import dataclass
@@ -118,93 +116,41 @@ def _members(m) -> list:
 
 
 class ActionTransformer:
-    """``(state history, action) -> grounded action``, NumPy inference.
+    """``(state history, action) -> grounded action``, NumPy inference (SGAT paper §III, Algorithm 1).
+
+    ``g(s_t, a_t) = f_sim^-1(s_t, ŝ_{t+1} − s_t)`` with ``ŝ_{t+1} − s_t ~ f_real(s_t, a_t)`` (SGAT
+    samples the forward model; GAT takes its mean), blended with the agent's action,
+    ``ã = (1 − α) a + α g(s, a)``, and clipped to the grounded actions' bounds.
 
     Args:
         spec: the :class:`GroundingSpec`.
         forward, inverse: fitted models, or equal-length lists of them (an ensemble: member i is the
             pair ``(forward[i], inverse[i])``); both None means the identity (before the first fit).
         method: ``"sgat"`` (sample the forward model) or ``"gat"`` (its mean).
-        alpha: blend ã = (1 - α) a + α g(s, a), in [0, 1]; required when models are given (the
-            paper's formula is α = 1; the GAT/GARAT code uses 0.5).
+        alpha: blend α in [0, 1]; required when models are given (the paper's formula is α = 1; the
+            GAT/GARAT code uses 0.5).
         seed: seed of the sampling generator (re-seeded by :meth:`reset`).
-        noise_memory: correlation time [steps] of SGAT's sampling noise (0: white, the paper). With
-            τ > 0 the standard normals behind each Δŝ sample form a stationary AR(1) process,
-            z_t = c z_{t-1} + sqrt(1 - c²) ε_t with c = exp(-1/τ): every step's sample has the
-            forward model's distribution, but deviations persist over about τ steps, as a real
-            trial's do (a stiffer joint, a bump under the foot, for a whole stride) instead of
-            averaging out within a stride.
 
     An ensemble expresses model uncertainty the way PETS's trajectory sampling does (Chua et al.,
     NeurIPS 2018, §4.2 "TS∞"): SGAT draws one member per episode at :meth:`reset` and keeps it for
     the whole episode, so a grounded sim is one plausible fit of the real data, not one arbitrary
     fit; GAT (deterministic) averages the members' predictions.
 
-    ``sim_forward`` (SGAT on a *stochastic* sim, e.g. the identified sim with random ground): a
-    stochastic forward model of the sim itself per member. The paper's SGAT assumes a deterministic
-    sim, so all of the real world's spread must come from the sampled Δŝ; a sim that already has
-    random ground would then get its spread twice. With ``sim_forward`` the sample is drawn with the
-    residual variance only, Δŝ ~ N(μ_real, max(σ²_real − σ²_sim, 0)), and the sim adds its own.
-
-    ``shadow_memory`` (τ [steps]; 0: the paper): the forward model predicts from a **shadow state**
-    ŝ_t, the transformer's own estimate of where the real robot would be, instead of from the sim's
-    state s_t. The target is ŝ_{t+1} = ŝ_t + Δŝ, Δŝ ~ f_real(ŝ history, a_t), and the inverse model
-    is asked for it from the sim's state, g = f_sim^-1(s_t, ŝ_{t+1} − s_t); after the step the
-    shadow relaxes toward the sim's new state, ŝ_{t+1} ← s_{t+1} + e^{-1/τ} (ŝ_{t+1} − s_{t+1})
-    (:meth:`relax_shadow`). With τ = 0 ŝ_t = s_t: every step's prediction starts again from wherever
-    the sim got to, so a deviation from the target the sim did not follow is forgotten at once. With
-    τ > 0 it persists for about τ steps and the transformer keeps pushing toward it, as it does when
-    the targets are a real walk's recorded states (teacher forcing, :class:`TeacherForcedEnv`):
-    the real joint trajectory drifts away from the sim's for whole strides (the ground under a
-    foot), which one-step samples anchored at the sim's state never do.
-
-    ``sim_mean`` (a *matched* transformer): a deterministic forward model of the sim per member.
-    The grounded action is then g(s, a) = a + f_sim^-1(s, ŝ_real) − f_sim^-1(s, ŝ_sim) with ŝ_sim the
-    sim model's prediction: the transformer corrects by the inverse model's answer to the gap
-    between the two forward models, so it is the identity wherever they agree, and the inverse
-    model's error at states unlike its training data (another gait's) cancels instead of becoming a
-    systematic offset of the commands (exactly so for linear models: then g − a = B (Δŝ_real − Δŝ_sim)
-    with B the inverse model's weights on Δs). It is the control-variate form of the paper's
-    f_sim^-1(s, ŝ_real), which equals it when f_sim^-1(s, ŝ_sim) = a.
-
-    ``gate_scale`` (D_ref [rad]; None: the paper): the correction is **gated by the ensemble's
-    disagreement**. At each step the members' deterministic grounded actions g_k (each member's mean
-    Δŝ through its own inverse model) disagree by D = RMS over members and joints of g_k − mean_k g_k
-    (:meth:`disagreement`); the blend becomes ã = a + α w (g − a) with w = min(1, D_ref / D). Where
-    the members agree as well as on the real transitions they were fitted on (D ≤ D_ref, a quantile
-    of D over those transitions, ``GroundingConfig.gate``), the correction is the paper's; at states
-    unlike that data (another gait's), where the bootstrap fits disagree, it shrinks toward the
-    agent's action: the world falls back to the sim under it (for hybrid grounding, the identified
-    sim) instead of extrapolating a correction learned on one gait. Epistemic uncertainty from a
-    bootstrap ensemble as in PETS (Chua et al., NeurIPS 2018) and MOPO's disagreement penalty (Yu
-    et al., NeurIPS 2020, §4.3), used here to shrink the action correction instead of the reward.
-    Teacher forcing (:meth:`reach`) is not gated.
-
     **Delay** d (inverse models with ``commands`` d, ``GroundingConfig.delay``; 0: the paper): for a
-    sim whose actuators answer a command d control steps late, a_t first shows in s_{t+d+1}. The forward
-    models then predict Δŝ = ŝ_{t+d+1} − s_t from the state history, the agent's d previous commands
-    (``past``) and a_t, and the inverse models answer it given the d actions the sim was sent before
-    (``sent``: the transformer's own earlier outputs, which callers keep per episode):
-    g = f_sim^-1(s_t, â_{t-d}, ..., â_{t-1}, ŝ_{t+d+1} − s_t). Works without shadow state and
-    without matched or residual sim models and gate.
+    sim whose actuators answer a command d control steps late, a_t first shows in s_{t+d+1}. The
+    forward models then predict Δŝ = ŝ_{t+d+1} − s_t from the state history, the agent's d previous
+    commands (``past``) and a_t, and the inverse models answer it given the d actions the sim was sent
+    before (``sent``: the transformer's own earlier outputs, which callers keep per episode):
+    g = f_sim^-1(s_t, â_{t-d}, ..., â_{t-1}, ŝ_{t+d+1} − s_t).
 
     Raises:
         ValueError: unknown method, α missing or outside [0, 1], only one kind of model given,
-            ensembles of different sizes, models whose sizes do not match the spec, or a gate on an
-            ensemble of fewer than 2 members, with a shadow state, or with a D_ref that is not finite
-            and > 0; inverse models that disagree on their delay, a delay with forward models that do
-            not see that many previous commands, or with a shadow state, sim models or a gate.
+            ensembles of different sizes, models whose sizes do not match the spec, members that
+            disagree on their mixture components or delay, or a delay the forward models do not see.
     """
 
     def __init__(self, spec: GroundingSpec, forward=None, inverse=None, *, method: str = "sgat",
-                 alpha: float | None = None, seed: int = 0, sim_forward=None, noise_memory: float = 0.0,
-                 sim_mean=None, shadow_memory: float = 0.0, gate_scale: float | None = None):
-        if not (math.isfinite(float(noise_memory)) and float(noise_memory) >= 0.0):
-            raise ValueError(f"noise_memory must be a finite number of steps >= 0, got {noise_memory}")
-        if not (math.isfinite(float(shadow_memory)) and float(shadow_memory) >= 0.0):
-            raise ValueError(f"shadow_memory must be a finite number of steps >= 0, got {shadow_memory}")
-        if float(shadow_memory) > 0 and (_members(sim_forward) or _members(sim_mean)):
-            raise ValueError("shadow_memory works with the paper's transformer only (no sim_forward or sim_mean models)")
+                 alpha: float | None = None, seed: int = 0):
         if method not in METHODS:
             raise ValueError(f"unknown grounding method {method!r}; choose from {', '.join(METHODS)}")
         fwds, invs = _members(forward), _members(inverse)
@@ -221,65 +167,22 @@ class ActionTransformer:
                 raise ValueError(f"model sizes do not match the grounding spec (S={S}, A={A}, k={k})")
         if len({f.components for f in fwds}) > 1:
             raise ValueError("ensemble members disagree on the number of mixture components")
-        if len({i.command_input for i in invs}) > 1:
-            raise ValueError("ensemble members disagree on whether the inverse model sees the command")
-        sims = _members(sim_forward)
-        if sims and (len(sims) != len(fwds) or not all(m.stochastic for m in sims)):
-            raise ValueError("give one stochastic sim forward model per ensemble member, or none")
-        means = _members(sim_mean)
-        if means and (len(means) != len(fwds) or any(m.stochastic for m in means)):
-            raise ValueError("give one deterministic sim forward model per ensemble member (sim_mean), or none")
-        if len({f.commands for f in fwds + sims + means}) > 1:
-            raise ValueError("forward models disagree on the number of past commands they see")
-        if len({i.commands for i in invs}) > 1:
-            raise ValueError("ensemble members disagree on the delay their inverse models bridge")
+        if len({f.commands for f in fwds}) > 1 or len({i.commands for i in invs}) > 1:
+            raise ValueError("ensemble members disagree on the delay their models bridge")
         delay = invs[0].commands if invs else 0
-        if delay and (fwds[0].commands != delay or float(shadow_memory) > 0 or sims or means or gate_scale is not None):
+        if delay and fwds[0].commands != delay:
             raise ValueError(f"inverse models that bridge a delay of {delay} steps need forward models that see the "
-                             f"{delay} previous commands, and no shadow state, sim models or gate")
+                             f"{delay} previous commands")
         self.delay = int(delay)
-        self.spec, self.forwards, self.inverses, self.sim_forwards = spec, fwds, invs, sims
-        self.sim_means = means
+        self.spec, self.forwards, self.inverses = spec, fwds, invs
         self.method, self.alpha, self.seed = method, float(alpha), seed
         self.member = 0
         self.rng = np.random.default_rng(seed)
-        self.noise_memory = float(noise_memory)
-        self._c = math.exp(-1.0 / self.noise_memory) if self.noise_memory > 0 else 0.0
-        self._s = math.sqrt(1.0 - self._c ** 2)
-        self._z = None
-        self.shadow_memory = float(shadow_memory)
-        self._beta = math.exp(-1.0 / self.shadow_memory) if self.shadow_memory > 0 else 0.0
-        #: Δŝ of the last :meth:`transform` call (the shadow's predicted change), shape (S,) or (..., S).
-        self.last_delta = None
-        self.gate_scale = None
-        if gate_scale is not None:
-            self.set_gate(gate_scale)
-
-    def set_gate(self, gate_scale: float | None) -> None:
-        """Gate the correction by the ensemble's disagreement with reference D_ref = ``gate_scale``
-        [rad] (None: no gate; see the class docstring).
-
-        Raises:
-            ValueError: fewer than 2 members, a shadow state, or D_ref not finite and > 0.
-        """
-        if gate_scale is None:
-            self.gate_scale = None
-            return
-        g = float(gate_scale)
-        if not (math.isfinite(g) and g > 0):
-            raise ValueError(f"gate_scale (D_ref) must be a finite number > 0, got {gate_scale}")
-        if self.n_members < 2:
-            raise ValueError("a disagreement gate needs an ensemble of at least 2 members")
-        if self.shadow_memory > 0:
-            raise ValueError("a disagreement gate works without a shadow state (shadow_memory 0)")
-        if self.delay:
-            raise ValueError("a disagreement gate works without a delay (inverse models of one step)")
-        self.gate_scale = g
 
     @property
     def commands(self) -> int:
         """c: the past commands (before the current one) the forward models see; callers pass them
-        as ``past`` (0: none, the paper's one-step model)."""
+        as ``past`` (0: none, the paper's one-step model; the delay d otherwise)."""
         return self.forwards[0].commands if self.forwards else 0
 
     def _check_actions(self, arr, lead: tuple, n: int, name: str, what: str, missing: str) -> np.ndarray | None:
@@ -329,140 +232,64 @@ class ActionTransformer:
         """Re-seed the sampling generator (an episode's seed makes grounded rollouts repeatable) and,
         for an SGAT ensemble, draw the episode's member."""
         self.rng = np.random.default_rng(self.seed if seed is None else np.random.SeedSequence([int(seed), 0x5a7]))
-        self._z = None
         if self.n_members > 1 and self.method == "sgat":
             self.member = int(self.rng.integers(self.n_members))
 
     def _ground(self, k: int, hist: np.ndarray, a: np.ndarray, sample: bool, normal=None, past=None,
-                shadow=None, sent=None) -> tuple[np.ndarray, np.ndarray]:
-        """Member k's grounded action and the predicted state change Δŝ; ``normal(shape)`` draws the
-        SGAT noise (default: ``self.rng``); ``past``: the previous commands (forward models with a
-        command history); ``shadow``: the shadow state history the forward model predicts from
-        (``shadow_memory`` > 0; None: the sim's, ``hist``); ``sent``: the actions sent to the sim
-        before (a delay)."""
+                sent=None) -> np.ndarray:
+        """Member k's grounded action (before the blend); ``normal(shape)`` draws the SGAT noise
+        (default: ``self.rng``); ``past``: the previous commands and ``sent``: the actions sent to the
+        sim before (a delay)."""
         if self.delay and sent is None:
             raise ValueError(f"the inverse models bridge a delay of {self.delay} steps: give the actions sent before")
         fwd, inv = self.forwards[k], self.inverses[k]
-        S = self.spec.state_dim
         normal = normal or self.rng.standard_normal
-        src = hist if shadow is None else shadow
-        x = np.concatenate([src, a] if past is None else [src, past, a], axis=-1)
-        if not sample:
-            ds = fwd.predict(x)[0]
-        elif self.sim_forwards:
-            mu, sd = fwd.predict(x)  # a mixture: its mean and total spread
-            sd_sim = self.sim_forwards[k].predict(x)[1]
-            ds = mu + np.sqrt(np.maximum(sd ** 2 - sd_sim ** 2, 0.0)) * normal((*mu.shape[:-1], fwd.noise_dim))[..., -S:]
-        elif fwd.stochastic:  # ForwardModel.sample with the given generator
+        x = np.concatenate([hist, a] if past is None else [hist, past, a], axis=-1)
+        if sample and fwd.stochastic:  # ForwardModel.sample with the given generator
             ds = fwd.sample_with(x, normal((*x.shape[:-1], fwd.noise_dim)))
         else:
             ds = fwd.predict(x)[0]
-        # the target ŝ_{t+1} = ŝ_t + Δŝ (ŝ_{t+d+1} with a delay), asked of the inverse model from the sim's state s_t
-        step = ds if shadow is None else ds + (shadow[..., -S:] - hist[..., -S:])
-        z = [hist] + ([sent] if self.delay else []) + [step] + ([a] if inv.command_input else [])
-        g = inv.predict(np.concatenate(z, axis=-1))
-        if self.sim_means:  # matched: subtract the inverse model's answer to the sim's own prediction
-            ds_sim = self.sim_means[k].predict(x)[0]
-            z = [hist, ds_sim, a] if inv.command_input else [hist, ds_sim]
-            g = a + g - inv.predict(np.concatenate(z, axis=-1))
-        return g, ds
+        # the target ŝ_{t+1} = s_t + Δŝ (ŝ_{t+d+1} with a delay), asked of the inverse model from the sim's state s_t
+        return inv.predict(np.concatenate([hist] + ([sent] if self.delay else []) + [ds], axis=-1))
 
     def transform(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None,
-                  shadow: np.ndarray | None = None, sent: np.ndarray | None = None) -> np.ndarray:
+                  sent: np.ndarray | None = None) -> np.ndarray:
         """Grounded actions for state histories ``hist`` (..., k*S) and actions ``a`` (..., A);
-        ``past`` (..., c*A): the c commands before ``a``, oldest first (required when
-        :attr:`commands` > 0; at an episode's first steps, pad with the first command); ``shadow``
-        (..., k*S): the shadow state history (required when ``shadow_memory`` > 0; at an episode's
-        start, the sim's); ``sent`` (..., d*A): the d actions sent to the sim before, oldest first
-        (required with a :attr:`delay` d; at an episode's first steps, pad with the first command).
-        The predicted change Δŝ is left in :attr:`last_delta`.
+        ``past`` (..., c*A): the c commands before ``a``, oldest first, and ``sent`` (..., d*A): the d
+        actions sent to the sim before, oldest first (both required with a :attr:`delay` d; at an
+        episode's first steps, pad with the first command).
 
         Raises:
-            ValueError: ``past``, ``shadow`` or ``sent`` missing or of the wrong shape.
+            ValueError: ``past`` or ``sent`` missing or of the wrong shape.
         """
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
             return a.copy()
         hist = np.asarray(hist, dtype=np.float64)
         past = self._check_past(past, a.shape[:-1])
-        shadow = self._check_shadow(shadow, hist.shape)
         sent = self._check_sent(sent, a.shape[:-1])
-        means = None
-        if self.method == "sgat" and self.forwards[0].stochastic:
-            g, ds = self._ground(self.member, hist, a, sample=True, normal=self._normal if self._c > 0 else None,
-                                 past=past, shadow=shadow, sent=sent)
+        if self.samples:
+            g = self._ground(self.member, hist, a, sample=True, past=past, sent=sent)
         else:
-            means = self._member_outputs(hist, a, past, shadow, sent)
-            g, ds = np.mean([g for g, _ in means], axis=0), np.mean([d for _, d in means], axis=0)
-        self.last_delta = ds
-        return self._blend(a, g, self._gate(hist, a, past, means))
+            g = self._mean_grounding(hist, a, past, sent)
+        return self._blend(a, g)
 
-    def _member_outputs(self, hist, a, past, shadow=None, sent=None) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Every member's deterministic (grounded action, Δŝ): averaged, GAT's (or SGAT's with
-        deterministic models) answer; their spread, the gate's disagreement."""
-        return [self._ground(k, hist, a, sample=False, past=past, shadow=shadow, sent=sent) for k in range(self.n_members)]
-
-    @staticmethod
-    def _spread(outs) -> np.ndarray:
-        G = np.stack([g for g, _ in outs])
-        return np.sqrt(np.mean((G - G.mean(axis=0)) ** 2, axis=(0, -1)))
-
-    def disagreement(self, hist: np.ndarray, a: np.ndarray, past: np.ndarray | None = None) -> np.ndarray:
-        """The ensemble's disagreement D [rad] on its grounded actions: the RMS over members and
-        grounded joints of g_k − mean_k g_k, with g_k member k's deterministic grounded action (its
-        forward model's mean Δŝ through its inverse model, before the blend).
-
-        Args:
-            hist: state histories (..., k*S); a: actions (..., A); past: (..., c*A) the previous
-                commands (forward models with a command history).
-
-        Returns:
-            (...,) ≥ 0; zeros for fewer than 2 members.
-
-        Raises:
-            ValueError: ``past`` missing or mis-shaped.
-        """
-        a = np.asarray(a, dtype=np.float64)
-        if self.n_members < 2:
-            return np.zeros(a.shape[:-1])
-        hist = np.asarray(hist, dtype=np.float64)
-        past = self._check_past(past, a.shape[:-1])
-        return self._spread(self._member_outputs(hist, a, past))
-
-    def _gate(self, hist, a, past, outs=None) -> np.ndarray | None:
-        """The gate's weights w = min(1, D_ref / D), shape (..., 1); None without a gate."""
-        if self.gate_scale is None:
-            return None
-        D = self._spread(outs if outs is not None else self._member_outputs(hist, a, past))
-        return np.minimum(1.0, self.gate_scale / np.maximum(D, 1e-300))[..., None]
-
-    def _check_shadow(self, shadow, shape: tuple) -> np.ndarray | None:
-        if not self.shadow_memory:
-            return None
-        if shadow is None:
-            raise ValueError("the transformer keeps a shadow state (shadow_memory > 0): give its history as shadow")
-        shadow = np.asarray(shadow, dtype=np.float64)
-        if shadow.shape != shape:
-            raise ValueError(f"shadow must have the shape of the state history {shape}, got {shadow.shape}")
-        return shadow
-
-    def relax_shadow(self, target: np.ndarray, state: np.ndarray) -> np.ndarray:
-        """The shadow state after a step: the target ŝ_{t+1} = ŝ_t + Δŝ relaxed toward the sim's new
-        state s_{t+1}, s_{t+1} + e^{-1/τ} (ŝ_{t+1} − s_{t+1}) (arrays (..., S); τ = ``shadow_memory``)."""
-        state = np.asarray(state, dtype=np.float64)
-        return state + self._beta * (np.asarray(target, dtype=np.float64) - state)
+    def _mean_grounding(self, hist, a, past, sent) -> np.ndarray:
+        """The members' deterministic grounded actions averaged: GAT's (or SGAT's with deterministic
+        models) answer."""
+        return np.mean([self._ground(k, hist, a, sample=False, past=past, sent=sent) for k in range(self.n_members)], axis=0)
 
     def reach(self, hist: np.ndarray, step: np.ndarray, a: np.ndarray, sent: np.ndarray | None = None) -> np.ndarray:
         """The grounded action that asks for a given state change: the members' inverse models'
         answers to ``f_sim^-1(hist, step)`` averaged and blended with ``a`` at α (what
-        :meth:`transform` does with a forward model's Δŝ; :class:`TeacherForcedEnv` gives the
-        recorded one).
+        :meth:`transform` does with a forward model's Δŝ; :class:`sgat.grounded.TeacherForcedEnv`
+        gives the recorded one).
 
         Args:
-            hist: state history (k*S,); step: the wanted change of the state from the sim's
-                current one, s_target − s_t (S,; with a :attr:`delay` d, the target is d + 1 steps
-                ahead); a: the agent's grounded actions (A,); sent: (d*A,) the d actions sent to
-                the sim before (with a delay).
+            hist: state history (k*S,); step: the wanted change of the state from the sim's current
+                one, s_target − s_t (S,; with a :attr:`delay` d, the target is d + 1 steps ahead);
+                a: the agent's grounded actions (A,); sent: (d*A,) the d actions sent to the sim
+                before (with a delay).
 
         Returns:
             (A,), clipped to the action bounds.
@@ -474,16 +301,11 @@ class ActionTransformer:
             raise ValueError("an identity transformer has no inverse models to ask")
         a = np.asarray(a, dtype=np.float64)
         sent = self._check_sent(sent, a.shape[:-1])
-        pre = [hist] + ([sent] if self.delay else []) + [step]
-        g = np.mean([inv.predict(np.concatenate(pre + [a] if inv.command_input else pre)) for inv in self.inverses],
-                    axis=0)
-        return self._blend(a, g)
+        z = np.concatenate([hist] + ([sent] if self.delay else []) + [step])
+        return self._blend(a, np.mean([inv.predict(z) for inv in self.inverses], axis=0))
 
-    def _blend(self, a: np.ndarray, g: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
-        if w is not None:  # the gate: ã = a + α w (g − a)
-            out = a + (self.alpha * w) * (g - a)
-        else:
-            out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
+    def _blend(self, a: np.ndarray, g: np.ndarray) -> np.ndarray:
+        out = (1.0 - self.alpha) * a + self.alpha * g if self.alpha < 1.0 else g
         return np.clip(out, self.spec.action_low, self.spec.action_high)
 
     @property
@@ -492,21 +314,6 @@ class ActionTransformer:
         :attr:`noise_dim` standard normals from ``self.rng`` per call."""
         return bool(self.forwards) and self.method == "sgat" and self.forwards[0].stochastic
 
-    def _normal(self, shape) -> np.ndarray:
-        """The next step's SGAT noise with memory: z_t = c z_{t-1} + sqrt(1 - c²) ε_t, z_0 = ε_0."""
-        eps = self.rng.standard_normal(shape)
-        self._z = eps if self._z is None else self._c * self._z + self._s * eps
-        return self._z
-
-    def correlate(self, Z: np.ndarray) -> np.ndarray:
-        """An episode's standard normal draws (T, d), drawn at once, turned in place into the noise
-        :meth:`transform` uses step by step (the same arithmetic: bit-identical); white noise
-        (``noise_memory`` 0) is returned as it is."""
-        if self._c > 0:
-            for t in range(1, len(Z)):
-                Z[t] = self._c * Z[t - 1] + self._s * Z[t]
-        return Z
-
     @property
     def noise_dim(self) -> int:
         """Standard normals one SGAT step draws: ``spec.state_dim``, plus one that picks the component
@@ -514,8 +321,7 @@ class ActionTransformer:
         return self.forwards[0].noise_dim if self.forwards else self.spec.state_dim
 
     def transform_episodes(self, hist: np.ndarray, a: np.ndarray, members, noise: np.ndarray | None = None,
-                           past: np.ndarray | None = None, shadow: np.ndarray | None = None,
-                           delta_out: np.ndarray | None = None, sent: np.ndarray | None = None) -> np.ndarray:
+                           past: np.ndarray | None = None, sent: np.ndarray | None = None) -> np.ndarray:
         """:meth:`transform` for n episodes at once, each with its own ensemble member and noise.
 
         Args:
@@ -524,13 +330,8 @@ class ActionTransformer:
             noise: (n, :attr:`noise_dim`) standard normal draws, row i the next draws of episode i's
                 generator (needed when :attr:`samples`; a generator's draws of (T, d) at once are its
                 next T draws of (d,), so a caller may draw a whole episode's noise at its start).
-            past: (n, c*A) each episode's previous commands (needed when :attr:`commands` > 0).
-            shadow: (n, k*S) each episode's shadow state history (needed when ``shadow_memory`` > 0).
-            delta_out: (n, S), filled with each episode's predicted change Δŝ if given.
-            sent: (n, d*A) the d actions sent to each episode's sim before (needed with a :attr:`delay`).
-
-        With a gate (``gate_scale``) each row's weight comes from the whole ensemble's deterministic
-        outputs at that row, as in :meth:`transform`.
+            past: (n, c*A) each episode's previous commands; sent: (n, d*A) the d actions sent to each
+                episode's sim before (both needed with a :attr:`delay`).
 
         Returns:
             (n, A); row i is bit-identical to :meth:`transform` ``(hist[i], a[i])`` of a transformer
@@ -538,7 +339,8 @@ class ActionTransformer:
             same BLAS routine per item on (n, 1, d) stacks as on one (d,) row).
 
         Raises:
-            ValueError: noise missing when the transformer samples; ``past`` missing or mis-shaped.
+            ValueError: noise missing when the transformer samples; ``past`` or ``sent`` missing or
+                mis-shaped.
         """
         a = np.asarray(a, dtype=np.float64)
         if self.is_identity:
@@ -547,29 +349,21 @@ class ActionTransformer:
         h3, a3 = hist[:, None, :], a[:, None, :]
         p3 = self._check_past(past, a.shape[:-1])
         p3 = None if p3 is None else p3[:, None, :]
-        s3 = self._check_shadow(shadow, hist.shape)
-        s3 = None if s3 is None else s3[:, None, :]
         e3 = self._check_sent(sent, a.shape[:-1])
         e3 = None if e3 is None else e3[:, None, :]
-        means = None  # the members' deterministic outputs, when they are computed anyway (GAT)
         if self.samples:
             if noise is None:
                 raise ValueError("an SGAT transformer samples: give each episode's standard normal draws (noise)")
             noise = np.asarray(noise, dtype=np.float64)[:, None, :]
             members = np.asarray(members)
             g = np.empty_like(a3)
-            ds = np.empty((len(a3), 1, self.spec.state_dim))
             for k in np.unique(members).tolist():
                 sel = np.flatnonzero(members == k)
-                g[sel], ds[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
-                                               past=None if p3 is None else p3[sel], shadow=None if s3 is None else s3[sel],
-                                               sent=None if e3 is None else e3[sel])
+                g[sel] = self._ground(k, h3[sel], a3[sel], sample=True, normal=lambda shape, sel=sel: noise[sel],
+                                      past=None if p3 is None else p3[sel], sent=None if e3 is None else e3[sel])
         else:
-            means = self._member_outputs(h3, a3, p3, s3, e3)
-            g, ds = np.mean([g for g, _ in means], axis=0), np.mean([d for _, d in means], axis=0)
-        if delta_out is not None:
-            delta_out[...] = ds[:, 0]
-        return self._blend(a3, g, self._gate(h3, a3, p3, means))[:, 0]
+            g = self._mean_grounding(h3, a3, p3, e3)
+        return self._blend(a3, g)[:, 0]
 
     # -- persistence ---------------------------------------------------------------------------
     @staticmethod
@@ -586,20 +380,8 @@ class ActionTransformer:
         for (ff, fi), f, i in zip(self._files(self.n_members), self.forwards, self.inverses):
             f.save(os.path.join(directory, ff))
             i.save(os.path.join(directory, fi))
-        for (ff, _), m in zip(self._files(self.n_members), self.sim_forwards):
-            m.save(os.path.join(directory, "sim_" + ff))
-        for (ff, _), m in zip(self._files(self.n_members), self.sim_means):
-            m.save(os.path.join(directory, "simmean_" + ff))
         meta = {"method": self.method, "alpha": self.alpha, "seed": self.seed, "identity": self.is_identity,
-                "members": self.n_members, "sim_forward": bool(self.sim_forwards), "spec": self.spec.to_dict()}
-        if self.sim_means:
-            meta["matched"] = True
-        if self.noise_memory > 0:
-            meta["noise_memory"] = self.noise_memory
-        if self.shadow_memory > 0:
-            meta["shadow_memory"] = self.shadow_memory
-        if self.gate_scale is not None:
-            meta["gate_scale"] = self.gate_scale
+                "members": self.n_members, "spec": self.spec.to_dict()}
         atomic_write_text(os.path.join(directory, "transformer.json"), json.dumps(meta, indent=1))
         return directory
 
@@ -608,7 +390,8 @@ class ActionTransformer:
         """Load what :meth:`save` wrote.
 
         Raises:
-            FileNotFoundError: missing files. ModelFileError: corrupted or mismatched weights.
+            FileNotFoundError: missing files. ModelFileError: corrupted or mismatched weights, or a
+                transformer saved with settings this version does not have.
         """
         directory = os.fspath(directory)
         path = os.path.join(directory, "transformer.json")
@@ -616,28 +399,26 @@ class ActionTransformer:
             raise FileNotFoundError(f"no transformer.json in {directory!r}")
         with open(path) as f:
             meta = json.load(f)
+        gone = sorted(k for k in ("sim_forward", "matched", "noise_memory", "shadow_memory", "gate_scale") if meta.get(k))
+        if gone:
+            raise ModelFileError(f"{path!r} was saved with {', '.join(gone)}, which this version does not have")
         spec = GroundingSpec.from_dict(meta["spec"])
-        fwds, invs, sims, means = [], [], [], []
+        fwds, invs = [], []
         if not meta["identity"]:
             S, A, k = spec.state_dim, spec.action_dim, spec.history
             for ff, fi in cls._files(int(meta.get("members", 1))):
-                for name, into in [(ff, fwds)] + ([("sim_" + ff, sims)] if meta.get("sim_forward") else []) \
-                        + ([("simmean_" + ff, means)] if meta.get("matched") else []):
-                    fwd = ForwardModel.load(os.path.join(directory, name), expect_out=S)
-                    if fwd.n_in != k * S + (fwd.commands + 1) * A:
-                        raise ModelFileError(f"{os.path.join(directory, name)!r}: model has {fwd.n_in} inputs, "
-                                             f"this setting needs {k * S + (fwd.commands + 1) * A}")
-                    into.append(fwd)
+                fwd = ForwardModel.load(os.path.join(directory, ff), expect_out=S)
+                if fwd.n_in != k * S + (fwd.commands + 1) * A:
+                    raise ModelFileError(f"{os.path.join(directory, ff)!r}: model has {fwd.n_in} inputs, "
+                                         f"this setting needs {k * S + (fwd.commands + 1) * A}")
+                fwds.append(fwd)
                 inv = InverseModel.load(os.path.join(directory, fi), expect_out=A)
-                want = (k + 1) * S + (inv.commands + int(inv.command_input)) * A
+                want = (k + 1) * S + inv.commands * A
                 if inv.n_in != want:
                     raise ModelFileError(f"{os.path.join(directory, fi)!r}: model has {inv.n_in} inputs, "
                                          f"this setting needs {want}")
                 invs.append(inv)
-        return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"],
-                   sim_forward=sims or None, noise_memory=float(meta.get("noise_memory", 0.0)),
-                   sim_mean=means or None, shadow_memory=float(meta.get("shadow_memory", 0.0)),
-                   gate_scale=meta.get("gate_scale"))
+        return cls(spec, fwds or None, invs or None, method=meta["method"], alpha=meta["alpha"], seed=meta["seed"])
 
 
 class GroundedEnv(gym.Wrapper):
@@ -662,8 +443,6 @@ class GroundedEnv(gym.Wrapper):
         self._hist: deque = deque(maxlen=transformer.spec.history)
         self._past: deque = deque(maxlen=max(transformer.commands, 1))
         self._sent: deque = deque(maxlen=max(transformer.delay, 1))  # actions sent (a delay)
-        self._shadow: deque = deque(maxlen=transformer.spec.history)  # shadow states (shadow_memory > 0)
-        self._target = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
@@ -679,9 +458,6 @@ class GroundedEnv(gym.Wrapper):
         self._hist.extend([s] * self.transformer.spec.history)
         self._past.clear()
         self._sent.clear()
-        self._shadow.clear()
-        self._shadow.extend([s] * self.transformer.spec.history)
-        self._target = None
 
     def ground(self, action) -> np.ndarray:
         """The action to apply for the agent's ``action`` (a new array), given the state history
@@ -707,13 +483,10 @@ class GroundedEnv(gym.Wrapper):
                     self._past.extend([ag] * self.transformer.commands)
                 past = np.concatenate(list(self._past))
                 self._past.append(ag)
-            shadow = np.concatenate(list(self._shadow)) if self.transformer.shadow_memory else None
             sent = self._sent_before(ag)
-            applied[spec.action_index] = self.transformer.transform(hist, ag, past, shadow, sent)
+            applied[spec.action_index] = self.transformer.transform(hist, ag, past, sent)
             if sent is not None:
                 self._sent.append(applied[spec.action_index].copy())
-            if shadow is not None:
-                self._target = self._shadow[-1] + self.transformer.last_delta
         return applied
 
     def _sent_before(self, ag: np.ndarray) -> np.ndarray | None:
@@ -728,13 +501,8 @@ class GroundedEnv(gym.Wrapper):
         return np.concatenate(list(self._sent))
 
     def observe(self, obs: np.ndarray) -> None:
-        """Append the state of the new observation to the history (and the relaxed target to the
-        shadow history, :meth:`ActionTransformer.relax_shadow`)."""
-        s = self.transformer.spec.states(obs)
-        self._hist.append(s)
-        if self._target is not None:
-            self._shadow.append(self.transformer.relax_shadow(self._target, s))
-            self._target = None
+        """Append the state of the new observation to the history."""
+        self._hist.append(self.transformer.spec.states(obs))
 
     def step(self, action):
         a = np.array(action, dtype=np.float64)

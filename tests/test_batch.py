@@ -6,12 +6,12 @@ import pytest
 import torch
 
 from common.defaults import CONTROL_DT
-from envs import NaoSimEnv
+from envs import SimWorld
 from envs.batch import SimBatch
 from experiments.runtime.batch import chunk_tasks, expected_generation_seconds, map_episodes, run_batch
 from experiments.runtime.executors import ProcessExecutor, SerialExecutor
 from experiments.runtime.grounding import grounding_spec
-from experiments.runtime.tasks import run_episode
+from experiments.runtime.tasks import EpisodeTask, run_episode
 from sgat.models import ForwardModel, InverseModel
 from sgat.transformer import ActionTransformer
 from walk_engine import GaitParams, WalkEngine
@@ -28,12 +28,11 @@ def _gaits(n: int, seed: int = 1, box: float = 0.4) -> list[list[float]]:
         GaitParams.from_vector(u0 + rng.uniform(-box, box, len(u0)), clip=True).to_array().tolist() for _ in range(n - 1)]
 
 
-def _assert_same(a: list[dict], b: list[dict]) -> None:
+def _assert_same(a: list, b: list) -> None:
     assert len(a) == len(b)
     for x, y in zip(a, b):
-        x, y = dict(x), dict(y)
-        rx, ry = x.pop("recording", None), y.pop("recording", None)
-        assert x == y  # fitness, speed, fall, fall time, drift, steps: bit for bit
+        rx, ry = x.recording, y.recording
+        assert x.metrics() == y.metrics()  # fitness, speed, fall, fall time, drift, steps: bit for bit
         if rx is not None:
             assert ry is not None and rx[1] == ry[1] and set(rx[0]) == set(ry[0])
             for c in rx[0]:
@@ -42,22 +41,19 @@ def _assert_same(a: list[dict], b: list[dict]) -> None:
 
 @pytest.fixture(scope="module")
 def transformers(tmp_path_factory):
-    """Saved SGAT (2-member ensemble; one Gaussian, a 3-component mixture, noise with memory, a shadow
-    state, a delay of 2 steps) and GAT transformers (one with a shadow state) with random (untrained)
-    weights: they push the legs around enough to make some walks fall."""
-    spec = grounding_spec(NaoSimEnv())
+    """Saved SGAT (2-member ensemble; one Gaussian, a 3-component mixture, a delay of 2 steps) and GAT
+    transformers with random (untrained) weights: they push the legs around enough to make some walks
+    fall."""
+    spec = grounding_spec(SimWorld())
     S, A = spec.state_dim, spec.action_dim
     out = {}
-    for name, method, K, memory, c, shadow in (
-            ("sgat", "sgat", 1, 0, 0, 0), ("gat", "gat", 1, 0, 0, 0), ("sgat-mdn", "sgat", 3, 0, 0, 0),
-            ("sgat-memory", "sgat", 1, 20.0, 0, 0), ("gat-commands", "gat", 1, 0, 3, 0),
-            ("sgat-shadow", "sgat", 1, 0, 0, 3.0), ("gat-shadow", "gat", 1, 0, 3, 3.0), ("sgat-delay", "sgat", 1, 0, 2, 0)):
+    for name, method, K, d in (("sgat", "sgat", 1, 0), ("gat", "gat", 1, 0), ("sgat-mdn", "sgat", 3, 0),
+                               ("sgat-delay", "sgat", 1, 2), ("gat-delay", "gat", 1, 2)):
         torch.manual_seed({"sgat": 7, "gat": 8}.get(name, 9))
-        fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K, commands=c) for _ in range(2)]
-        inv = [InverseModel(S, A, command_input=True, commands=c if name.endswith("delay") else 0) for _ in range(2)]
+        fw = [ForwardModel(S, A, stochastic=method == "sgat", components=K, commands=d) for _ in range(2)]
+        inv = [InverseModel(S, A, commands=d) for _ in range(2)]
         path = tmp_path_factory.mktemp(name)
-        ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0, noise_memory=memory,
-                          shadow_memory=shadow).save(path)
+        ActionTransformer(spec, fw, inv, method=method, alpha=0.3, seed=0).save(path)
         out[name] = str(path)
     return out
 
@@ -77,28 +73,28 @@ def report(tmp_path_factory):
     return str(path)
 
 
-@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "sgat-memory", "gat-commands", "sgat-shadow",
-                                   "gat-shadow", "identified", "hybrid", "hybrid-delay"])
+@pytest.mark.parametrize("world", ["sim", "ane", "sgat", "gat", "sgat-mdn", "gat-delay", "sgat-ane", "identified",
+                                   "hybrid", "hybrid-delay", "terrain"])
 def test_batched_episodes_are_bit_identical_to_single_episodes(world, transformers, report):
-    """Every MuJoCo world the optimizer trains in: results and recordings equal run_episode's,
-    falls included."""
+    """Every MuJoCo world the optimizer trains in, and the sim on given heightfields (stress tests):
+    results and recordings equal run_episode's, falls included."""
     kw = {"sim": {"world": "sim"}, "ane": {"world": "sim", "action_noise": 0.05},
-          "sgat": {"world": "grounded", "transformer": transformers.get("sgat")},
-          "gat": {"world": "grounded", "transformer": transformers.get("gat")},
-          "sgat-mdn": {"world": "grounded", "transformer": transformers.get("sgat-mdn")},
-          "sgat-memory": {"world": "grounded", "transformer": transformers.get("sgat-memory")},
-          "gat-commands": {"world": "grounded", "transformer": transformers.get("gat-commands")},
-          "sgat-shadow": {"world": "grounded", "transformer": transformers.get("sgat-shadow")},
-          "gat-shadow": {"world": "grounded", "transformer": transformers.get("gat-shadow")},
-          "identified": {"world": "identified", "identified": [report]},
-          "hybrid": {"world": "grounded", "transformer": transformers.get("sgat"), "identified": [report]},
-          "hybrid-delay": {"world": "grounded", "transformer": transformers.get("sgat-delay"), "identified": [report]}}[world]
-    tasks = [{**kw, "theta": th, "seed": 10 + i, "seconds": SECONDS, "record": True}
+          "sgat": {"world": "sim", "transformer": transformers.get("sgat")},
+          "gat": {"world": "sim", "transformer": transformers.get("gat")},
+          "sgat-mdn": {"world": "sim", "transformer": transformers.get("sgat-mdn")},
+          "gat-delay": {"world": "sim", "transformer": transformers.get("gat-delay")},
+          "sgat-ane": {"world": "sim", "transformer": transformers.get("sgat"), "action_noise": 0.05},
+          "identified": {"world": "identified", "identified": (report,)},
+          "hybrid": {"world": "identified", "transformer": transformers.get("sgat"), "identified": (report,)},
+          "hybrid-delay": {"world": "identified", "transformer": transformers.get("sgat-delay"), "identified": (report,)},
+          "terrain": {"world": "sim"}}[world]
+    tasks = [EpisodeTask(theta=th, seed=10 + i, seconds=SECONDS, record=True,
+                         terrain=("lumpy", i, 0.01 * (i % 3)) if world == "terrain" else None, **kw)
              for i, th in enumerate(_gaits(6))]
     single = [run_episode(t) for t in tasks]
     batched = run_batch(tasks)
     _assert_same(single, batched)
-    falls = sum(r["fell"] for r in single)
+    falls = sum(r.fell for r in single)
     assert 0 < falls < len(tasks), "the panel should hold walks that fall and walks that do not"
 
 
@@ -117,23 +113,23 @@ def test_generation_estimate_extrapolates_a_trial_batch_of_the_tasks_own_world(m
 
     def fake_batch(tasks):
         calls.append(tasks)
-        clock[0] += sum(0.05 + 0.002 * round(t["seconds"] / CONTROL_DT) for t in tasks)
-        return [{} for _ in tasks]
+        clock[0] += sum(0.05 + 0.002 * round(t.seconds / CONTROL_DT) for t in tasks)
+        return [None for _ in tasks]
 
     monkeypatch.setattr(B, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]))
     monkeypatch.setattr(B, "run_batch", fake_batch)
-    task = {"world": "grounded", "transformer": "models/hybrid_step1", "identified": ["fixed.json", "floating.json"],
-            "theta": _gaits(1)[0], "seed": 17, "seconds": 7.5, "record": True, "meta": {"x": 1}}
+    task = EpisodeTask("identified", _gaits(1)[0], 17, 7.5, transformer="models/hybrid_step1",
+                       identified=("fixed.json", "floating.json"), record=True, meta={"x": 1}, key="k")
     est = expected_generation_seconds(task, episodes=12, workers=2)
     assert (est["batch"], est["rounds"]) == (6, 1)
     assert est["step_ms"] == pytest.approx(6 * 2.0) and est["batch_fixed_s"] == pytest.approx(6 * 0.05)
     assert est["expected_s"] == pytest.approx(6 * 0.05 + 750 * 6 * 0.002)
     warm, short, long = calls
     assert len(warm) == 1 and [len(short), len(long)] == [6, 6]
-    assert [t["seed"] for t in short] == list(range(6)) and [round(t["seconds"] / CONTROL_DT) for t in (*short, *long)] == [10] * 6 + [110] * 6
+    assert [t.seed for t in short] == list(range(6)) and [round(t.seconds / CONTROL_DT) for t in (*short, *long)] == [10] * 6 + [110] * 6
     for t in short + long:
-        assert {k: t[k] for k in ("world", "transformer", "identified", "theta")} == {k: task[k] for k in ("world", "transformer", "identified", "theta")}
-        assert "record" not in t and "meta" not in t
+        assert (t.world, t.transformer, t.identified, t.theta) == (task.world, task.transformer, task.identified, task.theta)
+        assert not t.record and not t.meta and not t.key
     # a paper-scale generation: 300 episodes on 2 workers are 4 batches of 75, two per worker
     calls.clear()
     big = expected_generation_seconds(task, episodes=300, workers=2)
@@ -141,7 +137,7 @@ def test_generation_estimate_extrapolates_a_trial_batch_of_the_tasks_own_world(m
     assert big["expected_s"] == pytest.approx(2 * (75 * 0.05 + 750 * 75 * 0.002))
     # the real world runs one episode at a time: 12 episodes on 2 workers are 6 rounds of one
     calls.clear()
-    real = expected_generation_seconds({**task, "world": "real"}, episodes=12, workers=2)
+    real = expected_generation_seconds(task.replace(world="real", identified=(), transformer=None), episodes=12, workers=2)
     assert (real["batch"], real["rounds"]) == (1, 6) and all(len(c) == 1 for c in calls)
     assert real["expected_s"] == pytest.approx(6 * (0.05 + 750 * 0.002))
     with pytest.raises(ValueError, match="episodes and workers"):
@@ -155,8 +151,8 @@ def test_generation_estimate_walks_the_identified_ground(tmp_path):
 
     report = tmp_path / "rough.json"
     report.write_text(json.dumps({"model": {"latency": 0.012}, "effects": [{"family": "terrain_roughness", "value": 0.003}]}))
-    est = expected_generation_seconds({"world": "identified", "identified": [str(report)], "theta": _gaits(1)[0],
-                                       "seed": 0, "seconds": 1.0}, episodes=12, workers=2)
+    est = expected_generation_seconds(EpisodeTask("identified", _gaits(1)[0], 0, 1.0, identified=(str(report),)),
+                                      episodes=12, workers=2)
     assert (est["batch"], est["rounds"]) == (6, 1)
     assert np.isfinite(est["expected_s"]) and est["expected_s"] > 0 and est["step_ms"] > 0
 
@@ -164,16 +160,13 @@ def test_generation_estimate_walks_the_identified_ground(tmp_path):
 def test_mixed_worlds_keep_task_order(transformers):
     """Real-world tasks run one by one, the rest in lock-step; results come back in task order."""
     th = _gaits(3)
-    tasks = [{"world": "sim", "theta": th[0], "seed": 1, "seconds": 1.0},
-             {"world": "real", "theta": th[0], "seed": 1, "seconds": 1.0},
-             {"world": "grounded", "transformer": transformers["sgat"], "theta": th[1], "seed": 2, "seconds": 1.0},
-             {"world": "sim", "theta": th[2], "seed": 3, "seconds": 1.0}]
+    tasks = [EpisodeTask("sim", th[0], 1, 1.0), EpisodeTask("real", th[0], 1, 1.0),
+             EpisodeTask("sim", th[1], 2, 1.0, transformer=transformers["sgat"]), EpisodeTask("sim", th[2], 3, 1.0)]
     _assert_same([run_episode(t) for t in tasks], run_batch(tasks))
 
 
 def test_results_do_not_depend_on_batch_size_or_workers(transformers):
-    tasks = [{"world": "grounded", "transformer": transformers["sgat"], "theta": th, "seed": 20 + i, "seconds": 1.5}
-             for i, th in enumerate(_gaits(7, seed=2))]
+    tasks = [EpisodeTask("sim", th, 20 + i, 1.5, transformer=transformers["sgat"]) for i, th in enumerate(_gaits(7, seed=2))]
     ref = map_episodes(SerialExecutor(), tasks, batch_size=1)
     for bs in (2, 7):
         _assert_same(ref, map_episodes(SerialExecutor(), tasks, batch_size=bs))
@@ -184,13 +177,14 @@ def test_results_do_not_depend_on_batch_size_or_workers(transformers):
 
 
 def test_chunks_split_by_world_and_cover_every_task():
-    tasks = ([{"world": "sim", "seed": i} for i in range(10)] + [{"world": "real", "seed": 0}]
-             + [{"world": "grounded", "transformer": "a", "seed": i} for i in range(3)])
+    th = _gaits(1)[0]
+    tasks = ([EpisodeTask("sim", th, i) for i in range(10)] + [EpisodeTask("real", th, 0)]
+             + [EpisodeTask("sim", th, i, transformer="a") for i in range(3)])
     chunks = chunk_tasks(tasks, workers=2, batch_size=4)
     assert sorted(i for c in chunks for i in c) == list(range(len(tasks)))
     assert [10] in chunks  # the real-world task alone
     for c in chunks:
-        assert len({(tasks[i]["world"], tasks[i].get("transformer")) for i in c}) == 1
+        assert len({(tasks[i].world, tasks[i].transformer) for i in c}) == 1
         assert len(c) <= 4
     with pytest.raises(ValueError, match="batch_size"):
         chunk_tasks(tasks, batch_size=0)
@@ -199,7 +193,7 @@ def test_chunks_split_by_world_and_cover_every_task():
 def test_batch_engine_matches_scalar_engine_on_the_same_observations():
     """Fed identical (synthetic, noisy) observation streams, every row of the batched engine equals
     the scalar engine's targets, through phase changes and the start blend."""
-    robot = NaoSimEnv().robot
+    robot = SimWorld().robot
     params = [GaitParams.from_array(np.asarray(th)) for th in _gaits(5, seed=4, box=0.3)]
     rng = np.random.default_rng(0)
     obs = np.tile(np.zeros(62), (5, 1))
@@ -220,7 +214,7 @@ def test_batch_engine_matches_scalar_engine_on_the_same_observations():
 
 
 def test_sim_batch_rejects_bad_actions_and_other_worlds():
-    env = NaoSimEnv()
+    env = SimWorld()
     sim = SimBatch(env, 2)
     sim.reset([0, 1])
     a = np.tile(env.robot.pose("crouch", actuated=True), (2, 1))
@@ -229,27 +223,10 @@ def test_sim_batch_rejects_bad_actions_and_other_worlds():
         sim.step(a)
     with pytest.raises(ValueError, match="shape"):
         sim.step(a[:1])
-    with pytest.raises(TypeError, match="NaoSimEnv"):
-        from envs import NaoRealEnv
+    with pytest.raises(TypeError, match="SimWorld"):
+        from envs import RealWorld
 
-        SimBatch(NaoRealEnv(), 2)
-
-
-def test_stress_trials_in_lockstep_equal_single_trials():
-    """Stress sweeps batch their sim trials, each on its own heightfield: rows (but the wall time)
-    and recordings equal run_trial's."""
-    from experiments.stress import run as S
-
-    cfg = S.make_config(world="sim", amplitude="0,0.02,0.04", trials=2, seconds=2.0)
-    tasks = S.plan_tasks(cfg)
-    tasks[1] = {**tasks[1], "record": True}
-    single = [S.run_trial(t) for t in tasks]
-    batched = S.run_trials(tasks)
-    for a, b in zip(single, batched):
-        a, b = dict(a), dict(b)
-        a.pop("wall_s"), b.pop("wall_s")
-        _assert_same([a], [b])
-    assert len({(r["terrain"], r["terrain_seed"]) for r in single}) == len(single)  # each on its own ground
+        SimBatch(RealWorld(), 2)
 
 
 def test_ground_stack_gives_each_episode_its_own_ground_bit_for_bit():
@@ -274,3 +251,15 @@ def test_ground_stack_gives_each_episode_its_own_ground_bit_for_bit():
         assert np.ptp(got) > 0.005  # the surfaces are not flat: a wrong field or point would show
     assert not GroundStack([None, None]).uneven
     assert np.array_equal(GroundStack([None, None]).height([0, 1], [0.3, -2.0], [0.1, 5.0]), [0.0, 0.0])
+
+
+def test_a_task_on_a_given_heightfield_leaves_the_plain_worlds_ground_alone():
+    """Workers keep their worlds between tasks: a stress trial that lays a heightfield down must not
+    leave it under the next plain task of the same world (one episode or a batch)."""
+    th = _gaits(1)[0]
+    plain = EpisodeTask("sim", th, 5, 1.5, record=True)
+    before = run_episode(plain)
+    bumpy = EpisodeTask("sim", th, 5, 1.5, terrain=("lumpy", 3, 0.03))
+    assert run_episode(bumpy).terrain != "flat"
+    _assert_same([before, before], [run_episode(plain), *run_batch([plain])])
+    assert before.terrain == "flat"

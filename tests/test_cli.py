@@ -13,14 +13,6 @@ def test_help_lists_commands(capsys):
     assert "stand" in capsys.readouterr().out
 
 
-def test_fidelity_help_names_every_family_drop_takes(capsys):
-    from experiments.runtime.tasks import MEAN_PHYSICS_FAMILIES
-
-    assert main(["fidelity", "--help"]) == 0
-    line = next(s for s in capsys.readouterr().out.splitlines() if s.startswith("Effect families of drop="))
-    assert line.removeprefix("Effect families of drop=: ").rstrip(".").split(", ") == list(MEAN_PHYSICS_FAMILIES)
-
-
 def test_stand_json_and_recording(capsys, tmp_path):
     out = tmp_path / "rec.parquet"
     rc = main(["stand", "--world", "sim,real", "--seconds", "1", "--profile", "none", "--record", str(out), "--json"])
@@ -74,7 +66,7 @@ def test_the_command_runs_numpy_blas_with_omp_num_threads(monkeypatch):
     import numpy as np
     from threadpoolctl import threadpool_info
 
-    from experiments.cli import limit_blas_threads
+    from experiments.runtime.executors import limit_blas_threads
 
     def blas_threads():
         return {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}

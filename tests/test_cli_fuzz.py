@@ -37,8 +37,12 @@ def _cases():
                 bad = ["<missing>", "<dir>"]
             elif t is A.in_path:
                 bad = ["<missing>"]
-            elif t is A.hidden_layers:
-                bad = ["0x3", "64x", "abc", "-1"]
+            elif t is A.in_dir:
+                bad = ["<missing>", "<file>"]
+            elif t in (A.world, A.worlds):
+                bad = ["moon", "sgat:alpha=2", "sgat:shadow=0.1", "sgat:alpha", "hybrid:delay=auto:delay=1"]
+            elif t is A.profile:
+                bad = ["moon"]
             else:
                 continue
             for v in bad:
@@ -102,12 +106,14 @@ def test_bad_combinations_are_one_line_exit_2(argv, needle, tmp_path, monkeypatc
     assert not new, f"left behind: {sorted(new)}"
 
 
-def test_hidden_layers_option():
-    """--hidden of optimize/table1: sizes joined by x, or 0 for linear grounding models."""
-    assert A.hidden_layers("64x64") == (64, 64) and A.hidden_layers("0") == () and A.hidden_layers("16") == (16,)
-    for bad in ("", "0x3", "64x", "x", "5000"):
+def test_world_options_are_checked_at_the_boundary():
+    """A world's ``hidden`` option: sizes joined by x, or 0 for linear grounding models; anything else
+    is an argparse error naming it."""
+    assert A.world("sgat:hidden=64x64") == "sgat:hidden=64x64" and A.world("sgat:hidden=0") == "sgat"
+    assert A.worlds("sgat,gat:alpha=0.5") == ("sgat", "gat")
+    for bad in ("sgat:hidden=", "sgat:hidden=0x3", "sgat:hidden=64x", "sgat:hidden=5000"):
         with pytest.raises(argparse.ArgumentTypeError, match="hidden"):
-            A.hidden_layers(bad)
+            A.world(bad)
 
 
 def test_help_exits_0(capsys):

@@ -8,7 +8,7 @@ import json
 import pytest
 
 from experiments.cli import main
-from experiments.cli.cliff import parse_noise
+from experiments.cliff.run import parse_noise
 
 FAST = ["--episodes", "2000", "--real-episodes", "2000"]
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from envs import EFFECTS, PROFILES, CommandLog, NaoRealEnv, NaoSimEnv, RealProfile, get_profile, rollout
+from envs import EFFECTS, PROFILES, CommandLog, RealWorld, SimWorld, RealProfile, get_profile, rollout
 from envs.excitation import chirp_with_holds
 from robots import nao_h25
 
@@ -24,7 +24,7 @@ ON_GROUND = {"foot_friction": (0.05, 0.05), "terrain_amplitude": (0.02, 0.02)}
 
 
 def _replay(profile, fixed_base=True, seed=0, cmd=CMD):
-    env = NaoRealEnv(profile=profile, fixed_base=fixed_base)
+    env = RealWorld(profile=profile, fixed_base=fixed_base)
     rec = rollout(env, CommandLog(cmd), seed=seed, seconds=len(cmd) * env.control_dt)
     env.close()
     return rec
@@ -72,7 +72,7 @@ def test_none_profile_changes_nothing(baseline):
     other_seed = _replay("none", seed=99)
     for k in baseline.columns:  # no randomness at all
         assert np.array_equal(baseline.columns[k], other_seed.columns[k], equal_nan=True), k
-    sim = rollout(NaoSimEnv(fixed_base=True), CommandLog(CMD), seed=0, seconds=3.0)
+    sim = rollout(SimWorld(fixed_base=True), CommandLog(CMD), seed=0, seconds=3.0)
     assert np.abs(sim.group("q") - baseline.group("q")).max() < 3e-3  # only the engine gap is left
 
 
@@ -111,11 +111,11 @@ def test_real_splits_into_flat_and_ground():
             np.testing.assert_array_equal(getattr(draw["real-flat"], f), getattr(draw["real"], f), err_msg=f)
             np.testing.assert_array_equal(getattr(draw["real-ground"], f), getattr(draw["none"], f), err_msg=f)
     # the flat profile walks on a plane, the ground profile on a heightfield
-    env = NaoRealEnv(profile="real-flat")
+    env = RealWorld(profile="real-flat")
     env.reset(seed=3)
     assert env._terrain is None
     env.close()
-    env = NaoRealEnv(profile="real-ground")
+    env = RealWorld(profile="real-ground")
     env.reset(seed=3)
     assert env._terrain is not None and float(np.ptp(env._terrain.heights)) > 0.0
     env.close()

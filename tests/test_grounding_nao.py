@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from envs import NaoSimEnv
+from envs import SimWorld
 from envs.wrappers import ActionMismatch
 from sgat.grounding import Transitions, fit_transformer, trajectory_transitions
 from experiments.runtime.grounding import grounding_spec
@@ -43,11 +43,11 @@ def step_from(env, obs, a):
 
 @pytest.fixture(scope="module")
 def pair():
-    sim = NaoSimEnv(fixed_base=True)
+    sim = SimWorld(fixed_base=True)
     spec = grounding_spec(sim)
     robot = sim.robot
     q0 = robot.pose("crouch", actuated=True)
-    real = ActionMismatch(NaoSimEnv(fixed_base=True), gain=0.7, offset=0.05, noise_std=0.03,
+    real = ActionMismatch(SimWorld(fixed_base=True), gain=0.7, offset=0.05, noise_std=0.03,
                           index=spec.action_index, reference=q0, seed=0)
     rng = np.random.default_rng(0)
     R, S = [], []
@@ -100,7 +100,7 @@ def test_only_sgat_reproduces_the_real_spread(pair):
 
 def test_grounded_env_records_command_and_applied(pair):
     sim, _, spec, fits, O, A, _ = pair
-    env = GroundedEnv(NaoSimEnv(fixed_base=True), fits["sgat"].transformer)
+    env = GroundedEnv(SimWorld(fixed_base=True), fits["sgat"].transformer)
     obs, _ = env.reset(seed=0)
     a = A[0].copy()
     keep = a.copy()
@@ -113,7 +113,7 @@ def test_grounded_env_records_command_and_applied(pair):
 
 
 def test_action_mismatch_copies_and_applies():
-    env = ActionMismatch(NaoSimEnv(fixed_base=True), gain=0.5, offset=0.1, index=[0], seed=0)
+    env = ActionMismatch(SimWorld(fixed_base=True), gain=0.5, offset=0.1, index=[0], seed=0)
     env.reset(seed=0)
     a = env.unwrapped.robot.pose("crouch", actuated=True).copy()
     a[0] = 0.4
@@ -127,82 +127,11 @@ def test_action_mismatch_copies_and_applies():
 def _damped_world(damping: float = 0.3):
     """A fixed-base NAO sim with viscous damping [N m s/rad] in its leg joints (the sim has none):
     the "real" world of the DAD tests (its applied actions are its commands, as the real world's are)."""
-    real = NaoSimEnv(fixed_base=True)
+    real = SimWorld(fixed_base=True)
     m = real.model
     for j in real.robot.groups["legs"]:
         m.dof_damping[m.jnt_dofadr[m.joint(j).id]] = damping
     return real
-
-
-def test_dad_transitions_label_the_replay_s_states_with_the_real_next_states():
-    """Row t: the replay's state history at t and the real walk's action at t, labelled with
-    s^real_{t+1} - s_replay_t; a replay that is the real walk itself gives the real transitions."""
-    from envs.rollout import CommandLog, rollout
-    from experiments.runtime.grounding import nao_spec
-    from sgat.grounding import dad_transitions, recording_observations, recording_transitions
-
-    sim, real = NaoSimEnv(fixed_base=True), _damped_world()
-    spec = nao_spec("legs", 2)
-    A = random_leg_commands(sim.robot, 60, np.random.default_rng(3))
-    r_real = rollout(real, CommandLog(A), seed=0, seconds=0.6)
-    r_sim = rollout(sim, CommandLog(A[:40]), seed=0, seconds=0.4)  # the replay ends first
-    d = dad_transitions([r_sim], [r_real], sim.layout, spec)
-    S_sim = spec.states(recording_observations(r_sim, sim.layout))
-    S_real = spec.states(recording_observations(r_real, real.layout))
-    assert len(d) == 39 and d.P is None
-    np.testing.assert_array_equal(d.H, spec.stack_history(S_sim)[:-1])
-    np.testing.assert_array_equal(d.dS, S_real[1:40] - S_sim[:-1])
-    np.testing.assert_array_equal(d.A, A[:39, spec.action_index])
-    same = dad_transitions([r_real], [r_real], sim.layout, spec, past=2)
-    plain = recording_transitions([r_real], sim.layout, spec, 2)
-    for f in ("H", "A", "dS", "C", "P"):
-        np.testing.assert_array_equal(getattr(same, f), getattr(plain, f))
-    with pytest.raises(ValueError, match="replays for"):
-        dad_transitions([r_sim], [r_real, r_real], sim.layout, spec)
-
-
-def test_dad_rounds_pull_the_grounded_replay_toward_the_real_walk():
-    """Data as Demonstrator: refitted on the states the grounded sim reaches, the forward model keeps
-    a grounded replay of unseen real commands closer to the real walk than the one-step fit does.
-    Here the one-step fit (linear GAT, α = 1) drifts further from the real walk than the ungrounded
-    sim (about 0.56 against 0.19 rad RMS): fitted on real states only, it predicts from the grounded
-    sim's; two DAD rounds halve that drift. Only the forward models are refitted."""
-    import dataclasses
-
-    from envs.rollout import CommandLog, rollout
-    from experiments.runtime.grounding import fit_nao_grounding, nao_spec
-    from sgat.grounding import GroundingConfig, recording_observations
-
-    sim, real = NaoSimEnv(fixed_base=True), _damped_world()
-    spec = nao_spec("legs", 2)
-    rng = np.random.default_rng(0)
-    cmds = [random_leg_commands(sim.robot, 200, rng) for _ in range(3)]
-    real_recs = [rollout(real, CommandLog(A), seed=i, seconds=2.0) for i, A in enumerate(cmds)]
-    sim_recs = [rollout(ActionMismatch(sim, noise_std=0.05, index=spec.action_index, seed=i), CommandLog(A), seed=i,
-                        seconds=2.0) for i, A in enumerate(cmds)]
-    cfg = GroundingConfig(alpha=1.0, method="gat", hidden=(), ensemble=1)
-    plain = fit_nao_grounding(real_recs, sim_recs, cfg, history=2, seed=0)
-    dad = fit_nao_grounding(real_recs, sim_recs, dataclasses.replace(cfg, dad_iterations=2), history=2, seed=0,
-                            base_env=sim)
-    rows = sum(len(r) - 1 for r in real_recs)
-    assert rows < dad.info["n_forward_extra"] <= 2 * rows  # round 1 replays every walk to its end
-    x = np.random.default_rng(1).normal(size=(4, 3 * spec.state_dim))
-    np.testing.assert_array_equal(dad.transformer.inverses[0].predict(x)[0], plain.transformer.inverses[0].predict(x)[0])
-    A = random_leg_commands(sim.robot, 200, np.random.default_rng(99))
-    ref = spec.states(recording_observations(rollout(real, CommandLog(A), seed=7, seconds=2.0), real.layout))
-
-    def drift(fit):
-        rec = rollout(GroundedEnv(sim, fit.transformer), CommandLog(A), seed=7, seconds=2.0)
-        S = spec.states(recording_observations(rec, sim.layout))
-        assert len(S) == len(ref)  # no blow-up
-        return float(np.sqrt(np.mean((S - ref) ** 2)))
-
-    assert drift(dad) < 0.7 * drift(plain), (drift(dad), drift(plain))
-    with pytest.raises(ValueError, match="base_env"):
-        fit_nao_grounding(real_recs, sim_recs, dataclasses.replace(cfg, dad_iterations=1), history=2)
-    with pytest.raises(ValueError, match="dad_iterations"):
-        GroundingConfig(alpha=0.5, dad_iterations=-1)
-    assert "dad_iterations" not in cfg.to_dict() and GroundingConfig(alpha=0.5, dad_iterations=2).to_dict()["dad_iterations"] == 2
 
 
 @pytest.mark.parametrize("latency, delay", [(0.0237, 2), (0.0165, 1), (0.0099, 0), (None, 0)])

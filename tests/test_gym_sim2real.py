@@ -120,7 +120,7 @@ def _rows(cfg, fp=None):
     rows = []
     for nz, base in ((0.0, 900.0), (0.3, 400.0)):
         for r in range(3):
-            for m, f in (("none", 0.2), ("gat", 0.6), ("sgat", 0.8), ("real", 1.0)):
+            for m, f in (("sim", 0.2), ("gat", 0.6), ("sgat", 0.8), ("real", 1.0)):
                 rows.append({"env": cfg.env, "experiment": cfg.experiment, "noise": nz, "method": m, "run": r,
                              "return_mean": base * f + r, "fingerprint": fp or G.fingerprint_hash(cfg, m),
                              "wall_s": 1.0})
@@ -140,7 +140,7 @@ def test_summary_normalizes_to_real_and_selects_ane_sigma(tmp_path):
     assert get[(0.0, "gat")]["return_se"] == pytest.approx(np.std([540, 541, 542], ddof=1) / math.sqrt(3))
     assert get[(0.0, "ane")]["ane_sigma"] == 0.1 and get[(0.3, "ane")]["ane_sigma"] == 0.3
     assert get[(0.3, "ane")]["runs"] == 3 and get[(0.3, "ane")]["privileged"]
-    assert not get[(0.3, "none")]["uses_real_data"] and get[(0.3, "gat")]["uses_real_data"]
+    assert not get[(0.3, "sim")]["uses_real_data"] and get[(0.3, "gat")]["uses_real_data"]
     text = G.format_table(summary, cfg)
     assert "SIM-ONLY" in text and "ANE σ (best on real, privileged)" in text
     png = tmp_path / "f.png"
@@ -153,8 +153,8 @@ def test_result_table_resumes_and_keeps_settings_apart(tmp_path):
     table = G.ResultTable(tmp_path)
     plan = G.plan_tasks(cfg, table)
     kinds = sorted(t["kind"] for t in plan["second"])
-    # 2 runs: real x2 noises, none (both noises in one job), gat/sgat x2 noises, ane x2 sigmas
-    assert kinds.count("real") == 4 and kinds.count("none") == 2 and kinds.count("gat") == 4
+    # 2 runs: real x2 noises, sim (both noises in one job), gat/sgat x2 noises, ane x2 sigmas
+    assert kinds.count("real") == 4 and kinds.count("sim") == 2 and kinds.count("gat") == 4
     assert kinds.count("ane") == 4 and plan["sim_runs"] == [0, 1]
     assert plan["second"][0]["kind"] == "real"  # longest first
     rows = [r for r in _rows(cfg) if r["run"] < 2]
@@ -177,7 +177,7 @@ def test_result_table_resumes_and_keeps_settings_apart(tmp_path):
     cfg2 = GymConfig.from_preset("InvertedPendulum", "quick", runs=2, sim_steps=12345)
     assert G.fingerprint_hash(cfg2, "gat") != G.fingerprint_hash(cfg, "gat")
     assert G.fingerprint_hash(cfg2, "real") == G.fingerprint_hash(cfg, "real")
-    assert sorted({t["kind"] for t in G.plan_tasks(cfg2, table)["second"]}) == ["ane", "gat", "none", "sgat"]
+    assert sorted({t["kind"] for t in G.plan_tasks(cfg2, table)["second"]}) == ["ane", "gat", "sgat", "sim"]
     cfg3 = GymConfig.from_preset("InvertedPendulum", "quick", runs=2, real_steps=99999)
     assert [t["kind"] for t in G.plan_tasks(cfg3, table)["second"]] == ["real"] * 4 + ["sgat"]  # + the removed one
     cfg4 = GymConfig.from_preset("InvertedPendulum", "quick", runs=2, pole_factor=20)
@@ -226,9 +226,9 @@ def test_cli_end_to_end_tiny_sweep_and_resume(tmp_path):
     assert p.returncode == 0, p.stderr
     res = json.loads(p.stdout)
     methods = {(s["noise"], s["method"]) for s in res["summary"]}
-    assert methods == {(n, m) for n in (0.0, 0.3) for m in ("none", "gat", "sgat", "ane", "real")}
+    assert methods == {(n, m) for n in (0.0, 0.3) for m in ("sim", "gat", "sgat", "ane", "real")}
     assert os.path.exists(res["files"]["figure"]) and (out / "results.parquet").exists()
-    assert len(G.read_rows(out / "results.parquet")) == 12  # 2 noises x (none, gat, sgat, real) + ane 2 σ x 2
+    assert len(G.read_rows(out / "results.parquet")) == 12  # 2 noises x (sim, gat, sgat, real) + ane 2 σ x 2
     p = _cli(*args)
     res2 = json.loads(p.stdout)
     assert res2["tasks"] == 0 and res2["new_rows"] == 0

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from envs import NaoSimEnv
+from envs import SimWorld
 from experiments.runtime.fitness import run_walk
 from sysid.candidates import Term
 from sysid.diagnose import diagnose
@@ -15,7 +15,7 @@ from walk_engine import GaitParams
 
 def test_no_terms_is_the_plain_sim_bit_for_bit():
     p = GaitParams.initial()
-    a, _ = run_walk(p, seed=3, seconds=2.0, env=NaoSimEnv())
+    a, _ = run_walk(p, seed=3, seconds=2.0, env=SimWorld())
     b, _ = run_walk(p, seed=3, seconds=2.0, env=IdentifiedSimEnv({}))
     for k in a.columns:
         assert np.array_equal(a.columns[k], b.columns[k], equal_nan=True), k
@@ -45,7 +45,7 @@ def test_an_injected_latency_is_identified_and_walked_with(tmp_path):
     assert abs(terms[Term("latency")] - 0.02) < 1e-3 and rms == 0.0
     env = IdentifiedSimEnv.from_reports([tmp_path / "report" / "report.json"], fixed_base=True)
     assert np.allclose(env.model.actuator_delay, terms[Term("latency")])
-    plain = _step_response(NaoSimEnv(fixed_base=True))
+    plain = _step_response(SimWorld(fixed_base=True))
     ident = _step_response(env)
     assert plain[0] > 0.03  # the plain knee moves in the first 10 ms
     assert abs(ident[0]) < 1e-6 and abs(ident[1]) < 1e-6 and ident[2] > 0.03  # the identified one after 20 ms
@@ -57,7 +57,7 @@ def test_sensor_bias_and_backlash_act_like_the_real_world():
     env = IdentifiedSimEnv({Term("sensor_bias", "LKneePitch"): bias, Term("backlash", "RKneePitch"): 0.004},
                            fixed_base=True)
     r = env.robot
-    plain = NaoSimEnv(fixed_base=True)
+    plain = SimWorld(fixed_base=True)
     a = r.pose("crouch", actuated=True)
     for e in (env, plain):
         e.reset(seed=0)
@@ -101,7 +101,7 @@ def test_the_sparse_jacobian_on_uneven_ground_solves_the_same_walk(monkeypatch):
     env = IdentifiedSimEnv({}, rms_height=0.003)
     sparse, _ = run_walk(p, seed=1, seconds=1.0, env=env)
     assert env.model.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
-    assert IdentifiedSimEnv({}).model.opt.jacobian == NaoSimEnv().model.opt.jacobian  # flat: the plain sim's
+    assert IdentifiedSimEnv({}).model.opt.jacobian == SimWorld().model.opt.jacobian  # flat: the plain sim's
     monkeypatch.setattr(identified, "GROUND_JACOBIAN", mujoco.mjtJacobian.mjJAC_DENSE)
     env = IdentifiedSimEnv({}, rms_height=0.003)
     dense, _ = run_walk(p, seed=1, seconds=1.0, env=env)
@@ -129,8 +129,10 @@ def test_contact_terms_that_only_stand_in_for_the_ground_can_be_left_out(tmp_pat
     term, one without a declared ground, and the fixed-base terms stay."""
     import json
 
-    from experiments.runtime.tasks import _world
+    from experiments.runtime.tasks import EpisodeTask
+    from experiments.runtime.worlds import world_env
     from sysid.identified import confounded_with_ground
+    from walk_engine import GaitParams
 
     assert confounded_with_ground(_stepping_report()) == {"ground_compliance"}
     assert confounded_with_ground(_stepping_report(compliance_found=True)) == set()
@@ -141,9 +143,6 @@ def test_contact_terms_that_only_stand_in_for_the_ground_can_be_left_out(tmp_pat
     without, rms2 = load_identified(path, confounded=False)
     assert every == {Term("latency"): 0.02, Term("ground_compliance"): 0.03} and rms == rms2 == 0.0025
     assert without == {Term("latency"): 0.02, Term("ground_compliance"): 0.0025}  # the calibrated engine gap's
-    # the rollout tasks build the same worlds (and keep them apart in their cache); a task leaves the
-    # term out unless it asks for it (the identified worlds' default since the fourteenth fidelity round)
-    task = {"world": "identified", "identified": [str(path)]}
-    assert _world(task).terms[Term("ground_compliance")] == 0.0025
-    assert _world({**task, "identified_confounded": True}).terms[Term("ground_compliance")] == 0.03
-    assert _world({**task, "identified_confounded": False}).terms[Term("ground_compliance")] == 0.0025
+    # the identified world of the rollout tasks leaves the term out
+    task = EpisodeTask("identified", GaitParams().to_array(), 0, identified=(str(path),))
+    assert world_env(task).terms[Term("ground_compliance")] == 0.0025

@@ -60,10 +60,9 @@ def test_calibrate_engines_copies_the_shipped_calibration_and_recomputes_the_fix
 
 
 def test_excitation_logs_recorded_ahead_are_the_ones_identify_real_uses(tmp_path, monkeypatch):
-    """``excitation_tasks`` lists what ``identify_real`` still has to record (the fixed stage once when
-    shared); logs recorded by those tasks are used as they are, and a complete stage is not listed."""
-    kw = {"seed": 7, "profile": "real", "n_fixed": 2, "n_floating": 1, "seconds": 3.0,
-          "fixed_dir": str(tmp_path / "d0" / "fixed")}
+    """``excitation_tasks`` lists what ``identify_real`` still has to record; logs recorded by those
+    tasks are used as they are, and a complete stage is not listed."""
+    kw = {"seed": 7, "profile": "real", "n_fixed": 2, "n_floating": 1, "seconds": 3.0}
     tasks = excitation_tasks(str(tmp_path / "d0"), **kw)
     assert [(t["kind"], t["n_logs"], t["seed"], t["lumpy"]) for t in tasks] == [("fixed", 2, 7, False),
                                                                                  ("floating", 1, 57, True)]
@@ -83,61 +82,3 @@ def test_excitation_logs_recorded_ahead_are_the_ones_identify_real_uses(tmp_path
     assert [os.stat(p).st_mtime_ns for p in paths] == before  # not recorded again
 
 
-def test_base_terms_go_under_the_stepping_diagnosis_only(tmp_path, monkeypatch):
-    """``identify_real(base_terms=...)`` (``identified:servo=staged``): the terms are added to the
-    in-air model under the stepping-log diagnosis; the in-air stage (its report here already on disk,
-    shared with the draw's plain identification) is neither diagnosed again nor given them."""
-    import json
-    import types
-
-    from sysid.candidates import Term
-
-    fixed = tmp_path / "d0" / "fixed"
-    fixed.mkdir(parents=True)
-    (fixed / "report.json").write_text(json.dumps({"model": {"latency": 0.02}, "base_model": {}, "effects": []}))
-    monkeypatch.setattr(ident, "_recorded", lambda task: ["x.parquet"])
-    monkeypatch.setattr("sysid.data.load_logs", lambda *a, **k: [types.SimpleNamespace(seconds=6.0, name="x")])
-    seen = []
-
-    def fake_diagnose(logs, *, base_model, **k):
-        seen.append({t.label(): v for t, v in base_model.items()})
-        raise RuntimeError("stop")
-
-    monkeypatch.setattr("sysid.diagnose.diagnose", fake_diagnose)
-    with pytest.raises(RuntimeError, match="stop"):
-        ident.identify_real(str(tmp_path / "d0_servo"), seed=7, n_fixed=2, n_floating=1, fixed_dir=str(fixed),
-                            base_terms={Term("pd_gain_all"): 0.92})
-    assert seen == [{"latency": 0.02, "pd_gain_all": 0.92}]
-
-
-def test_servo_refit_fits_the_common_friction_and_the_in_air_model_with_the_kp_and_writes_them_all(tmp_path, monkeypatch):
-    """``fit_servo_gain(refit=True)`` (``identified:servo=refit``): the common kp starts with the joints'
-    common dry and viscous friction and every term of the in-air report at its value, over that model;
-    the report it writes carries every fitted value, and what moved. Without ``refit`` only the kp."""
-    rep = tmp_path / "fixed" / "report.json"
-    rep.parent.mkdir()
-    rep.write_text(json.dumps({"model": {"latency": 0.024, "coulomb_friction[RWristYaw]": 0.06}, "base_model": {},
-                               "effects": []}))
-    monkeypatch.setattr("sysid.data.load_logs", lambda *a, **k: ["log"])
-    seen = []
-
-    def fake_fit_terms(logs, start, *, base_model, **k):
-        seen.append(({t.label(): v for t, v in start.items()}, {t.label(): v for t, v in base_model.items()}))
-        fitted = {t: (0.014 if t.family == "latency" else 0.86 if t.family == "pd_gain_all" else v) for t, v in start.items()}
-        return {"values": fitted, "heldout_cost_before": 2000.0, "heldout_cost_after": 1000.0}
-
-    monkeypatch.setattr("sysid.diagnose.fit_terms", fake_fit_terms)
-    r = ident.fit_servo_gain([str(rep)], str(tmp_path / "logs"), None, str(tmp_path / "refit" / "report.json"),
-                             confounded=False, refit=True)
-    base = {"latency": 0.024, "coulomb_friction[RWristYaw]": 0.06}
-    assert seen[0] == ({**base, "coulomb_friction_all": 0.02, "viscous_damping_all": 0.005, "pd_gain_all": 0.95}, base)
-    assert r["value"] == 0.86 and r["refitted"]["latency"] == [0.024, 0.014]
-    assert r["refitted"]["coulomb_friction_all"] == [0.0, 0.02]
-    written = json.loads((tmp_path / "refit" / "report.json").read_text())["model"]
-    assert written == {"coulomb_friction[RWristYaw]": 0.06, "coulomb_friction_all": 0.02, "latency": 0.014,
-                       "pd_gain_all": 0.86, "viscous_damping_all": 0.005}
-    assert ident.fit_servo_gain([str(rep)], "x", None, str(tmp_path / "refit" / "report.json"),
-                                confounded=False)["value"] == 0.86  # reused, not fitted again
-    ident.fit_servo_gain([str(rep)], str(tmp_path / "logs"), None, str(tmp_path / "air" / "report.json"), confounded=False)
-    assert seen[1][0] == {"pd_gain_all": 0.95}
-    assert json.loads((tmp_path / "air" / "report.json").read_text())["model"] == {"pd_gain_all": 0.86}

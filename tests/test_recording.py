@@ -7,13 +7,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from envs import HoldPose, NaoSimEnv, Recording, RecordingError, rollout
+from envs import HoldPose, SimWorld, Recording, RecordingError, rollout
 from robots import nao_h25
 
 
 @pytest.fixture(scope="module")
 def rec():
-    env = NaoSimEnv()
+    env = SimWorld()
     return rollout(env, HoldPose(env.robot), seed=0, seconds=0.5, meta={"source": "test"})
 
 
@@ -112,4 +112,4 @@ def test_bad_metadata_and_files(rec, tmp_path):
 
 def test_rollout_rejects_bad_duration():
     with pytest.raises(ValueError, match="seconds"):
-        rollout(NaoSimEnv(), lambda o: None, seconds=0)
+        rollout(SimWorld(), lambda o: None, seconds=0)

@@ -7,7 +7,7 @@ import numpy as np
 import pybullet
 import pytest
 
-from envs import NaoRealEnv, NaoSimEnv
+from envs import RealWorld, SimWorld
 from robots import nao_h25
 from robots.nao import FOOT_HEIGHT, SOLE_CENTER_X, SOLE_CENTER_Y_OUT, SOLE_LENGTH, SOLE_WIDTH
 
@@ -55,8 +55,8 @@ def test_urdf_has_documented_sole_and_mimic(robot):
 
 
 def test_both_engines_same_mass_and_com(robot):
-    sim = NaoSimEnv()
-    real = NaoRealEnv(profile="none", terrain="flat")
+    sim = SimWorld()
+    real = RealWorld(profile="none", terrain="flat")
     _, info_s = sim.reset(seed=0)
     _, info_r = real.reset(seed=0)
     m_sim = float(sim.model.body_mass.sum())
@@ -72,7 +72,7 @@ def test_both_engines_same_mass_and_com(robot):
 
 
 def test_mujoco_keeps_urdf_semantics(robot):
-    m = NaoSimEnv().model
+    m = SimWorld().model
     assert m.neq == 1 and m.eq_type[0] == mujoco.mjtEq.mjEQ_JOINT  # the mimic, once
     hinges = [m.joint(i).name for i in range(m.njnt) if m.jnt_type[i] == mujoco.mjtJoint.mjJNT_HINGE]
     assert hinges == list(robot.joint_names)
@@ -82,7 +82,7 @@ def test_mujoco_keeps_urdf_semantics(robot):
 
 
 def test_pybullet_loads_inertia_from_file(robot):
-    real = NaoRealEnv(profile="none", terrain="flat")
+    real = RealWorld(profile="none", terrain="flat")
     real.reset(seed=0)
     p, b = real.client, real.body
     names = {p.getJointInfo(b, i)[12].decode(): i for i in range(p.getNumJoints(b))}

@@ -57,9 +57,9 @@ def test_stand_json_names_the_robot(robot, capsys):
 def test_optimize_g1_tiny_run(tmp_path, capsys):
     """A whole (tiny) grounding + CMA-ES run on the G1: every episode is a G1 walk."""
     out = tmp_path / "run"
-    code, text, err = _run(capsys, "optimize", "--robot", "g1", "--methods", "sgat", "--grounding-steps", "1",
-                           "--popsize", "2", "--generations", "1", "--real-episodes", "1", "--sim-episodes", "1",
-                           "--select-episodes", "1", "--eval-trials", "1", "--seconds", "1", "--model-epochs", "5",
+    code, text, err = _run(capsys, "optimize", "--robot", "g1", "--methods", "sgat:epochs=5:real=1:sim=1",
+                           "--grounding-steps", "1", "--popsize", "2", "--generations", "1",
+                           "--select-episodes", "1", "--eval-trials", "1", "--seconds", "1",
                            "--workers", "1", "--out", str(out), "--json")
     assert code == 0, err
     res = json.loads(text)

@@ -8,7 +8,7 @@ import pybullet
 import pytest
 from pybullet_utils import bullet_client
 
-from envs import CommandLog, HoldPose, NaoRealEnv, NaoSimEnv, rollout
+from envs import CommandLog, HoldPose, RealWorld, SimWorld, rollout
 from envs.excitation import chirp_with_holds
 from robots import ROBOT_NAMES, get_robot
 from robots.urdf_robots import G1, SPECS, robots_dir
@@ -37,10 +37,10 @@ def test_same_robot_in_both_engines(name):
     robot = get_robot(name)
     assert len(robot.joint_names) == JOINTS[name]
     assert robot.total_mass == pytest.approx(_urdf_mass(SPECS[name]), rel=1e-9)
-    sim = NaoSimEnv(robot)
+    sim = SimWorld(robot)
     assert sim.model.nu == JOINTS[name]
     assert sim.model.body_mass.sum() == pytest.approx(robot.total_mass, rel=1e-9)
-    real = NaoRealEnv(robot, profile="none")
+    real = RealWorld(robot, profile="none")
     real.reset(seed=0)
     assert len(real._jidx) == JOINTS[name]
     assert real._masses.sum() == pytest.approx(robot.total_mass, rel=1e-9)
@@ -58,7 +58,7 @@ def test_massless_links_add_nothing_in_pybullet():
 @pytest.mark.parametrize("name", ["g1", "talos"])
 def test_feet_are_the_only_contact_boxes_and_soles_sit_below_the_ankle_on_their_bottom(name):
     robot = get_robot(name)
-    env = NaoSimEnv(robot)
+    env = SimWorld(robot)
     m, d = env.model, env.data
     env.reset(seed=0)
     robot_geoms = [g for g in range(m.ngeom) if g != m.geom("ground").id]
@@ -80,7 +80,7 @@ def test_feet_are_the_only_contact_boxes_and_soles_sit_below_the_ankle_on_their_
 @pytest.mark.parametrize("name", ["g1", "talos"])
 def test_crouch_stands_5s(name, world):
     robot = get_robot(name)
-    env = NaoSimEnv(robot) if world == "sim" else NaoRealEnv(robot, profile="none")
+    env = SimWorld(robot) if world == "sim" else RealWorld(robot, profile="none")
     rec = rollout(env, HoldPose(robot, "crouch"), seed=0, seconds=5.0)
     assert not rec.fell, rec.meta["fall_reason"]
     assert rec.meta["robot"] == name
@@ -98,8 +98,8 @@ def test_fixed_base_leg_chirp_agrees_across_engines(name):
     the limits) replays within 3 mrad RMS per joint in MuJoCo and PyBullet."""
     robot = get_robot(name)
     cmd = chirp_with_holds(robot, seconds=6.0, amplitude=0.15, margin=0.1, joints=robot.groups["legs"])
-    q_sim = rollout(NaoSimEnv(robot, fixed_base=True), CommandLog(cmd), seed=0, seconds=6.0).group("q")
-    real = NaoRealEnv(robot, fixed_base=True, profile="none")
+    q_sim = rollout(SimWorld(robot, fixed_base=True), CommandLog(cmd), seed=0, seconds=6.0).group("q")
+    real = RealWorld(robot, fixed_base=True, profile="none")
     q_real = rollout(real, CommandLog(cmd), seed=0, seconds=6.0).group("q")
     real.close()
     assert q_sim.shape == q_real.shape == (600, JOINTS[name])

@@ -6,6 +6,8 @@ import shutil
 import pytest
 
 from experiments import cli
+from experiments.runtime.tasks import EpisodeTask, run_episode
+from experiments.runtime.worlds import terrain_field
 from experiments.stress import run as S
 from experiments.runtime.executors import SerialExecutor, make_executor
 from walk_engine import GaitParams
@@ -44,25 +46,22 @@ def test_plan_pairs_policies_and_levels(tmp_path):
     assert len(tasks) == 2 * 3 * 2 and [p.label for p in cfg.policies] == ["a", "b"]
     # every (level, trial) has one terrain seed shared by both policies; levels share it too
     for j in range(2):
-        ts = {(t["terrain_seed"], t["episode_seed"]) for t in tasks if t["trial"] == j}
+        ts = {(t.terrain_seed, t.episode_seed, t.task.seed) for t in tasks if t.trial == j}
         assert len(ts) == 1
-    assert {tuple(t["terrain"]) for t in tasks if t["trial"] == 0} == {("lumpy", tasks[0]["terrain_seed"], v)
-                                                                        for v in (0.0, 0.01, 0.02)}
+    assert {t.task.terrain for t in tasks if t.trial == 0} == {("lumpy", tasks[0].terrain_seed, v) for v in (0.0, 0.01, 0.02)}
 
 
 def test_same_heightfield_in_sim_and_real():
     """A (level, trial) is the same ground in both worlds: the recorded terrains agree."""
     ts, es = S.trial_seeds(0, 1)
     metas = {}
-    for world, profile in (("sim", None), ("real", S.make_config(world="real").profile)):
-        task = {"policy": "theta0", "theta": list(GaitParams().to_array()), "theta_hash": "x", "world": world,
-                "profile": profile, "terrain": ["fractal", ts, 0.02], "level": 0.02, "trial": 1,
-                "terrain_seed": ts, "episode_seed": es, "seconds": 0.1, "record": True}
-        row = S.run_trial(task)
-        metas[world] = row["recording"][1]["terrain"]
-        assert row["terrain"] == metas[world]["name"]
+    for world, profile in (("sim", "real"), ("real", S.make_config(world="real").profile)):
+        res = run_episode(EpisodeTask(world, GaitParams().to_array(), es, 0.1, profile=profile,
+                                      terrain=("fractal", ts, 0.02), record=True))
+        metas[world] = res.recording[1]["terrain"]
+        assert res.terrain == metas[world]["name"]
     assert metas["sim"] == metas["real"] and metas["sim"]["max"] == pytest.approx(0.02, abs=1e-3)
-    assert S.terrain_of("fractal", ts, 0.02) is S.terrain_of("fractal", ts, 0.02)  # cached per process
+    assert terrain_field("fractal", ts, 0.02) is terrain_field("fractal", ts, 0.02)  # cached per process
 
 
 def test_worst_trial_is_earliest_fall_else_slowest():
@@ -133,7 +132,8 @@ def test_identical_policies_give_identical_trials(tmp_path):
     assert by["a"][0]["speed_cm_s"] != by["a"][1]["speed_cm_s"]  # the trials themselves differ
     ra, rb = res["rows"]
     assert {**ra, "policy": "b"} == rb
-    serial = S.run_trial(S.plan_tasks(cfg)[1])  # a process-pool row repeats exactly in this process
+    trial = S.plan_tasks(cfg)[1]
+    serial = S.trial_row(trial, run_episode(trial.task))  # a process-pool row repeats exactly in this process
     assert _strip([serial])[0] == _strip([r for r in by["b"] if r["trial"] == 0])[0]
 
 
@@ -213,5 +213,5 @@ def test_sweep_latency_with_rerun(tmp_path):
     rows = S.read_trials(tmp_path / "run" / "trials.csv")
     assert {r["terrain"] for r in rows} == {"flat"}  # profile none: no random terrain
     # the effect value reaches the world
-    t = dict(S.plan_tasks(cfg)[1], record=True)
-    assert S.run_trial(t)["recording"][1]["effects"]["latency_s"] == 0.02
+    t = S.plan_tasks(cfg)[1].task.replace(record=True)
+    assert run_episode(t).recording[1]["effects"]["latency_s"] == 0.02

@@ -192,7 +192,7 @@ def _check_row(row):
 
 
 def test_cliff_gat_vs_sgat_at_key_noise_values():
-    from experiments.cli.cliff import compare_at_noise
+    from experiments.cliff.run import compare_at_noise
 
     rows = [compare_at_noise(0.0), compare_at_noise(0.3),
             # at noise 1 every policy is equivalent; a short grounding budget is enough
@@ -212,7 +212,7 @@ def test_cliff_gat_vs_sgat_at_key_noise_values():
 def test_cliff_full_sweep_reproduces_fig7():
     """The paper's Fig. 7 sweep (11 noise values; its speed is measured by ``sgatwalk cliff``, which
     prints the time it took, not asserted here)."""
-    from experiments.cli.cliff import sweep
+    from experiments.cliff.run import sweep
 
     rows = sweep(np.linspace(0, 1, 11).round(12).tolist())
     for row in rows:

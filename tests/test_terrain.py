@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import terrain
-from envs import NaoRealEnv, NaoSimEnv
+from envs import RealWorld, SimWorld
 from terrain import Heightfield
 
 
@@ -60,9 +60,9 @@ def test_bad_input():
 @pytest.mark.parametrize("kind,amp", [("lumpy", 0.03), ("fractal", 0.04), ("steps", 0.03)])
 def test_ray_casts_agree_across_engines(kind, amp):
     hf = terrain.make(kind, seed=7, amplitude=amp)
-    sim = NaoSimEnv(terrain=hf)
+    sim = SimWorld(terrain=hf)
     sim.reset(seed=0)
-    real = NaoRealEnv(terrain=hf, profile="none")
+    real = RealWorld(terrain=hf, profile="none")
     real.reset(seed=0)
     rng = np.random.default_rng(0)
     hx, hy = hf.half_extent

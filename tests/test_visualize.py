@@ -15,7 +15,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from envs import HoldPose, NaoRealEnv, NaoSimEnv, Recording, RecordingError, rollout
+from envs import HoldPose, RealWorld, SimWorld, Recording, RecordingError, rollout
 from experiments import viz
 from experiments.cli import main
 from robots import get_robot, nao_h25
@@ -75,9 +75,9 @@ def recs():
     """A short sim and real rollout holding the crouch (real on its lumpy field, seed 3), the sim
     one with a synthetic plan and footsteps, and a synthetic fall."""
     robot = nao_h25()
-    sim_env = NaoSimEnv()
+    sim_env = SimWorld()
     sim = rollout(sim_env, HoldPose(robot), seed=3, seconds=0.5)
-    real_env = NaoRealEnv()
+    real_env = RealWorld()
     real = rollout(real_env, HoldPose(robot), seed=3, seconds=0.4)
     real_terrain = real_env.terrain
     real_env.close()
@@ -108,7 +108,7 @@ def recs():
 ])
 def test_forward_kinematics_matches_mujoco(name, atol):
     robot = get_robot(name)
-    env = NaoSimEnv(robot)
+    env = SimWorld(robot)
     m, d = env.model, env.data
     rng = np.random.default_rng(0)
     T, n = 5, len(robot.joint_names)

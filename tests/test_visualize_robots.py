@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from common.spatial import quat_from_rpy
-from envs import HoldPose, NaoSimEnv, Recording, RecordingError, rollout
+from envs import HoldPose, SimWorld, Recording, RecordingError, rollout
 from experiments import viz
 from experiments.cli import main
 from robots import get_robot, nao_h25
@@ -60,7 +60,7 @@ def recs():
     out = {}
     for name in ("g1", "talos"):
         robot = get_robot(name)
-        env = NaoSimEnv(robot)
+        env = SimWorld(robot)
         out[name] = rollout(env, HoldPose(robot), seed=1, seconds=0.15)
         env.close()
     return out
@@ -134,7 +134,7 @@ def test_meshes_logged_under_link_entities(recs, tmp_path, name):
 
 def test_nao_has_no_meshes(tmp_path):
     robot = nao_h25()
-    env = NaoSimEnv()
+    env = SimWorld()
     rec = rollout(env, HoldPose(robot), seed=0, seconds=0.05)
     viz.log_rollouts_to_rrd({"sim": rec}, tmp_path / "nao.rrd")
     data = read_rrd(tmp_path / "nao.rrd")

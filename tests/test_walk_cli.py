@@ -35,7 +35,7 @@ def test_walk_json_and_record(tmp_path, capsys):
 
 def test_walk_human_output_defaults_to_theta0(capsys):
     """The printed line is the --json result of the same (deterministic) walk of θ0, in words."""
-    from experiments.cli.walk import format_walk
+    from experiments.demos.walk import format_walk
     from walk_engine import GaitParams
 
     code, out, _ = _run(capsys, "--seconds", "1")
@@ -91,21 +91,8 @@ def test_walk_in_the_identified_world_and_seed_errors(tmp_path, capsys):
     assert code == 0, err
     res = json.loads(out)
     assert res["terrain"].startswith("gaussian(sq=0.002") and res["world"] == "identified"
-    # a ground compliance kept as uncertain and indistinguishable from the declared ground: the default
-    # world leaves it out (as sgatwalk fidelity's and optimize's identified worlds do), --confounded-terms builds it in
-    rep.write_text(json.dumps({"model": {"latency": 0.02, "ground_compliance": 0.04}, "base_model": {},
-                               "effects": [{"family": "terrain_roughness", "value": 0.002}],
-                               "uncertain": [{"family": "ground_compliance"}],
-                               "indistinguishable": [{"a": "ground_compliance", "b": "terrain_roughness"}]}))
-    walks = {}
-    for extra in ([], ["--confounded-terms"]):
-        code, out, err = _run(capsys, "--world", "identified", "--report", str(rep), "--seconds", "2", "--seed", "4",
-                              "--json", *extra)
-        assert code == 0, err
-        walks[bool(extra)] = json.loads(out)
-    assert walks[False]["distance_m"] != walks[True]["distance_m"]  # a 40 ms contact time constant walks otherwise
     for argv, words in [(["--world", "identified"], "needs --report"), (["--report", str(rep)], "needs --world identified"),
-                        (["--confounded-terms"], "applies to --world identified only"),
+                        (["--profile", "none"], "applies to the real world only"),
                         (["--seed", "-5"], "argument --seed: must be in [0, 4294967295]")]:
         code, out, err = _run(capsys, *argv)
         assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from robots import nao_h25
-from walk_engine import STAND, GaitParams, WalkCommand, WalkEngine, observation_slices
+from robots.observation import ObservationLayout
+from walk_engine import STAND, GaitParams, WalkCommand, WalkEngine
 
 ROBOT = nao_h25()
-SL = observation_slices(ROBOT)
+SL = {**ObservationLayout(ROBOT).slices, "size": ObservationLayout(ROBOT).size}
 
 
 def _obs(q=None, gyro=(0.0, 0.0, 0.0), fsr=(20.0, 20.0), angle=(0.0, GaitParams().torso_pitch)):

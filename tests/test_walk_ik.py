@@ -5,13 +5,14 @@ import pytest
 
 import envs
 from robots import nao_h25
-from walk_engine.kinematics import (LEG_JOINTS, LEG_REACH, REACH_CLIP, BodyModel, hip_offset, leg_fk, leg_ik,
+from robots.kinematics import BodyModel
+from walk_engine.kinematics import (LEG_JOINTS, LEG_REACH, REACH_CLIP, hip_offset, leg_fk, leg_ik,
                                     leg_ik_fixed_hyp, leg_limits, leg_load_torques, legs_ik)
 
 
 @pytest.fixture(scope="module")
 def hanging():
-    env = envs.NaoSimEnv(fixed_base=True)
+    env = envs.SimWorld(fixed_base=True)
     env.reset(seed=0)
     yield env
     env.close()

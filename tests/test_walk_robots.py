@@ -4,7 +4,7 @@ RobotModel, gait parameters scaled per robot, 20 s walks in both worlds."""
 import numpy as np
 import pytest
 
-from envs import NaoRealEnv, NaoSimEnv, rollout
+from envs import RealWorld, SimWorld, rollout
 from robots import get_robot, nao_h25
 from walk_engine import GaitParams, LegChain, WalkEngine, params_for
 from walk_engine.footsteps import SupportPolygon
@@ -70,7 +70,7 @@ def test_support_polygon_is_the_sole_box(name):
 @pytest.mark.parametrize("name", ["g1", "talos"])
 def test_theta0_walks_20s_without_falling(name, world):
     robot = get_robot(name)
-    env = NaoSimEnv(robot) if world == "sim" else NaoRealEnv(robot, profile="none", terrain="flat")
+    env = SimWorld(robot) if world == "sim" else RealWorld(robot, profile="none", terrain="flat")
     rec = rollout(env, WalkEngine(robot), seed=0, seconds=20.0)
     env.close()
     assert not rec.fell, (rec.meta["fall_reason"], rec.meta["fall_time"])

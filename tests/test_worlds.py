@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from envs import CommandLog, HoldPose, NaoRealEnv, NaoSimEnv, rollout
+from envs import CommandLog, HoldPose, RealWorld, SimWorld, rollout
 from envs.excitation import chirp_with_holds
 from robots import nao_h25
 from terrain import lumpy
@@ -21,8 +21,8 @@ def test_fixed_base_chirp_agrees_across_engines():
     physics only (<= 3 mrad RMS per joint)."""
     robot = nao_h25()
     cmd = chirp_with_holds(robot, seconds=6.0)
-    q_sim = replay(NaoSimEnv(fixed_base=True), cmd).group("q")
-    real = NaoRealEnv(fixed_base=True, profile="none")
+    q_sim = replay(SimWorld(fixed_base=True), cmd).group("q")
+    real = RealWorld(fixed_base=True, profile="none")
     q_real = replay(real, cmd).group("q")
     real.close()
     assert q_sim.shape == q_real.shape == (600, 24)
@@ -36,7 +36,7 @@ def test_fixed_base_chirp_agrees_across_engines():
 @pytest.mark.parametrize("amplitude", [0.0, 0.01])
 def test_crouch_stands_10s(world, amplitude):
     hf = lumpy(3, amplitude=amplitude) if amplitude > 0 else None
-    env = NaoSimEnv(terrain=hf) if world == "sim" else NaoRealEnv(profile="none", terrain=hf if hf else "flat")
+    env = SimWorld(terrain=hf) if world == "sim" else RealWorld(profile="none", terrain=hf if hf else "flat")
     rec = rollout(env, HoldPose(env.robot, "crouch"), seed=0, seconds=10.0)
     assert not rec.fell, rec.meta["fall_reason"]
     assert len(rec) == 1000
@@ -49,7 +49,7 @@ def test_crouch_stands_10s(world, amplitude):
 
 
 def test_real_profile_stands_too():
-    env = NaoRealEnv(profile="real")
+    env = RealWorld(profile="real")
     rec = rollout(env, HoldPose(env.robot), seed=1, seconds=5.0)
     assert not rec.fell
     assert rec.meta["terrain"] is not None and rec.meta["terrain"]["max"] > 0.004  # a lumpy field
@@ -58,18 +58,18 @@ def test_real_profile_stands_too():
 
 def test_mujoco_bit_identical():
     cmd = chirp_with_holds(nao_h25(), seconds=3.0, amplitude=0.1)
-    a = replay(NaoSimEnv(), cmd)
-    b = replay(NaoSimEnv(), cmd)
+    a = replay(SimWorld(), cmd)
+    b = replay(SimWorld(), cmd)
     for k in a.columns:
         assert np.array_equal(a.columns[k], b.columns[k], equal_nan=True), k
 
 
 def test_pybullet_same_seed_identical_different_seed_differs():
     cmd = chirp_with_holds(nao_h25(), seconds=3.0, amplitude=0.1)
-    env = NaoRealEnv(profile="real")
+    env = RealWorld(profile="real")
     a = replay(env, cmd, seed=5)
     b = replay(env, cmd, seed=6)
-    c = replay(NaoRealEnv(profile="real"), cmd, seed=5)  # a fresh process-level world, same seed
+    c = replay(RealWorld(profile="real"), cmd, seed=5)  # a fresh process-level world, same seed
     d = replay(env, cmd, seed=5)  # the same world again after another episode
     for k in a.columns:
         assert np.array_equal(a.columns[k], c.columns[k], equal_nan=True), k
@@ -79,14 +79,14 @@ def test_pybullet_same_seed_identical_different_seed_differs():
     assert not np.array_equal(a.group("q"), b.group("q"))
 
 
-@pytest.mark.parametrize("make", [lambda: NaoSimEnv(), lambda: NaoRealEnv(profile="real")], ids=["sim", "real"])
+@pytest.mark.parametrize("make", [lambda: SimWorld(), lambda: RealWorld(profile="real")], ids=["sim", "real"])
 def test_check_env(make):
     env = make()
     check_env(env, skip_render_check=True)
     env.close()
 
 
-@pytest.mark.parametrize("make", [lambda: NaoSimEnv(), lambda: NaoRealEnv(profile="none")], ids=["sim", "real"])
+@pytest.mark.parametrize("make", [lambda: SimWorld(), lambda: RealWorld(profile="none")], ids=["sim", "real"])
 def test_bad_actions(make):
     env = make()
     obs, info = env.reset(seed=0)
@@ -111,16 +111,16 @@ def test_bad_actions(make):
 
 def test_unknown_profile_and_terrain():
     with pytest.raises(ValueError, match="unknown profile 'moon'"):
-        NaoRealEnv(profile="moon")
+        RealWorld(profile="moon")
     with pytest.raises(ValueError, match="terrain"):
-        NaoRealEnv(terrain="ice")
+        RealWorld(terrain="ice")
     with pytest.raises(ValueError, match="terrain"):
-        NaoSimEnv(terrain=3)
+        SimWorld(terrain=3)
 
 
 def test_nan_physics_state_ends_episode_unstable_sim(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo logs its warning to MUJOCO_LOG.TXT in the working directory
-    env = NaoSimEnv()
+    env = SimWorld()
     env.reset(seed=0)
     env.data.qvel[:] = np.nan  # corrupt the physics state
     obs, r, terminated, truncated, info = env.step(env.robot.pose("crouch", actuated=True))
@@ -134,7 +134,7 @@ def test_nan_physics_state_ends_episode_unstable_sim(tmp_path, monkeypatch):
 
 
 def test_nan_physics_state_ends_episode_unstable_real():
-    env = NaoRealEnv(profile="none", terrain="flat")
+    env = RealWorld(profile="none", terrain="flat")
     env.reset(seed=0)
     env.client.resetJointState(env.body, env._jidx[3], float("nan"), 0.0)  # corrupt one joint
     obs, r, terminated, truncated, info = env.step(env.robot.pose("crouch", actuated=True))
@@ -147,7 +147,7 @@ def test_nan_physics_state_ends_episode_unstable_real():
 
 
 def test_fall_is_detected_with_reason():
-    env = NaoSimEnv()
+    env = SimWorld()
     obs, info = env.reset(seed=0)
     a = env.robot.pose("crouch", actuated=True).copy()
     names = env.robot.actuated_joint_names
@@ -162,12 +162,12 @@ def test_real_world_reports_the_torso_link_frame_not_bullets_inertial_frame():
     free base; roll -19, pitch +23, yaw +74 mrad here). The state must be the URDF torso frame: the
     robot is loaded upright, and standing in the crouch both engines' IMU angles agree (an earlier
     version read the inertial frame: a 20 mrad roll offset and a gyro rotated by 74 mrad)."""
-    real = NaoRealEnv(profile="none", terrain="flat")
+    real = RealWorld(profile="none", terrain="flat")
     _, info = real.reset(seed=0)
     assert np.abs(info["base_quat"] - [1.0, 0.0, 0.0, 0.0]).max() < 1e-9
     rec_real = rollout(real, HoldPose(real.robot, "crouch"), seed=0, seconds=2.0)
     real.close()
-    sim = NaoSimEnv()
+    sim = SimWorld()
     rec_sim = rollout(sim, HoldPose(sim.robot, "crouch"), seed=0, seconds=2.0)
     d_angle = rec_real.group("angle")[-50:].mean(0) - rec_sim.group("angle")[-50:].mean(0)
     assert np.abs(d_angle).max() < 3e-3, d_angle  # measured 1.6 mrad in pitch, 0 in roll
@@ -176,7 +176,7 @@ def test_real_world_reports_the_torso_link_frame_not_bullets_inertial_frame():
 
 @pytest.mark.parametrize("world", ["sim", "real"])
 def test_fixed_base_hangs_and_never_falls(world):
-    env = NaoSimEnv(fixed_base=True) if world == "sim" else NaoRealEnv(fixed_base=True, profile="real")
+    env = SimWorld(fixed_base=True) if world == "sim" else RealWorld(fixed_base=True, profile="real")
     _, info = env.reset(seed=0)
     assert info["base_pos"][2] == pytest.approx(0.6)
     if world == "sim":
@@ -196,7 +196,7 @@ def test_real_world_foot_friction_is_the_contact_coefficient(ground):
 
     from terrain import flat
 
-    env = NaoRealEnv(fixed_base=False, profile={"foot_friction": (0.3, 0.3)})
+    env = RealWorld(fixed_base=False, profile={"foot_friction": (0.3, 0.3)})
     env.reset(seed=0, options={"terrain": None if ground == "plane" else flat()})
     p = env.client
     foot = env._link[env.robot.frames["l_sole"].link]
@@ -224,7 +224,7 @@ def test_recorded_terrain_spec_rebuilds_the_episode_field(tmp_path):
     from envs import Recording
     from terrain import from_spec, make
 
-    env = NaoRealEnv(profile="real")
+    env = RealWorld(profile="real")
     for seed in (2, 7):
         rec = rollout(env, HoldPose(env.robot), seed=seed, seconds=0.05)
         spec = rec.meta["terrain"]["spec"]
@@ -234,5 +234,5 @@ def test_recorded_terrain_spec_rebuilds_the_episode_field(tmp_path):
         assert np.array_equal(from_spec(back.meta["terrain"]["spec"]).heights, env.terrain.heights)
     env.close()
     hf = make("fractal", seed=5, amplitude=0.02)
-    rec = rollout(NaoSimEnv(terrain=hf), HoldPose(nao_h25()), seed=0, seconds=0.05)
+    rec = rollout(SimWorld(terrain=hf), HoldPose(nao_h25()), seed=0, seconds=0.05)
     assert np.array_equal(from_spec(rec.meta["terrain"]["spec"]).heights, hf.heights)

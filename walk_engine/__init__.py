@@ -6,12 +6,12 @@ trajectory -> leg IK (the NAO's closed form with the shared HipYawPitch; other r
 gyro feedback -> joint targets at 100 Hz (WalkEngine). See walk_engine/README.md.
 """
 
-from walk_engine.engine import WalkEngine, observation_slices
+from walk_engine.engine import WalkEngine
 from walk_engine.footsteps import STAND, FootstepPlanner, Phase, WalkCommand, plan_phases
 from walk_engine.legs import LegChain
 from walk_engine.params import NAMES, N_PARAMS, SPECS, GaitParams, ParamSpec, params_for
 from walk_engine.preview import ZmpPreview, cart_table, preview_gains
 
 __all__ = ["NAMES", "N_PARAMS", "SPECS", "STAND", "FootstepPlanner", "GaitParams", "LegChain", "ParamSpec", "Phase",
-           "WalkCommand", "WalkEngine", "ZmpPreview", "cart_table", "observation_slices", "plan_phases",
+           "WalkCommand", "WalkEngine", "ZmpPreview", "cart_table", "plan_phases",
            "params_for", "preview_gains"]

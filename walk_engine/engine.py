@@ -29,21 +29,22 @@ with Kajita's preview control for the CoM):
 
 The engine is open loop in its plan (the walk frame is the plan's world frame; ground truth is
 never read) and closed loop only through the gyro (and the IMU angle if ``torso_angle_gain``). It reads nothing but the observation vector
-(layout of ``envs.ObservationLayout``, re-derived here from the robot so that no physics engine is
+(layout of ``robots.observation.ObservationLayout``, derived from the robot model, so that no physics engine is
 imported). Deterministic: no random numbers, identical observations give identical targets.
 """
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 
 from common.defaults import CONTROL_DT
 from robots import RobotModel, nao_h25
+from robots.observation import ObservationLayout
 from walk_engine.footsteps import FootstepPlanner, Phase, SupportPolygon, WalkCommand, zmp_reference
-from walk_engine.kinematics import (LEG_JOINTS, BodyModel, _fixed_scalar, _fixed_t, _free_hyp, _free_hyp_t,
+from robots.kinematics import BodyModel
+from walk_engine.kinematics import (LEG_JOINTS, _fixed_scalar, _fixed_t, _free_hyp, _free_hyp_t,
                                     _load_scalar, _target_scalar, rot_y)
 from walk_engine.legs import LegChain
 from walk_engine.params import GaitParams, params_for
@@ -62,43 +63,33 @@ BLEND_TIME = 0.2
 HIP_COMP_RAMP = 0.2
 
 
-def observation_slices(robot: RobotModel) -> dict[str, slice]:
-    """Slices of the observation vector's fields, identical to ``envs.ObservationLayout``
-    (q, dq: one per joint; gyro 3, acc 3, angle 2, fsr 2, cop 4), without importing ``envs``."""
-    n = len(robot.joint_names)
-    sizes = {"q": n, "dq": n, "gyro": 3, "acc": 3, "angle": 2, "fsr": 2, "cop": 4}
-    out, i = {}, 0
-    for k, m in sizes.items():
-        out[k] = slice(i, i + m)
-        i += m
-    out["size"] = i
-    return out
-
-
 def _mat_rows(R: np.ndarray) -> tuple:
     return tuple(tuple(r) for r in R.tolist())
 
 
-@functools.lru_cache(maxsize=256)
-def nominal_stance(robot_name: str, com_height: float, feet_spacing: float, torso_pitch: float
+_STANCES: dict = {}
+
+
+def nominal_stance(robot: RobotModel, com_height: float, feet_spacing: float, torso_pitch: float
                    ) -> tuple[np.ndarray, np.ndarray]:
     """Where the torso must be for the whole-body CoM to sit at (0, 0, ``com_height``) above feet
-    at (0, ±spacing/2, 0), torso pitched by ``torso_pitch``, arms in the crouch pose.
+    at (0, ±spacing/2, 0), torso pitched by ``torso_pitch``, arms in the crouch pose, for a robot
+    with NAO-family legs (``robot.leg_geometry``: the closed form with the shared HipYawPitch).
 
     Fixed-point iteration on the torso position with the NumPy body model (stage 5 of the module
     docstring: fixed-point iterations with the full-model CoM).
 
     Returns:
         (c_off (3,): whole-body CoM minus torso origin in the yaw-aligned walk frame [m],
-         q (24,): the joint angles of that stance [rad]); cached, treat as read-only.
-
-    Raises:
-        ValueError: a robot other than ``nao_h25`` (use ``_nominal_stance`` with the model).
+         q (n,): the joint angles of that stance [rad]); cached per robot object and stance, treat as
+         read-only.
     """
-    robot = nao_h25() if robot_name == "nao_h25" else None
-    if robot is None:  # pragma: no cover - only the NAO is modelled
-        raise ValueError(f"no body model for robot {robot_name!r}")
-    return _nominal_stance(robot, com_height, feet_spacing, torso_pitch)
+    key = (id(robot), float(com_height), float(feet_spacing), float(torso_pitch))
+    if key not in _STANCES or _STANCES[key][0] is not robot:
+        if len(_STANCES) >= 256:
+            _STANCES.clear()
+        _STANCES[key] = (robot, _nominal_stance(robot, com_height, feet_spacing, torso_pitch))
+    return _STANCES[key][1]
 
 
 def _nominal_stance(robot: RobotModel, com_height, feet_spacing, torso_pitch, legs: dict | None = None):
@@ -191,11 +182,11 @@ class WalkEngine:
         self.command = command or WalkCommand()
         self.dt = float(dt)
         r = self.robot
-        self._obs = observation_slices(r)
+        self._obs = ObservationLayout(r).slices
         act = r.actuated_joint_names
         # The NAO's legs share HipYawPitch (closed form of walk_engine.kinematics); any other robot's
         # 6-DoF legs are solved one by one (walk_engine.legs: closed form or damped least squares).
-        self._generic = "LHipYawPitch" not in r.joint_names
+        self._generic = r.leg_geometry is None
         if self._generic:
             self._legs = {s: LegChain(r, s) for s in "LR"}
             leg_names = {s: self._legs[s].joint_names for s in "LR"}
@@ -224,10 +215,8 @@ class WalkEngine:
             self.c_off, self.q_nominal = _nominal_stance_legs(r, self._legs, *stance)
             idx = {s: r.joint_index(leg_names[s]) for s in "LR"}
             self._q_leg0 = {s: np.array(self.q_nominal[idx[s]]) for s in "LR"}
-        elif r is nao_h25():
-            self.c_off, self.q_nominal = nominal_stance(r.name, *stance)  # cached
         else:
-            self.c_off, self.q_nominal = _nominal_stance(r, *stance)
+            self.c_off, self.q_nominal = nominal_stance(r, *stance)  # cached
         self.reset()
 
     # ------------------------------------------------------------------ control
@@ -326,7 +315,7 @@ class WalkEngine:
 
         Args:
             obs: the world's observation vector, shape (62,) for the NAO (layout of
-                ``envs.ObservationLayout``); only ``gyro``, ``angle`` and ``fsr`` (logged) are
+                ``robots.observation.ObservationLayout``); only ``gyro``, ``angle`` and ``fsr`` (logged) are
                 read (and ``q`` at reset).
 
         Returns:

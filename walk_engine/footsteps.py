@@ -314,8 +314,9 @@ def plan_phases(params: GaitParams, command: WalkCommand | None = None, seconds:
 
 @dataclass
 class SupportPolygon:
-    """Sole rectangle of the robot's foot in the foot frame (as in ``robots.nao``): x from ``back`` to
-    ``front`` [m] of the ankle projection, y from ``-inner``..``outer`` (left foot; mirrored)."""
+    """Sole rectangle of the robot's foot in the foot frame: x from ``back`` to ``front`` [m] of the
+    ankle projection, y from ``-inner``..``outer`` (left foot; mirrored). The defaults are the NAO's
+    (``robots.nao.NAO_SOLE``)."""
 
     front: float = 0.110
     back: float = -0.050
@@ -324,14 +325,14 @@ class SupportPolygon:
 
     @classmethod
     def for_robot(cls, robot) -> "SupportPolygon":
-        """The sole rectangle of ``robot`` (a ``robots.RobotModel``): the NAO's defaults, else the
-        left foot's collision box seen from the ``l_sole`` frame.
+        """The sole rectangle of ``robot`` (a ``robots.RobotModel``): its ``sole`` where the model gives
+        one, else the left foot's collision box seen from the ``l_sole`` frame.
 
         Raises:
             ValueError: the left foot has no collision box.
         """
-        if robot.name == "nao_h25":
-            return cls()
+        if robot.sole is not None:
+            return cls(*robot.sole)
         sole = robot.frames["l_sole"]
         foot = next(j for j in robot.joints if j.child == sole.link)
         boxes = [g for g in foot.geoms if g.kind == "box" and g.collide]

@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from common.spatial import rot_x, rot_y, rot_z
 from robots import RobotModel
 from robots.nao import FOOT_HEIGHT, HIP_OFFSET_Y, HIP_OFFSET_Z, THIGH_LENGTH, TIBIA_LENGTH
 
@@ -43,24 +44,6 @@ REACH_CLIP = 0.999
 MIN_REACH = abs(L1 - L2) + 0.02
 _C45 = math.cos(math.pi / 4)
 LEG_JOINTS = ("HipYawPitch", "HipRoll", "HipPitch", "KneePitch", "AnklePitch", "AnkleRoll")
-
-
-def rot_x(a: float) -> np.ndarray:
-    """Rotation matrix (3, 3) about x by ``a`` [rad]."""
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_y(a: float) -> np.ndarray:
-    """Rotation matrix (3, 3) about y by ``a`` [rad]."""
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rot_z(a: float) -> np.ndarray:
-    """Rotation matrix (3, 3) about z by ``a`` [rad]."""
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 _RX_P45 = rot_x(math.pi / 4)
@@ -311,57 +294,6 @@ def leg_limits(robot: RobotModel, side: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ------------------------------------------------------------------------------ full body
-def _axis_rot(axis: np.ndarray, a: float) -> np.ndarray:
-    """Rodrigues rotation (3, 3) about the unit ``axis`` by ``a`` [rad]."""
-    x, y, z = axis
-    c, s = math.cos(a), math.sin(a)
-    C = 1.0 - c
-    return np.array([[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
-                     [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
-                     [z * x * C - y * s, z * y * C + x * s, c + z * z * C]])
-
-
-class BodyModel:
-    """Full-body forward kinematics and centre of mass of a :class:`robots.RobotModel` (NumPy).
-
-    Args:
-        robot: the robot; its joints must be listed parents-first (URDF order, as ``nao_h25``).
-
-    Used to place the torso so that the *whole-body* CoM (not only a point mass) sits where the
-    LIPM plan wants it (stage 5 of :mod:`walk_engine.engine`).
-    """
-
-    def __init__(self, robot: RobotModel):
-        self.robot = robot
-        self.total_mass = robot.total_mass
-        self._joints = []
-        self._rpy = {}
-        for j in robot.joints:
-            ax = np.array(j.axis, float)
-            self._joints.append((j.parent, j.child, np.array(j.xyz, float), ax / np.linalg.norm(ax),
-                                 j.inertial.mass, np.array(j.inertial.com, float)))
-            if any(j.rpy):  # joint origins rotated (URDFs of example-robot-data; the NAO has none)
-                self._rpy[j.child] = rot_z(j.rpy[2]) @ rot_y(j.rpy[1]) @ rot_x(j.rpy[0])
-        self._root = robot.root
-        self._root_mass = robot.root_inertial.mass
-        self._root_com = np.array(robot.root_inertial.com, float)
-
-    def com(self, q: np.ndarray) -> np.ndarray:
-        """Whole-body CoM [m] in the torso frame for joint angles ``q`` [rad], shape (n joints,)
-        (``robot.joint_names`` order). Returns shape (3,)."""
-        frames = {self._root: (np.zeros(3), np.eye(3))}
-        acc = self._root_mass * self._root_com
-        for (parent, child, xyz, axis, mass, com), a in zip(self._joints, q):
-            p0, R0 = frames[parent]
-            p = p0 + R0 @ xyz
-            if child in self._rpy:
-                R0 = R0 @ self._rpy[child]
-            R = R0 @ _axis_rot(axis, float(a))
-            frames[child] = (p, R)
-            acc = acc + mass * (p + R @ com)
-        return acc / self.total_mass
-
-
 def leg_load_torques(side: str, q, cop, force) -> np.ndarray:
     """Static joint torques a ground force puts on one leg (leg masses neglected).
 

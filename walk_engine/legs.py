@@ -28,7 +28,8 @@ import math
 import numpy as np
 
 from robots import RobotModel
-from walk_engine.kinematics import BodyModel, _axis_rot, rot_x, rot_y, rot_z
+from common.spatial import axis_rotation as _axis_rot, rot_x, rot_y, rot_z
+from robots.kinematics import BodyModel
 
 #: Damping λ [-] of the least-squares step (small: the leg stays far from singular while walking;
 #: large enough to keep an out-of-reach target finite).

@@ -1,15 +1,17 @@
 """The ``sgatwalk`` command line: one entry point, one module per subcommand.
 
-Each subcommand lives in its own module under ``experiments/`` that defines
+Each subcommand lives in its own module of this package and defines
 
 * ``register(subparsers) -> argparse.ArgumentParser``: adds the subparser and its options;
-* ``run(args) -> dict``: does the work and returns a JSON-serialisable result.
+* ``run(args)``: turns the options into the experiment's config, runs it and returns its result
+  (JSON values or dataclasses).
 
-``main`` prints ``run``'s result as one JSON object when ``--json`` is given; otherwise the
-subcommand prints its own human-readable output. Errors that come from bad user input
-(:class:`UsageError`, ``ValueError``, ``KeyError``, and ``OSError`` such as a missing, unwritable or
-existing file) are printed as one clear line on stderr, naming the file, with exit status 2, never as
-a traceback.
+``main`` prints the result as one JSON object when ``--json`` is given; otherwise the subcommand
+prints its own human-readable output. Bad user input is found at the boundary: option types and
+ranges by argparse (:mod:`experiments.cli.argtypes`), the rest where a command reads what the user
+gave (:func:`experiments.cli.argtypes.user_input`); either is one line on stderr, exit status 2. Any
+other exception is a bug and shows as one, with its traceback. The modules here import no physics
+engine or torch: ``sgatwalk --help`` answers at once.
 """
 
 from __future__ import annotations
@@ -20,8 +22,7 @@ import json
 import os
 import sys
 
-from experiments.cli.argtypes import Parser, fail
-from common.files import jsonable
+from experiments.cli.argtypes import Parser, UsageError, fail
 
 # Subcommand modules, in the order ``sgatwalk --help`` lists them.
 COMMANDS: list[str] = [
@@ -53,10 +54,6 @@ def drop_timings(obj):
     return obj
 
 
-class UsageError(ValueError):
-    """Bad user input: printed as one line, exit status 2."""
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="sgatwalk",
@@ -81,53 +78,29 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def limit_blas_threads() -> int:
-    """Run the BLAS and OpenMP pools loaded in this process with ``OMP_NUM_THREADS`` threads (1 unless
-    set; ``threadpoolctl.threadpool_limits``), and those loaded later too (the variable is set).
-
-    The sgatwalk command runs its numerical work in process-pool workers of one thread each, and the
-    rounding of a threaded BLAS reduction depends on its thread count: the engine-gap calibration
-    computed with numpy's two OpenBLAS threads differs from the one-thread result in the 12th digit, and
-    the identified worlds built on it walk differently on random ground. The variable alone does not
-    reach a BLAS already loaded (an entry point that imported numpy before :func:`main`).
-
-    Returns:
-        The thread count applied.
-    """
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    try:
-        n = max(1, int(os.environ["OMP_NUM_THREADS"]))
-    except ValueError:  # e.g. a nested "4,2": leave the pools as they are
-        return 0
-    from threadpoolctl import threadpool_limits  # lazy: inspects the libraries loaded so far
-
-    threadpool_limits(limits=n)
-    return n
-
-
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     for stream in (sys.stdout, sys.stderr):  # lines reach a pipe or file as they are printed
         if hasattr(stream, "reconfigure"):
             stream.reconfigure(line_buffering=True)
-    parser = build_parser()  # imports numpy: its BLAS is loaded now
-    limit_blas_threads()
+    parser = build_parser()
     try:  # ranges and paths are checked here (experiments.cli.argtypes): one line, exit 2
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a bad option (2, already printed)
         return exc.code if isinstance(exc.code, int) else 2
+    from experiments.runtime.executors import limit_blas_threads
+
+    limit_blas_threads()
     try:
         result = args._run(args)
-    except (UsageError, ValueError, KeyError, OSError) as exc:
-        if isinstance(exc, OSError) and exc.strerror:  # e.g. [Errno 13] on an unwritable --out: name the file
-            msg = f"{exc.strerror}: {exc.filename!r}" if exc.filename else exc.strerror
-        else:
-            msg = exc.args[0] if exc.args else exc
-        return fail(f"sgatwalk {args.command}", str(msg))
+    except UsageError as exc:
+        return fail(f"sgatwalk {args.command}", str(exc))
     except KeyboardInterrupt:
         print(f"sgatwalk {args.command}: interrupted", file=sys.stderr)
         return 130
     if args.json:
+        from common.files import jsonable
+
         result = jsonable(result)
         print(json.dumps(result if args.timings else drop_timings(result), allow_nan=False))
     return 0

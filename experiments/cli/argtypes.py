@@ -14,9 +14,32 @@ import argparse
 import math
 import os
 import sys
+from contextlib import contextmanager
 
 #: Largest seed numpy.random.SeedSequence takes as one 32-bit word.
 SEED_MAX = 2**32 - 1
+
+
+class UsageError(ValueError):
+    """Bad user input found after parsing (a malformed θ file, a world the robot lacks, a run directory
+    of another run): printed as one line, exit status 2."""
+
+
+@contextmanager
+def user_input():
+    """Treat what the block raises as the user's input being bad: ``ValueError``, ``KeyError`` and a
+    missing file become a :class:`UsageError` (one line, exit 2). Wrap only the code that reads what
+    the user gave (building a config, loading a file or a run directory): an error anywhere else is a
+    bug and keeps its traceback."""
+    try:
+        yield
+    except UsageError:
+        raise
+    except (ValueError, KeyError, FileNotFoundError, NotADirectoryError, IsADirectoryError) as exc:
+        msg = exc.args[0] if exc.args else str(exc)
+        if isinstance(exc, OSError) and exc.strerror and exc.filename:
+            msg = f"{exc.strerror}: {exc.filename!r}"
+        raise UsageError(str(msg)) from exc
 
 
 class Parser(argparse.ArgumentParser):
@@ -84,28 +107,23 @@ workers = Number(int, 1, 256)
 fraction = Number(float, 0.0, 1.0)
 
 
-def parse_hidden(text: str) -> tuple[int, ...]:
-    """Hidden layer sizes of the grounding models: ``64x64`` -> (64, 64); ``0`` -> () (linear models).
+def worlds(text: str) -> tuple[str, ...]:
+    """Training worlds as a comma list (``--methods``): their canonical names
+    (:func:`experiments.runtime.worlds.parse_worlds`)."""
+    from experiments.runtime.worlds import parse_worlds  # imports no engine
 
-    Raises:
-        ValueError: anything else (sizes outside 1..4096, empty parts).
-    """
-    t = str(text).strip().lower()
-    if t == "0":
-        return ()
     try:
-        sizes = tuple(int(h) for h in t.split("x"))
-    except ValueError:
-        sizes = ()
-    if not sizes or any(not 1 <= h <= 4096 for h in sizes):
-        raise ValueError(f"hidden layers must look like 64x64 (sizes 1 to 4096) or 0 (linear), got {text!r}")
-    return sizes
+        return tuple(s.name for s in parse_worlds(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def hidden_layers(text: str) -> tuple[int, ...]:
-    """:func:`parse_hidden` as an argparse type (``--hidden`` of optimize and table1)."""
+def world(text: str) -> str:
+    """One training world (``--worlds`` items): its canonical name (:func:`experiments.runtime.worlds.parse_world`)."""
+    from experiments.runtime.worlds import parse_world  # imports no engine
+
     try:
-        return parse_hidden(text)
+        return parse_world(text).name
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -168,6 +186,13 @@ def in_file(text: str) -> str:
     return text
 
 
+def in_dir(text: str) -> str:
+    """A folder the command reads: it exists and is a directory."""
+    if not os.path.isdir(text):
+        raise argparse.ArgumentTypeError(f"no such directory: {text!r}")
+    return text
+
+
 def in_path(text: str) -> str:
     """A file or a folder the command reads: it exists."""
     if not os.path.exists(text):
@@ -175,6 +200,28 @@ def in_path(text: str) -> str:
     if not os.access(text, os.R_OK):
         raise argparse.ArgumentTypeError(f"{text!r} is not readable")
     return text
+
+
+def profile(text: str) -> str:
+    """A real-world effect profile name (``envs.effects.PROFILES``)."""
+    from envs.effects import PROFILES  # imports no engine
+
+    if text not in PROFILES:
+        raise argparse.ArgumentTypeError(f"unknown profile {text!r}; choose from {', '.join(PROFILES)}")
+    return text
+
+
+def add_profile(parser: argparse.ArgumentParser) -> None:
+    """Add ``--profile`` (default real): the real world's effect profile."""
+    parser.add_argument("--profile", type=profile, help="real-world effect profile: real (default), none, real-flat "
+                        "(real on flat ground) or real-ground (its uneven ground alone)")
+
+
+def add_executor(parser: argparse.ArgumentParser) -> None:
+    """Add ``--workers`` and ``--ray-address``: where the episodes run (a local process pool by default)."""
+    parser.add_argument("--workers", type=workers, help="worker processes (default: one per core; 1 = serial)")
+    parser.add_argument("--ray-address", metavar="ADDRESS",
+                        help="run on a Ray cluster instead (auto, or host:port of its head; docs/commands/cluster.md)")
 
 
 def add_robot(parser: argparse.ArgumentParser) -> None:
@@ -193,5 +240,5 @@ def fail(prog: str, message: str) -> int:
     return 2
 
 
-__all__ = ["Number", "Parser", "add_robot", "count", "fail", "fraction", "in_file", "in_path", "out_dir", "out_file", "real",
-           "seconds", "seed", "workers"]
+__all__ = ["Number", "Parser", "UsageError", "user_input", "add_executor", "add_profile", "add_robot", "count", "fail", "fraction", "in_dir", "in_file",
+           "in_path", "out_dir", "out_file", "profile", "real", "seconds", "seed", "workers", "world", "worlds"]

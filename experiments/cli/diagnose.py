@@ -65,17 +65,11 @@ def register(sub) -> argparse.ArgumentParser:
 
 
 def run(args) -> dict:
-    from sysid.data import load_logs  # lazy: loads the engines; keeps sgatwalk --help fast
     from sysid.diagnose import calibrate, diagnose  # lazy: loads the engines; keeps sgatwalk --help fast
     from sysid.report import format_report, public_json, write_report  # lazy: loads the engines; keeps sgatwalk --help fast
 
-    logs = load_logs(args.real, use_ground_truth=args.use_ground_truth)
-    robot = logs[0].robot
-    if args.sim != "auto":
-        from robots import get_robot  # lazy: g1/talos parse their URDFs
-
-        if get_robot(args.sim).name != robot.name:
-            raise ValueError(f"--sim {args.sim}: the recordings are of robot {robot.name!r}")
+    with A.user_input():
+        logs, robot, cal, fams, base = _inputs(args)
     say = None if args.json else (lambda s: print(s, file=sys.stderr))
     os.makedirs(args.out, exist_ok=True)
     if args.calibrate:
@@ -90,10 +84,35 @@ def run(args) -> dict:
                   f"{', '.join(f'{k} = {v:.4g}' for k, v in cal['baseline_model'].items()) or 'none'}; "
                   f"base state {cal['base_state']}; wrote {p}")
         return {"calibration": p, **public_json(cal)}
+    rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
+                   time_budget_s=args.time_budget or None, robot=robot, use_ground_truth=args.use_ground_truth)
+    paths = write_report(rep, logs, args.out, plots=not args.no_plots)
+    if not args.json:
+        print(format_report(rep))
+        print(f"wrote {', '.join(v if isinstance(v, str) else ', '.join(v) for v in paths.values())}")
+    out = public_json(rep)
+    out["files"] = paths
+    return out
+
+
+def _inputs(args):
+    """What the user gave, read and checked: (logs, robot, calibration or None, families or None, base
+    model or None).
+
+    Raises:
+        ValueError, FileNotFoundError: unreadable logs, a calibration or report of other logs (named).
+    """
+    from sysid.data import load_logs  # lazy: loads the engines
+
+    logs = load_logs(args.real, use_ground_truth=args.use_ground_truth)
+    robot = logs[0].robot
+    if args.sim != "auto":
+        from robots import get_robot  # lazy: g1/talos parse their URDFs
+
+        if get_robot(args.sim).name != robot.name:
+            raise ValueError(f"--sim {args.sim}: the recordings are of robot {robot.name!r}")
     cal = None
-    if args.calibration:
-        if not os.path.exists(args.calibration):
-            raise FileNotFoundError(f"no calibration file at {args.calibration!r}")
+    if args.calibration and not args.calibrate:
         with open(args.calibration) as f:
             try:
                 cal = json.load(f)
@@ -111,10 +130,8 @@ def run(args) -> dict:
     fams = _families(args.families, logs) if args.families else None
     base = None
     if args.base_report:
-        from sysid.report import terms_from_labels  # lazy: loads the engines; keeps sgatwalk --help fast
+        from sysid.report import terms_from_labels  # lazy: loads the engines
 
-        if not os.path.exists(args.base_report):
-            raise FileNotFoundError(f"no report at {args.base_report!r}")
         with open(args.base_report) as f:
             try:
                 prev = json.load(f)
@@ -126,15 +143,7 @@ def run(args) -> dict:
         if alien:
             raise ValueError(f"{args.base_report}: effect {alien[0]} is not on a joint or link of {robot.name} "
                              "(a report of another robot)")
-    rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
-                   time_budget_s=args.time_budget or None, robot=robot, use_ground_truth=args.use_ground_truth)
-    paths = write_report(rep, logs, args.out, plots=not args.no_plots)
-    if not args.json:
-        print(format_report(rep))
-        print(f"wrote {', '.join(v if isinstance(v, str) else ', '.join(v) for v in paths.values())}")
-    out = public_json(rep)
-    out["files"] = paths
-    return out
+    return logs, robot, cal, fams, base
 
 
 def _families(text: str, logs) -> list[str]:

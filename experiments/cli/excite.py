@@ -68,15 +68,29 @@ def run(args) -> dict:
     from sysid.worlds import freeze, record_excitation, rough_ground  # lazy: loads the engines; keeps sgatwalk --help fast
     from robots import get_robot  # lazy: g1/talos parse their URDFs
 
-    if args.segments and "saturation" in args.segments and not args.fixed_base:
-        raise ValueError("--segments saturation needs --fixed-base (a standing robot would fall)")
-    if (args.design != "protocol" or args.design_only) and not args.fixed_base:
-        raise ValueError("--design d-optimal needs --fixed-base (the design replays the robot in the air)")
-    if args.design_only and args.design == "protocol":
-        raise ValueError("--design-only needs --design d-optimal")
-    if args.out is None and not args.design_only:
-        raise ValueError("--out DIR is required (the folder for the recordings)")
-    robot = get_robot(args.robot)
+    with A.user_input():
+        if args.segments and "saturation" in args.segments and not args.fixed_base:
+            raise ValueError("--segments saturation needs --fixed-base (a standing robot would fall)")
+        if (args.design != "protocol" or args.design_only) and not args.fixed_base:
+            raise ValueError("--design d-optimal needs --fixed-base (the design replays the robot in the air)")
+        if args.design_only and args.design == "protocol":
+            raise ValueError("--design-only needs --design d-optimal")
+        if args.out is None and not args.design_only:
+            raise ValueError("--out DIR is required (the folder for the recordings)")
+        if args.world != "real" and (args.effect or args.terrain != "flat"):
+            raise ValueError("--effect and --terrain apply to the real world only")
+        if args.terrain == "lumpy" and args.fixed_base:
+            raise ValueError("--terrain lumpy needs a floating base (omit --fixed-base)")
+        robot = get_robot(args.robot)
+        prof = get_profile(args.profile, robot) if args.world == "real" else None
+        for item in args.effect if args.world == "real" else ():
+            if "=" not in item:
+                raise ValueError(f"--effect expects NAME=VALUE, got {item!r}")
+            name, val = item.split("=", 1)
+            try:
+                prof = prof.with_effect(name.strip(), float(val))
+            except ValueError as exc:
+                raise ValueError(f"--effect {item}: {exc}") from None
     shares = None
     plan = None
     if args.design == "d-optimal":
@@ -97,23 +111,10 @@ def run(args) -> dict:
     kw = {"fixed_base": args.fixed_base, "robot": robot}
     ground = None
     if args.world == "real":
-        prof = get_profile(args.profile, robot)
-        for item in args.effect:
-            if "=" not in item:
-                raise ValueError(f"--effect expects NAME=VALUE, got {item!r}")
-            name, val = item.split("=", 1)
-            try:
-                prof = prof.with_effect(name.strip(), float(val))
-            except ValueError as exc:
-                raise ValueError(f"--effect {item}: {exc}") from None
         frozen = freeze(prof, args.seed, robot)
         kw.update(profile=frozen, terrain="flat")
         if args.terrain == "lumpy":
-            if args.fixed_base:
-                raise ValueError("--terrain lumpy needs a floating base (omit --fixed-base)")
             ground = rough_ground(float(frozen.frozen.terrain_amplitude), seed=args.seed)
-    elif args.effect or args.terrain != "flat":
-        raise ValueError("--effect and --terrain apply to the real world only")
     env = make_world(args.world, **kw)
     t0 = time.perf_counter()
     say = None if args.json else print

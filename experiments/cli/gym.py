@@ -90,17 +90,19 @@ def config_from_args(args):
 def run(args) -> dict:
     from experiments.gym import run as G  # lazy: keeps sgatwalk --help fast
 
-    cfg = config_from_args(args)
+    with A.user_input():
+        cfg = config_from_args(args)
     out = args.out or os.path.join("runs", f"gym_{cfg.env}_{cfg.experiment}_{cfg.preset}")
     log = (lambda *a, **k: None) if args.json else print
     if args.report:
         table = G.ResultTable(Path(out))
-        if not table.path.exists():
-            raise FileNotFoundError(f"--report: no results table at {table.path}")
-        rows = table.current(cfg)
-        if not rows:
-            raise ValueError(f"--report: {table.path} has no rows for these settings; give the options "
-                             f"the sweep ran with")
+        with A.user_input():
+            if not table.path.exists():
+                raise FileNotFoundError(f"--report: no results table at {table.path}")
+            rows = table.current(cfg)
+            if not rows:
+                raise ValueError(f"--report: {table.path} has no rows for these settings; give the options "
+                                 f"the sweep ran with")
         summary = G.summarize(rows, cfg)
         text = G.format_table(summary, cfg)
         fig = Path(out) / f"gym_{cfg.env}_{cfg.experiment}.png"

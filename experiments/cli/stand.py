@@ -8,12 +8,7 @@ foot forces and the simulation speed, and can write each rollout as a Parquet re
 from __future__ import annotations
 
 import argparse
-import os
-import time
-
-import numpy as np
-
-from terrain import TERRAINS, check_amplitude, make
+from terrain import TERRAINS
 import experiments.cli.argtypes as A
 
 
@@ -24,7 +19,7 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--pose", default="crouch", help="robot pose to hold (zero, stand, crouch; the NAO also deep_crouch)")
     p.add_argument("--seconds", type=A.seconds, default=10.0, help="duration [s] (default 10)")
     p.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise)")
-    p.add_argument("--profile", default="real", help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
+    A.add_profile(p)
     p.add_argument("--terrain", default=None, choices=TERRAINS,
                    help="terrain for both worlds (default: flat sim, the profile's random lumpy field in real)")
     p.add_argument("--amplitude", type=A.real(0.0, 1.0), default=None,
@@ -37,76 +32,14 @@ def register(sub) -> argparse.ArgumentParser:
     return p
 
 
-def _record_path(path: str, world: str, n_worlds: int) -> str:
-    if "{world}" in path:
-        return path.format(world=world)
-    if n_worlds == 1:
-        return path
-    root, ext = os.path.splitext(path)
-    return f"{root}_{world}{ext or '.parquet'}"
-
-
 def run(args) -> dict:
-    from envs import HoldPose, make_world, rollout  # lazy: engines load only when the command runs
-    from robots import get_robot  # lazy: g1/talos parse their URDFs
+    from experiments.demos.stand import StandConfig, format_stand, stand
 
-    robot = get_robot(args.robot)
-    robot.pose(args.pose)  # KeyError naming the known poses, before any world is built
-
-    worlds = [w.strip() for w in args.world.split(",") if w.strip()]
-    for w in worlds:
-        if w not in ("sim", "real"):
-            raise ValueError(f"unknown world {w!r}; choose from sim, real")
-    hf = None
-    if args.amplitude is not None and args.terrain is None:
-        raise ValueError("--amplitude needs --terrain (e.g. --terrain lumpy --amplitude 0.01)")
-    if args.terrain is not None:
-        amp = check_amplitude(args.terrain, 0.01 if args.amplitude is None else args.amplitude)
-        hf = make(args.terrain, seed=args.seed, amplitude=amp)
-    results = []
-    for w in worlds:
-        kw = {"fixed_base": args.fixed_base, "robot": robot}
-        if w == "real":
-            kw.update(profile=args.profile, terrain=hf if hf is not None else "lumpy")
-        else:
-            kw.update(terrain=hf)
-        env = make_world(w, **kw)
-        ctrl = HoldPose(env.robot, args.pose)
-        t0 = time.perf_counter()
-        rec = rollout(env, ctrl, seed=args.seed, seconds=args.seconds)
-        wall = time.perf_counter() - t0
-        com = rec.group("gt.com")
-        fsr = rec.group("fsr")
-        res = {
-            "world": w, "fell": rec.fell, "fall_reason": rec.meta["fall_reason"], "fall_time_s": rec.meta["fall_time"],
-            "seconds": float(len(rec) * env.control_dt),
-            "com_drift_m": float(np.linalg.norm(com[-1, :2] - com[0, :2])),
-            "com_height_m": float(com[-1, 2]),
-            "foot_force_n": [float(v) for v in fsr[len(fsr) // 2:].mean(0)],
-            "terrain": rec.meta["terrain"]["name"] if rec.meta["terrain"] else "flat",
-            "wall_s": wall, "realtime_factor": float(len(rec) * env.control_dt / wall),
-        }
-        if w == "real":
-            res["profile"] = env.profile.name
-        if args.record:
-            res["recording"] = rec.to_parquet(_record_path(args.record, w, len(worlds)))
-        results.append(res)
-        env.close()
+    with A.user_input():
+        cfg = StandConfig(worlds=tuple(w.strip() for w in args.world.split(",") if w.strip()), pose=args.pose,
+                          seconds=args.seconds, seed=args.seed, profile=args.profile or "real", terrain=args.terrain,
+                          amplitude=args.amplitude, fixed_base=args.fixed_base, robot=args.robot, record=args.record)
+    res = stand(cfg)
     if not args.json:
-        print(format_stand(results))
-    return {"robot": args.robot, "pose": args.pose, "seed": args.seed, "worlds": results}
-
-
-def format_stand(results: list[dict]) -> str:
-    """The table ``sgatwalk stand`` prints, from its per-world results (also from ``--json``; the
-    real-time factor shows when the result has it, i.e. with ``--timings``)."""
-    rt = all("realtime_factor" in r for r in results)
-    lines = [f"{'world':6s} {'fell':5s} {'reason':10s} {'CoM drift':>10s} {'CoM z':>7s} {'feet L/R [N]':>14s} "
-             f"{'terrain':22s}" + (f" {'x realtime':>10s}" if rt else "")]
-    for r in results:
-        lines.append(f"{r['world']:6s} {str(r['fell']):5s} {str(r['fall_reason'] or '-'):10s} "
-                     f"{1000 * r['com_drift_m']:8.1f}mm {r['com_height_m']:7.3f} "
-                     f"{r['foot_force_n'][0]:6.1f}/{r['foot_force_n'][1]:6.1f} {r['terrain']:22s}"
-                     + (f" {r['realtime_factor']:10.1f}" if rt else "")
-                     + (f"  -> {r['recording']}" if "recording" in r else ""))
-    return "\n".join(lines)
+        print(format_stand(res["worlds"]))
+    return res

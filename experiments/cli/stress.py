@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import argparse
 
-from experiments.runtime.fitness import EPISODE_SECONDS
+from common.defaults import EPISODE_SECONDS
 import experiments.cli.argtypes as A
 
 
@@ -37,27 +37,27 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--trials", type=A.count(1, 100000), default=20, help="episodes per policy and level (default 20)")
     p.add_argument("--seed", type=A.seed, default=0, help="run seed: terrain and episode seeds of the trials")
     p.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help="episode length [s] (default 7.5)")
-    p.add_argument("--profile", default=None, help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
+    A.add_profile(p)
     p.add_argument("--sweep", default=None, metavar="EFFECT=lo:hi:n",
                    help="sweep one real-world effect instead of the terrain (real world only)")
     p.add_argument("--out", type=A.out_dir, default=None, metavar="DIR", help="run directory (default runs/stress-...)")
     p.add_argument("--rerun", action="store_true", help="write .rrd files of the worst trial per policy and level")
-    p.add_argument("--workers", type=A.workers, default=None, help="worker processes (default: one per core; 1 = serial)")
-    p.add_argument("--ray-address", default=None, help="run the episodes on a Ray cluster (auto, local, ray://...)")
+    A.add_executor(p)
     A.add_robot(p)
     return p
 
 
 def run(args) -> dict:
-    from experiments.stress.run import make_config, run_stress  # lazy: scipy; keeps sgatwalk --help fast
+    from experiments.runtime.progress import Reporter
+    from experiments.stress.run import make_config, run_stress  # lazy: loads the engines
 
     terrain = args.terrain if (args.terrain is not None or args.sweep is not None) else "lumpy"
-    cfg = make_config(args.params, world=args.world, terrain=terrain, amplitude=args.amplitude,
-                      trials=args.trials, seed=args.seed, profile=args.profile, sweep=args.sweep,
-                      seconds=args.seconds, robot=args.robot)
-    log = None if args.json else print
+    with A.user_input():
+        cfg = make_config(args.params, world=args.world, terrain=terrain, amplitude=args.amplitude,
+                          trials=args.trials, seed=args.seed, profile=args.profile, sweep=args.sweep,
+                          seconds=args.seconds, robot=args.robot)
     res = run_stress(cfg, args.out, workers=args.workers, ray_address=args.ray_address, rerun=args.rerun,
-                     progress=not args.json, log=log)
+                     reporter=Reporter("stress"))
     if not args.json:
         print(res["table"])
         print(f"{res['episodes']} episodes ({res['ran']} run now, {res['resumed']} resumed); the run took "

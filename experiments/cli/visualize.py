@@ -22,14 +22,9 @@ and entity paths are described in ``experiments/viz/__init__.py``.
 from __future__ import annotations
 
 import argparse
-import os
 import experiments.cli.argtypes as A
 
 from common.defaults import EPISODE_SECONDS
-from experiments.cli.stand import _record_path
-
-WORLDS = ("sim", "real", "grounded")
-
 
 def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("visualize", help="show rollouts in Rerun (recordings, a run directory or a live rollout)",
@@ -51,7 +46,7 @@ def register(sub) -> argparse.ArgumentParser:
                       help="hold this pose instead of walking (zero, stand, crouch; the NAO also deep_crouch)")
     live.add_argument("--seed", type=A.seed, default=0, help="episode seed (terrain, effects, noise; default 0)")
     live.add_argument("--seconds", type=A.seconds, default=EPISODE_SECONDS, help=f"rollout duration [s] (default {EPISODE_SECONDS:g})")
-    live.add_argument("--profile", default="real", help="real-world effect profile: real (default), none, real-flat (real on flat ground) or real-ground (its uneven ground alone)")
+    A.add_profile(live)
     live.add_argument("--transformer", type=A.in_path, metavar="PATH", default=None,
                       help="action transformer for the grounded world (sgat), when available")
     live.add_argument("--record", type=A.out_file, metavar="PATH", default=None,
@@ -61,96 +56,31 @@ def register(sub) -> argparse.ArgumentParser:
     return p
 
 
-def _grounded_env(sim_env, transformer_path):
-    """``sgat.GroundedEnv(sim, transformer)`` with the transformer saved by ``sgatwalk optimize``
-    (``RUN_DIR/models/<method>_step<i>``)."""
-    from sgat.transformer import ActionTransformer, GroundedEnv  # lazy: torch; keeps sgatwalk --help fast
-
-    if transformer_path is None:
-        raise ValueError("world 'grounded' needs --transformer DIR (e.g. RUN_DIR/models/sgat_step1 of 'sgatwalk optimize')")
-    if not os.path.exists(transformer_path):
-        raise FileNotFoundError(f"no action transformer at {transformer_path!r}")
-    return GroundedEnv(sim_env, ActionTransformer.load(transformer_path))
-
-
-def _live(args) -> tuple[dict, dict, list[str]]:
-    """Run one rollout per world; returns (label -> recording, label -> terrain, notes)."""
-    from envs import HoldPose, make_world, rollout  # lazy: loads the engines; keeps sgatwalk --help fast
-    from experiments.viz import plan_from_engine  # lazy: loads the engines; keeps sgatwalk --help fast
-
-    worlds = [w.strip() for w in args.world.split(",") if w.strip()]
-    if not worlds:
-        raise ValueError("--world is empty; choose from sim, real, grounded")
-    for w in worlds:
-        if w not in WORLDS:
-            raise ValueError(f"unknown world {w!r}; choose from {', '.join(WORLDS)}")
-    if len(set(worlds)) != len(worlds):
-        raise ValueError(f"--world lists a world twice: {args.world!r}")
-    from robots import get_robot  # lazy: g1/talos parse their URDFs
-
-    robot = get_robot(args.robot or "nao")
-    if "grounded" in worlds and robot.name != "nao_h25":
-        raise ValueError(f"world 'grounded' is the NAO's only (its action transformers are fitted on the NAO); "
-                         f"drop it from --world for --robot {args.robot}")
-    if args.pose is not None and args.pose not in robot.poses:
-        raise ValueError(f"unknown pose {args.pose!r} for --robot {args.robot or 'nao'}; choose from "
-                         f"{', '.join(robot.poses)}")
-    params = None
-    if args.pose is None:
-        from walk_engine import WalkEngine, params_for  # lazy: scipy; keeps sgatwalk --help fast
-
-        P = params_for(robot)
-        params = P.load(args.params) if args.params else P.initial()
-    elif args.params:
-        raise ValueError("give either --params (walk) or --pose (stand), not both")
-    envs = {}
-    try:
-        for w in worlds:  # build all first: a bad world fails before any rollout runs
-            if w == "real":
-                envs[w] = make_world("real", robot=robot, profile=args.profile)
-            elif w == "sim":
-                envs[w] = make_world("sim", robot=robot)
-            else:
-                envs[w] = _grounded_env(make_world("sim", robot=robot), args.transformer)
-        recs, terrains, notes = {}, {}, []
-        for w, env in envs.items():
-            robot = env.unwrapped.robot
-            meta = {"world": w}
-            if params is not None:
-                ctrl = WalkEngine(robot, params)
-                meta["params"] = params.to_dict()
-            else:
-                ctrl = HoldPose(robot, args.pose)
-            rec = rollout(env, ctrl, seed=args.seed, seconds=args.seconds, meta=meta)
-            if hasattr(ctrl, "diagnostics"):
-                rec = plan_from_engine(rec, ctrl.diagnostics())
-            recs[w] = rec
-            terrains[w] = env.unwrapped.terrain
-            if args.record:
-                notes.append(f"{w}: recording -> {rec.to_parquet(_record_path(args.record, w, len(worlds)))}")
-    finally:
-        for env in envs.values():
-            env.close()
-    return recs, terrains, notes
-
-
 def run(args) -> dict:
     from experiments.viz import find_recordings, log_rollouts_to_rrd, screenshot_rrd  # lazy: loads the engines; keeps sgatwalk --help fast
 
-    if args.spawn and args.save:
-        raise ValueError("give --save or --spawn, not both")
-    if args.spawn and args.screenshot:
-        raise ValueError("--screenshot renders a saved file; drop --spawn")
+    from experiments.viz.live import LiveConfig, live_rollouts
+
     notes: list[str] = []
     skipped: list[str] = []
     terrains = None
-    if args.inputs:
-        given = [a for a in ("params", "pose", "transformer", "record", "robot") if getattr(args, a)]
-        if given:
-            raise ValueError(f"--{given[0]} is for a live rollout; drop it or drop the recording paths")
-        recs, skipped = find_recordings(args.inputs)
-    else:
-        recs, terrains, notes = _live(args)
+    with A.user_input():
+        if args.spawn and args.save:
+            raise ValueError("give --save or --spawn, not both")
+        if args.spawn and args.screenshot:
+            raise ValueError("--screenshot renders a saved file; drop --spawn")
+        if args.inputs:
+            given = [a for a in ("params", "pose", "transformer", "record", "robot") if getattr(args, a)]
+            if given:
+                raise ValueError(f"--{given[0]} is for a live rollout; drop it or drop the recording paths")
+            recs, skipped = find_recordings(args.inputs)
+        else:
+            cfg = LiveConfig(worlds=tuple(w.strip() for w in args.world.split(",") if w.strip()), robot=args.robot or "nao",
+                             params=args.params, pose=args.pose, seed=args.seed, seconds=args.seconds,
+                             profile=args.profile or "real", transformer=args.transformer, record=args.record)
+            gait = cfg.gait()
+    if not args.inputs:
+        recs, terrains, notes = live_rollouts(cfg, gait)
     path = None if args.spawn else (args.save or "sgatwalk.rrd")
     res = log_rollouts_to_rrd(recs, path, terrains=terrains, spawn=args.spawn)
     out = {

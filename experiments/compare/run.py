@@ -8,18 +8,13 @@ fitness agree), so their worlds are scored against the same real fitness and the
 The same seed on another machine kind is another panel (the real trials differ in their last bits,
 and falls amplify that).
 
-Per world: its episodes per gait, Spearman ρ with the real fitness over the draws (median, worst, best), median |bias| and
-the bias spread over the draws, the median Brier score, the median regret of its pick, whether its
-worst ρ meets the grounding issue's ranking target (:func:`experiments.fidelity.run.ranking_target`),
-and for SGAT and hybrid worlds how many of the issue's targets it meets
-(:func:`experiments.fidelity.run.fidelity_targets`, against its own run's plain sim and GAT) and its ρ
-against its run's reference SGAT world draw by draw (draw d of both is fitted on the same real
-grounding walks: a paired comparison). Worlds are named in today's meaning of their options
-(:func:`experiments.fidelity.run.canonical_world_name`: an ``identified`` world saved before the
-fourteenth round, which built in the contact terms confounded with the ground, ranks as
-``identified:confounded=1``). With ``paired``, a world that two runs of a panel measured under one name
-is also tested across the runs (:func:`paired_across_runs`: the paired bootstrap of
-:func:`experiments.runtime.stats.paired_spearman_difference` on the real trials and episodes they share).
+Per world: its episodes per gait, Spearman ρ with the real fitness over the draws (median, worst,
+best), median |bias| and the bias spread over the draws, the median Brier score, the median regret of
+its pick, and for SGAT and hybrid worlds its ρ against its run's first SGAT world draw by draw (draw d
+of both is fitted on the same real grounding walks: a paired comparison). With ``paired``, a world
+that two runs of a panel measured under one name is also tested across the runs
+(:func:`paired_across_runs`: the paired bootstrap of :func:`experiments.runtime.stats.paired_test` on
+the real trials and episodes they share).
 """
 
 from __future__ import annotations
@@ -33,19 +28,13 @@ import statistics
 
 import numpy as np
 
-from experiments.fidelity.run import (canonical_world_name, distinct_suffixes, fidelity_targets, first_world, format_ci, p_text,
-                                  paired_test, ranking_target)
-from experiments.runtime.stats import pick_regret
+from experiments.fidelity.results import FidelityResult, check_result, is_fidelity_result
+from experiments.runtime.rundir import distinct_suffixes
+from experiments.runtime.stats import format_ci, p_text, paired_test, pick_regret
 
-#: Worlds drawn per panel by :func:`plot` (the best by worst ρ).
-PLOT_ROWS = 20
+from experiments.compare import PLOT_ROWS  # noqa: E402 - one definition, beside the package docstring
 #: How many decimals of every gait's real fitness decide whether two runs share a panel.
 PANEL_DECIMALS = 9
-
-
-def _is_fidelity(doc) -> bool:
-    return isinstance(doc, dict) and isinstance(doc.get("real"), dict) and "fitness" in doc["real"] \
-        and isinstance(doc.get("worlds"), dict) and "gaits" in doc
 
 
 def _read(path: str):
@@ -81,13 +70,13 @@ def load_results(paths: list[str]) -> tuple[list[tuple[str, str, dict]], list[st
     def add(path: str, strict: bool) -> bool:
         doc = _read(path)
         res = doc.get("result") if isinstance(doc, dict) and "command" in doc and "result" in doc else doc
-        if not _is_fidelity(res):
+        if not is_fidelity_result(res):
             if strict:
                 raise ValueError(f"{path}: not a fidelity result (needs 'real', 'worlds' and 'gaits'; "
                                  "sgatwalk fidelity writes fidelity.json)")
             skipped.append(path)
             return False
-        _check(res, path)
+        check_result(res, path)
         real = os.path.realpath(path)
         if real in seen:
             raise ValueError(f"{path}: given twice")
@@ -127,21 +116,6 @@ def _labels(paths: list[str]) -> list[str]:
     return distinct_suffixes(parts)
 
 
-def _check(res: dict, path: str) -> None:
-    """Raise ValueError naming ``path`` and the world when a fidelity result lacks what a ranking reads."""
-    n = len(res["real"]["fitness"])
-    for key in ("fall_rate", "ceiling"):
-        if key not in res["real"]:
-            raise ValueError(f"{path}: the real trials have no {key!r}")
-    for name, w in res["worlds"].items():
-        draws = w.get("draws") if isinstance(w, dict) else None
-        if not draws or not isinstance(w.get("summary"), dict):
-            raise ValueError(f"{path}: world {name!r} has no draws or summary")
-        for d in draws:
-            if not all(k in d for k in ("rho", "brier", "fitness")) or len(d["fitness"]) != n:
-                raise ValueError(f"{path}: world {name!r}: a draw without rho, brier or one fitness per gait")
-
-
 def panel_key(res: dict) -> str:
     """Identity of a result's gait panel and real trials: SHA-256 (first 12 hex digits) of the gait
     names, the trial count, the real world's profile and every gait's real fitness (rounded to
@@ -156,23 +130,24 @@ def _median(v):
     return float(statistics.median(v)) if v else math.nan
 
 
-def world_row(res: dict, name: str) -> dict:
+def first_world(res: FidelityResult, kind: str) -> str | None:
+    """The first world of ``kind`` that a fidelity result lists (its reference world of that kind), or None."""
+    return next((n for n, w in res["worlds"].items() if w.get("kind", n.split(":")[0]) == kind), None)
+
+
+def world_row(res: FidelityResult, name: str) -> dict:
     """One world of one result, the figures :func:`compare` ranks by (module docstring)."""
     w = res["worlds"][name]
     draws = w["draws"]
     rhos = [d["rho"] for d in draws if d["rho"] is not None and math.isfinite(d["rho"])]
     kind = w.get("kind", name.split(":")[0])
-    row = {"world": canonical_world_name(name, w), "kind": kind, "draws": len(draws), "episodes": w.get("episodes"),
+    row = {"world": name, "kind": kind, "draws": len(draws), "episodes": w.get("episodes"),
            "rho_median": _median(rhos), "rho_worst": min(rhos) if rhos else math.nan,
            "rho_best": max(rhos) if rhos else math.nan,
            "abs_bias_median": float(w["summary"]["abs_bias_median"]),
            "bias_spread": float(w["summary"]["bias"]["spread"]),
            "brier_median": _median([d["brier"] for d in draws]),
            "regret_median": _median([pick_regret(d["fitness"], res["real"]["fitness"]) for d in draws])}
-    row["ranking_target_met"] = bool(rhos) and len(rhos) == len(draws) and min(rhos) >= ranking_target(res["real"]["ceiling"])
-    targets = fidelity_targets(res, name) if kind in ("sgat", "hybrid") else []  # the issue's targets are SGAT's
-    row["targets"] = [{"target": t, "met": bool(ok)} for t, ok, _ in targets]
-    row["targets_met"] = sum(t["met"] for t in row["targets"])
     ref = first_world(res, "sgat")
     if kind in ("sgat", "hybrid") and ref and ref != name and len(res["worlds"][ref]["draws"]) == len(draws) > 1:
         pairs = [(d["rho"], e["rho"]) for d, e in zip(draws, res["worlds"][ref]["draws"])
@@ -229,7 +204,7 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
         for n, w in res["worlds"].items():
             if kinds is not None and w.get("kind", n.split(":")[0]) not in kinds:
                 continue
-            sig = _measurement(canonical_world_name(n, w), w)
+            sig = _measurement(n, w)
             same = next((r for r in p["rows"] if r["_sig"] == sig), None)
             if same is not None:  # one measurement that several runs carry (a shared run directory)
                 same["runs"].append(label)
@@ -257,16 +232,16 @@ def compare(results: list[tuple[str, str, dict]], kinds: tuple[str, ...] | None 
 
 def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -> list[dict]:
     """Paired tests of one world measured by two runs of a panel: what changed between the runs (the
-    code, a setting such as ``--identify-rounds``) moved its ranking by how much, beyond the noise?
+    code, a setting) moved its ranking by how much, beyond the noise?
 
     For every world name that two or more rows of the panel carry (in the runs' order), each later
     row is tested against the first: the mean over the draws of ρ_row − ρ_first with a 90 %
-    interval and two-sided p from :func:`experiments.fidelity.run.paired_test` (this panel's gaits kept:
+    interval and two-sided p from :func:`experiments.runtime.stats.paired_test` (this panel's gaits kept:
     ``ci_panel``, ``p_value_panel``; the gaits resampled too, for a new panel: ``ci``, ``p_value``). It pairs what the design pairs only where the runs share it: the same real trials
     (every trial's fitness equal, not only the gaits' means), the same episode seeds (a fidelity
     run's are keyed by its seed alone) and draw d of both fitted on the same real data (the runs'
-    seeds). A pair that lacks per-episode fitness (results saved before the twenty-third round) or
-    whose real trials differ is listed with ``"skipped"`` saying why.
+    seeds). A pair whose real trials differ, or that lacks per-episode fitness, is listed with
+    ``"skipped"`` saying why.
 
     Args:
         rows: a panel's rows of :func:`compare`, each with ``_src`` = (result, world name).
@@ -289,7 +264,7 @@ def paired_across_runs(rows: list[dict], *, n_boot: int = 1000, seed: int = 0) -
             ta, tb = res["real"].get("fitness_trials"), ref_res["real"].get("fitness_trials")
             have = all("fitness_episodes" in d for x, m in ((res, n), (ref_res, ref_name)) for d in x["worlds"][m]["draws"])
             if ta is None or tb is None or not have:
-                out.append({**row, "skipped": "no per-episode fitness (saved before the twenty-third round)"})
+                out.append({**row, "skipped": "no per-episode fitness"})
                 continue
             if not np.array_equal(ta, tb):
                 out.append({**row, "skipped": "the runs' real trials differ trial by trial"})
@@ -317,10 +292,6 @@ def _vs(r: dict) -> str:
     return "-" if not v else f"{v['rho_diff_median']:+.2f} ({v['wins']}/{v['pairs']})"
 
 
-def _targets(r: dict) -> str:
-    return "-" if not r["targets"] else f"{r['targets_met']}/{len(r['targets'])}"
-
-
 def _episodes(r: dict) -> str:
     """A row's episodes per gait, '-' for results saved before the field."""
     return "-" if r.get("episodes") is None else str(r["episodes"])
@@ -332,15 +303,13 @@ def format_compare(res: dict) -> str:
     for p in res["panels"]:
         lines += [panel_title(p),
                   f"  {'world':40s} {'run (+ others with the same draws)':33s} {'draws':>5s} {'ep.':>4s} {'rho median [worst, best]':>26s} {'|bias|':>6s} "
-                  f"{'spread':>6s} {'Brier':>6s} {'regret':>6s} {'worst>=target':>13s} {'targets':>7s} {'rho - sgat (wins)':>18s}",
-                  f"  (target for the worst rho: {ranking_target(p['ceiling']):.2f})"]
+                  f"{'spread':>6s} {'Brier':>6s} {'regret':>6s} {'rho - sgat (wins)':>18s}"]
         for r in p["rows"]:
             run = r["run"] + (f" (+{len(r['runs']) - 1})" if len(r["runs"]) > 1 else "")
             lines.append(f"  {r['world']:40s} {run:33s} {r['draws']:>5d} {_episodes(r):>4s} "
                          f"{r['rho_median']:>8.2f} [{r['rho_worst']:5.2f}, {r['rho_best']:5.2f}] "
                          f"{r['abs_bias_median']:>6.1f} {r['bias_spread']:>6.1f} {r['brier_median']:>6.3f} "
-                         f"{r['regret_median']:>6.1f} {'yes' if r['ranking_target_met'] else 'no':>13s} {_targets(r):>7s} "
-                         f"{_vs(r):>18s}")
+                         f"{r['regret_median']:>6.1f} {_vs(r):>18s}")
         if len(p["rows"]) < p["worlds"]:
             lines.append(f"  ... {p['worlds'] - len(p['rows'])} more")
         lines += _format_paired(p.get("paired") or [])
@@ -368,7 +337,7 @@ def _format_paired(rows: list[dict]) -> list[str]:
 
 #: Colour per world kind in :func:`plot` (matplotlib's tab10).
 _KIND_COLOURS = {"sim": "tab:gray", "ane": "tab:brown", "gat": "tab:orange", "sgat": "tab:blue",
-                 "identified": "tab:green", "hybrid": "tab:purple", "oracle": "black"}
+                 "identified": "tab:green", "hybrid": "tab:purple", "real": "black"}
 
 
 def plot(res: dict, path: str, *, max_rows: int = PLOT_ROWS) -> None:
@@ -399,8 +368,6 @@ def plot(res: dict, path: str, *, max_rows: int = PLOT_ROWS) -> None:
             ax.plot([r["rho_worst"], r["rho_best"]], [yi, yi], color=c, lw=2, alpha=0.7)
             ax.plot([r["rho_median"]], [yi], "o", color=c, ms=4)
         ax.axvline(p["ceiling"], color="0.3", ls="--", lw=1, label=f"ceiling {p['ceiling']:.2f}")
-        ax.axvline(ranking_target(p["ceiling"]), color="tab:red", ls=":", lw=1,
-                   label=f"target for the worst draw {ranking_target(p['ceiling']):.2f}")
         ax.set_yticks(y, [f"{r['world']}  ({r['run']}" + (f" +{len(r['runs']) - 1}" if len(r["runs"]) > 1 else "")
                           + (f"; {r['episodes']} ep." if r.get("episodes") not in (None, 1) else "") + ")"
                           for r in rows], fontsize=6)

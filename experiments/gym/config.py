@@ -93,12 +93,12 @@ TRPO_HYPERPARAMS: dict[str, dict] = {
     },
 }
 
-METHODS = ("none", "gat", "sgat", "ane", "real")
+METHODS = ("sim", "gat", "sgat", "ane", "real")
 #: Methods that use no real-world data during training (hatched bars, as in the paper).
-NO_REAL_DATA = ("none", "ane")
+NO_REAL_DATA = ("sim", "ane")
 EXPERIMENTS = ("noisyreal", "noisysim")
 
-#: Budgets per task and preset. ``sim_steps``: the initial sim policy (shared by none, GAT, SGAT
+#: Budgets per task and preset. ``sim_steps``: the initial sim policy (shared by sim, GAT, SGAT
 #: and ANE of one run); ``grounded_steps``: the policy-improvement step per grounding step
 #: (GAT/SGAT in the grounded sim, ANE in the noisy sim), warm-started from the sim policy;
 #: ``real_steps``: the real-trained upper bound, from scratch on the real variant;
@@ -286,8 +286,8 @@ class GymConfig:
     def fingerprint(self, method: str) -> dict:
         """The settings a stored result row of ``method`` depends on (besides noise, run and ANE
         σ): a sweep only reuses rows whose fingerprint matches, so changing a budget never mixes
-        results, and only the methods that depend on a changed setting are re-run. ``"sim"`` is
-        the initial sim policy's own fingerprint.
+        results, and only the methods that depend on a changed setting are re-run. ``"sim_policy"``
+        is the initial sim policy's own fingerprint.
 
         Raises:
             ValueError: unknown method.
@@ -297,7 +297,7 @@ class GymConfig:
         ground = ("grounded_steps", "grounding_steps")
         model = ("real_transitions", "sim_transitions", "explore_sigma", "alpha", "hidden", "model_epochs",
                  "model_patience", "model_lr", "model_batch")
-        keys = {"sim": sim, "none": common + ("sim_steps",), "real": common + ("real_steps",),
+        keys = {"sim_policy": sim, "sim": common + ("sim_steps",), "real": common + ("real_steps",),
                 "ane": common + ("sim_steps",) + ground, "gat": common + ("sim_steps",) + ground + model,
                 "sgat": common + ("sim_steps",) + ground + model}
         if method not in keys:

@@ -3,8 +3,8 @@
 One run ``r`` of the experiment, for a noise level ν of the "real" actuator:
 
 1. **sim policy** -- TRPO from scratch in the sim (``sim_steps``), seed derived from r. It is
-   shared by ``none``, ``gat``, ``sgat`` and ``ane`` of run r (identical seeds).
-2. ``none`` -- the sim policy evaluated on real (the lower bound).
+   shared by ``sim``, ``gat``, ``sgat`` and ``ane`` of run r (identical seeds).
+2. ``sim`` -- the sim policy evaluated on real (the lower bound).
 3. ``gat`` / ``sgat`` -- Algorithm 1 of the paper, ``grounding_steps`` times: run the current
    policy (stochastic) on real for ``real_transitions`` steps and in the sim with exploration
    noise for ``sim_transitions`` steps (data accumulate over grounding steps); fit f_real
@@ -78,7 +78,7 @@ def noise_key(noise: float) -> int:
 
 
 def fingerprint_hash(cfg: GymConfig, method: str) -> str:
-    """Short hash of :meth:`GymConfig.fingerprint` for ``method`` (or ``"sim"``)."""
+    """Short hash of :meth:`GymConfig.fingerprint` for ``method`` (or ``"sim_policy"``)."""
     return hashlib.sha1(json.dumps(cfg.fingerprint(method), sort_keys=True).encode()).hexdigest()[:12]
 
 
@@ -412,16 +412,16 @@ def _task_real(cfg: GymConfig, task: dict) -> dict:
     return {"kind": "real", "run": r, "noise": noise, "policy": blob, "rows": [row]}
 
 
-def _task_none(cfg: GymConfig, task: dict) -> dict:
+def _task_sim(cfg: GymConfig, task: dict) -> dict:
     r = task["run"]
     pol = NumpyPolicy(task["init_policy"])
     rows = []
     for noise in task["noises"]:
         t0 = time.perf_counter()
         ev = _eval_real(cfg, pol, noise, r)
-        rows.append(_row(cfg, noise, "none", r, ev, train_steps=cfg.sim_steps, wall_s=time.perf_counter() - t0,
+        rows.append(_row(cfg, noise, "sim", r, ev, train_steps=cfg.sim_steps, wall_s=time.perf_counter() - t0,
                          sim_return=task.get("sim_return", math.nan)))
-    return {"kind": "none", "run": r, "rows": rows}
+    return {"kind": "sim", "run": r, "rows": rows}
 
 
 def _task_ane(cfg: GymConfig, task: dict) -> dict:
@@ -515,7 +515,7 @@ def _task_ground(cfg: GymConfig, task: dict) -> dict:
     return {"kind": method, "run": r, "noise": noise, "policy": res["policy"], "rows": [row]}
 
 
-_TASKS = {"sim_policy": _task_sim_policy, "real": _task_real, "none": _task_none, "ane": _task_ane,
+_TASKS = {"sim_policy": _task_sim_policy, "real": _task_real, "sim": _task_sim, "ane": _task_ane,
           "gat": _task_ground, "sgat": _task_ground}
 
 
@@ -532,7 +532,7 @@ def run_task(task: dict) -> dict:
     out = _TASKS[task["kind"]](cfg, task)
     out["cpu_s"], out["job_wall_s"] = time.process_time() - c0, time.perf_counter() - w0
     for row in out["rows"]:
-        row["cpu_s"] = out["cpu_s"]  # the whole job's CPU time (ANE/none: shared by its rows)
+        row["cpu_s"] = out["cpu_s"]  # the whole job's CPU time (ANE/sim: shared by its rows)
     if task.get("policy_path") and out.get("policy") is not None:
         save_policy(out["policy"], task["policy_path"])
     if task.get("cell_dir") and out["rows"]:
@@ -657,7 +657,7 @@ def _policy_path(out: Path, cfg: GymConfig, task: dict) -> Path:
     """Where the policy a task trains is stored: ``policies/<fingerprint>/<name>.npz``."""
     kind, r = task["kind"], task["run"]
     if kind == "sim_policy":
-        fp, name = fingerprint_hash(cfg, "sim"), f"sim_r{r}"
+        fp, name = fingerprint_hash(cfg, "sim_policy"), f"sim_r{r}"
     elif kind == "ane":
         fp, name = fingerprint_hash(cfg, "ane"), f"ane_s{task['ane_sigma']:g}_r{r}"
     else:
@@ -668,8 +668,8 @@ def _policy_path(out: Path, cfg: GymConfig, task: dict) -> Path:
 def plan_tasks(cfg: GymConfig, table: ResultTable) -> dict:
     """The jobs still to do: ``{"sim_runs": [r...], "second": [task dicts without policies]}``.
 
-    ``sim_runs`` are the runs whose sim policy is needed (some none/gat/sgat/ane cell of the run
-    is missing); ``second`` holds real, none, gat, sgat and ane jobs, longest first.
+    ``sim_runs`` are the runs whose sim policy is needed (some sim/gat/sgat/ane cell of the run
+    is missing); ``second`` holds real, sim, gat, sgat and ane jobs, longest first.
     """
     ms = cfg.methods
     second, sim_runs = [], []
@@ -679,11 +679,11 @@ def plan_tasks(cfg: GymConfig, table: ResultTable) -> dict:
             for nz in cfg.noise:
                 if not table.done(cfg, nz, "real", r):
                     second.append({"kind": "real", "run": r, "noise": nz, "cost": cfg.real_steps})
-        if "none" in ms:
-            todo = [nz for nz in cfg.noise if not table.done(cfg, nz, "none", r)]
+        if "sim" in ms:
+            todo = [nz for nz in cfg.noise if not table.done(cfg, nz, "sim", r)]
             if todo:
                 need_sim = True
-                second.append({"kind": "none", "run": r, "noises": todo, "cost": 0})
+                second.append({"kind": "sim", "run": r, "noises": todo, "cost": 0})
         for m in ("gat", "sgat"):
             if m in ms:
                 for nz in cfg.noise:
@@ -748,7 +748,7 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: boo
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a directory")
     out.mkdir(parents=True, exist_ok=True)
-    fps = {m: fingerprint_hash(cfg, m) for m in ("sim", *cfg.methods)}
+    fps = {m: fingerprint_hash(cfg, m) for m in ("sim_policy", *cfg.methods)}
     _write_json(out / "config.json", {**cfg.to_dict(), "fingerprints": fps, "versions": _versions()})
     table = ResultTable(out)
     n0 = len(table.rows)
@@ -789,13 +789,13 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: boo
     tasks = []
     for t in plan["second"]:
         t = {**t, "cfg": cfg_d, "cell_dir": cell_dir}
-        if t["kind"] != "none":
+        if t["kind"] != "sim":
             t["policy_path"] = str(_policy_path(out, cfg, t)) if local else None
         if t["kind"] != "real":
             t["init_policy"] = sim[t["run"]]
         if t["kind"] == "ane" and _policy_path(out, cfg, t).exists():
             t["trained_policy"] = load_policy(_policy_path(out, cfg, t))
-            if t["kind"] == "none":
+            if t["kind"] == "sim":
                 t["sim_return"] = sim_returns.get(t["run"], math.nan)
         tasks.append(t)
 
@@ -889,7 +889,7 @@ def format_table(summary: list[dict], cfg: GymConfig) -> str:
     lines = [f"{cfg.env} {name} ({mass}), TRPO, {cfg.runs} runs/cell; return on real over {cfg.eval_episodes} "
              f"episodes, mean ± s.e. over runs (normalized to real-trained)"]
     ms = [m for m in METHODS if m in cfg.methods]
-    head = f"{'noise':>5}  " + "  ".join(f"{m.upper() if m != 'none' else 'SIM-ONLY':>22}" for m in ms)
+    head = f"{'noise':>5}  " + "  ".join(f"{m.upper() if m != 'sim' else 'SIM-ONLY':>22}" for m in ms)
     lines += [head, "-" * len(head)]
     for nz in cfg.noise:
         cells = []
@@ -925,7 +925,7 @@ def write_summary_csv(summary: list[dict], path: Path) -> None:
     _write_text(path, buf.getvalue())
 
 
-_STYLE = {"none": ("sim only", "0.6", "//"), "ane": ("ANE (σ tuned on real)", "tab:orange", "//"),
+_STYLE = {"sim": ("sim only", "0.6", "//"), "ane": ("ANE (σ tuned on real)", "tab:orange", "//"),
           "gat": ("GAT", "tab:purple", None), "sgat": ("SGAT", "tab:blue", None), "real": ("real-trained", "tab:red", None)}
 
 
@@ -937,7 +937,7 @@ def plot_bars(summary: list[dict], cfg: GymConfig, path: Path) -> None:
     from matplotlib.figure import Figure  # lazy: matplotlib
 
     have_real = any(s["method"] == "real" and math.isfinite(s["return_mean"]) for s in summary)
-    bars = [m for m in ("none", "ane", "gat", "sgat") if m in cfg.methods]
+    bars = [m for m in ("sim", "ane", "gat", "sgat") if m in cfg.methods]
     if not have_real and "real" in cfg.methods:
         bars.append("real")
     key = "normalized" if have_real else "return_mean"

@@ -1,8 +1,8 @@
 """Batched walk episodes: many :func:`experiments.runtime.tasks.run_episode` tasks in lock-step in one worker.
 
-:func:`run_batch` takes a list of ``run_episode`` task dicts and returns exactly what
+:func:`run_batch` takes a list of :class:`experiments.runtime.tasks.EpisodeTask` and returns exactly what
 ``[run_episode(t) for t in tasks]`` returns, bit for bit (``tests/test_batch.py``), faster: tasks of
-a MuJoCo world (``sim``, ``identified``, ``grounded`` on either, ANE exploration noise) run as one
+a MuJoCo world (``sim``, ``identified``, grounded on either, with action noise, on a given heightfield) run as one
 :class:`envs.batch.SimBatch` (one ``MjModel``, one ``MjData`` per episode; a model per episode
 where the world builds one per episode, as the identified sim on its random ground) driven by one
 :class:`walk_engine.batch.BatchWalkEngine` (the ZMP engine vectorized over the episodes), the
@@ -22,41 +22,42 @@ import time
 
 import numpy as np
 
-from common.defaults import CONTROL_DT, EPISODE_SECONDS
+from common.defaults import CONTROL_DT
 from envs.batch import SimBatch
-from envs.mujoco_world import NaoSimEnv
+from envs.mujoco_world import SimWorld
 from envs.rollout import assemble_recording
 from envs.wrappers import ActionMismatch
 from experiments.runtime.fitness import walk_fitness, walk_meta
-from experiments.runtime.grounding import nao_spec
-from experiments.runtime.tasks import IDENTIFIED_CONFOUNDED, _transformer, _world, episode_result, run_episode
+from experiments.runtime.grounding import walk_spec
+from experiments.runtime.tasks import EpisodeResult, EpisodeTask, episode_result, run_episode
+from experiments.runtime.worlds import load_transformer, terrain_field, world_env
 from walk_engine import GaitParams
 from walk_engine.batch import BatchWalkEngine
 
 
-def _batchable(task: dict) -> bool:
+def _batchable(task: EpisodeTask) -> bool:
     # BatchWalkEngine vectorizes the NAO's closed-form legs; other robots' episodes run one by one
-    return task["world"] in ("sim", "grounded", "identified") and task.get("robot", "nao") == "nao"
+    return task.world in ("sim", "identified") and task.robot == "nao"
 
 
-def _group_key(task: dict) -> tuple:
-    """Tasks that share a world (and so a template env) and a duration."""
-    return (task["world"], task.get("transformer"), float(task.get("seconds", EPISODE_SECONDS)),
-            tuple(task.get("identified") or ()), bool(task.get("identified_terms", True)),
-            bool(task.get("identified_ground", True)), bool(task.get("identified_confounded", IDENTIFIED_CONFOUNDED)))
+def _group_key(task: EpisodeTask) -> tuple:
+    """Tasks that share a world (and so a template env: :func:`experiments.runtime.worlds.world_env`), a
+    transformer and a duration."""
+    return task.world, task.transformer, float(task.seconds), task.identified, task.terrain is not None
 
 
-def run_batch(tasks: list[dict]) -> list[dict]:
+def run_batch(tasks: list[EpisodeTask]) -> list[EpisodeResult]:
     """Run walk episodes in lock-step where the world allows it; results in task order.
 
     Args:
-        tasks: :func:`experiments.runtime.tasks.run_episode` task dicts (any worlds, any mix).
+        tasks: :class:`experiments.runtime.tasks.EpisodeTask` (any worlds, any mix).
 
     Returns:
-        ``[run_episode(t) for t in tasks]``, bit-identical (recordings included when asked).
+        ``[run_episode(t) for t in tasks]``, bit-identical (recordings included when asked; ``wall_s``
+        is a batch's time shared among its episodes).
 
     Raises:
-        ValueError: what ``run_episode`` raises for a bad task (unknown world, missing reports).
+        ValueError: what ``run_episode`` raises for a bad task (unknown profile, missing reports).
     """
     tasks = list(tasks)
     out: list = [None] * len(tasks)
@@ -72,22 +73,25 @@ def run_batch(tasks: list[dict]) -> list[dict]:
     return out
 
 
-def _run_sim_group(tasks: list[dict]) -> list[dict]:
+def _run_sim_group(tasks: list[EpisodeTask]) -> list[EpisodeResult]:
     """One group of sim-world tasks with the same world, transformer and duration."""
-    env = _world({**tasks[0], "action_noise": 0.0}).unwrapped
-    tr = _transformer(tasks[0]["transformer"]) if tasks[0]["world"] == "grounded" else None
-    walks = lockstep_walks(env, [t["theta"] for t in tasks], [int(t["seed"]) for t in tasks],
-                           float(tasks[0].get("seconds", EPISODE_SECONDS)),
-                           action_noise=[float(t.get("action_noise", 0.0) or 0.0) for t in tasks], transformer=tr)
-    return [episode_result(t, rec, res) for t, (rec, res) in zip(tasks, walks)]
+    t0 = time.perf_counter()
+    env = world_env(tasks[0])
+    tr = load_transformer(tasks[0].transformer) if tasks[0].transformer else None
+    walks = lockstep_walks(env, [t.theta for t in tasks], [int(t.seed) for t in tasks], float(tasks[0].seconds),
+                           terrains=[terrain_field(*t.terrain) if t.terrain else None for t in tasks]
+                           if any(t.terrain for t in tasks) else None,
+                           action_noise=[float(t.action_noise) for t in tasks], transformer=tr)
+    wall = (time.perf_counter() - t0) / len(tasks)
+    return [episode_result(t, rec, res, wall) for t, (rec, res) in zip(tasks, walks)]
 
 
-def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=None, action_noise=None,
+def lockstep_walks(env: SimWorld, thetas, seeds, seconds: float, *, terrains=None, action_noise=None,
                    transformer=None) -> list:
     """Walk B gaits of the ZMP engine in the sim ``env`` in lock-step (see the module docstring).
 
     Args:
-        env: a :class:`envs.NaoSimEnv`, or a subclass with ``batch_hooks`` (the identified sim), the
+        env: a :class:`envs.SimWorld`, or a subclass with ``batch_hooks`` (the identified sim), the
             template (its state is restored afterwards).
         thetas: B gait parameter vectors (SI, 16); seeds: B episode seeds; seconds: episode length [s].
         terrains: B heightfields (or None: the env's own ground) to walk on, each episode its own.
@@ -112,8 +116,8 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
                          + ("" if terrains is None else f", {len(terrains)} terrains"))
     n = int(round(seconds / env.control_dt))
     sim = SimBatch(env, B)
-    # the wrappers of experiments.runtime.tasks._world, one per episode (their state is per episode)
-    noise = [ActionMismatch(env, noise_std=s, index=nao_spec().action_index, seed=seeds[i]) if s > 0 else None
+    # the wrappers of experiments.runtime.worlds.task_env, one per episode (their state is per episode)
+    noise = [ActionMismatch(env, noise_std=s, index=walk_spec().action_index, seed=seeds[i]) if s > 0 else None
              for i, s in enumerate(sigma)]
     noisy = np.array([x is not None for x in noise])
     tr = transformer
@@ -125,8 +129,6 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
         E = np.empty((B, tr.delay, spec.action_dim)) if tr.delay else None  # ... and the actions sent before (a delay)
         Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
-        Hs = np.empty_like(H) if tr.shadow_memory else None  # each episode's shadow state history
-        D = np.empty((B, spec.state_dim))  # the predicted state changes Δŝ of the step
     params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
     engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
     sim.reset(seeds, terrains)
@@ -136,10 +138,8 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
         if grounded:
             eps[i].reset(seeds[i])
             H[i] = spec.states(sim.obs[i])
-            if Hs is not None:
-                Hs[i] = H[i]
             if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
-                Z[i] = eps[i].correlate(eps[i].rng.standard_normal((n, tr.noise_dim)))
+                Z[i] = eps[i].rng.standard_normal((n, tr.noise_dim))
     engine.reset(sim.obs)
     layout = env.layout
     na = env.action_space.shape[0]
@@ -171,14 +171,10 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
                 if k == 0:  # padded with the first command, as sgat.GroundedEnv pads
                     E[idx] = cmd[:, ai][:, None]
                 sent = E[idx].reshape(len(idx), -1)
-            dout = np.empty((len(idx), spec.state_dim)) if Hs is not None else None
             act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
-                                               None if Z is None else Z[idx, k], past,
-                                               None if Hs is None else Hs[idx].reshape(len(idx), -1), dout, sent)
+                                               None if Z is None else Z[idx, k], past, sent)
             if E is not None:
                 E[idx] = np.concatenate([E[idx, 1:], act[:, ai][:, None]], axis=1)
-            if Hs is not None:
-                D[idx] = Hs[idx, -1] + dout  # the targets ŝ_{t+1}
             if P is not None:
                 P[idx] = np.concatenate([P[idx, 1:], cmd[:, ai][:, None]], axis=1)
         actions[idx] = act
@@ -192,10 +188,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
             fall_time[i] = (k + 1) * env.control_dt
         if grounded:
             live = idx[sim.active[idx]]
-            s_new = spec.states(sim.obs[live])
-            H[live] = np.concatenate([H[live, 1:], s_new[:, None]], axis=1)
-            if Hs is not None:
-                Hs[live] = np.concatenate([Hs[live, 1:], tr.relax_shadow(D[live], s_new)[:, None]], axis=1)
+            H[live] = np.concatenate([H[live, 1:], spec.states(sim.obs[live])[:, None]], axis=1)
     out = []
     for i in range(B):
         rec = assemble_recording(env, O[i], C[i], A[i], G[i], int(rows[i]), seed=seeds[i], seconds=seconds,
@@ -210,7 +203,7 @@ def lockstep_walks(env: NaoSimEnv, thetas, seeds, seconds: float, *, terrains=No
 MAX_BATCH = 75
 
 
-def chunk_tasks(tasks: list[dict], workers: int = 1, batch_size: int | None = None, key=None) -> list[list[int]]:
+def chunk_tasks(tasks: list, workers: int = 1, batch_size: int | None = None, key=None) -> list[list[int]]:
     """Split task indices into batches for :func:`run_batch` (or another batched task function).
 
     Tasks that can run in lock-step (same world, transformer and duration; or the same ``key(task)``
@@ -242,7 +235,7 @@ def chunk_tasks(tasks: list[dict], workers: int = 1, batch_size: int | None = No
     return out
 
 
-def map_episodes(ex, tasks: list[dict], progress=None, batch_size: int | None = None) -> list[dict]:
+def map_episodes(ex, tasks: list[EpisodeTask], progress=None, batch_size: int | None = None) -> list[EpisodeResult]:
     """``[run_episode(t) for t in tasks]`` on the executor ``ex``, sent as batches (:func:`chunk_tasks`).
 
     The results are bit-identical whatever the batch size and the number of workers
@@ -265,7 +258,7 @@ def map_episodes(ex, tasks: list[dict], progress=None, batch_size: int | None = 
 TRIAL_STEPS = (10, 110)
 
 
-def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict:
+def expected_generation_seconds(task: EpisodeTask, episodes: int, workers: int) -> dict:
     """How long a generation of ``episodes`` episodes like ``task`` should take on ``workers`` cores,
     timed on a trial of the task's own world in this process.
 
@@ -287,8 +280,8 @@ def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict
     falls. It is timed on a shared machine and varies by a fifth between calls there.
 
     Args:
-        task: an :func:`experiments.runtime.tasks.run_episode` task dict (its ``seconds`` is the episode
-            length; ``seed``, ``record`` and ``meta`` are replaced for the trial).
+        task: an :class:`experiments.runtime.tasks.EpisodeTask` (its ``seconds`` is the episode length;
+            ``seed``, ``record``, ``meta`` and ``key`` are replaced for the trial).
         episodes: episodes per generation (>= 1).
         workers: worker processes (>= 1).
 
@@ -301,15 +294,15 @@ def expected_generation_seconds(task: dict, episodes: int, workers: int) -> dict
     """
     if episodes < 1 or workers < 1:
         raise ValueError(f"episodes and workers must be >= 1, got {episodes}, {workers}")
-    n = int(round(float(task.get("seconds", EPISODE_SECONDS)) / CONTROL_DT))
-    base = {k: v for k, v in task.items() if k not in ("record", "meta")}
+    n = int(round(float(task.seconds) / CONTROL_DT))
+    base = task.replace(record=False, meta={}, key="")
     chunks = chunk_tasks([base] * episodes, workers)  # the generation's batches, as map_episodes cuts them
     size, rounds = len(chunks[0]), -(-len(chunks) // workers)
     # run_batch walks a task that does not run batched one episode at a time, as the executors do
-    run_batch([{**base, "seed": 0, "seconds": 2 * CONTROL_DT}])  # the world built, the transformer loaded (cached per process)
+    run_batch([base.replace(seed=0, seconds=2 * CONTROL_DT)])  # the world built, the transformer loaded (cached per process)
     took = []
     for steps in TRIAL_STEPS:
-        trial = [{**base, "seed": k, "seconds": steps * CONTROL_DT} for k in range(size)]
+        trial = [base.replace(seed=k, seconds=steps * CONTROL_DT) for k in range(size)]
         t0 = time.perf_counter()
         run_batch(trial)
         took.append(time.perf_counter() - t0)

@@ -23,6 +23,30 @@ from concurrent.futures.process import BrokenProcessPool
 from typing import Any, Callable, Sequence
 
 
+def limit_blas_threads() -> int:
+    """Run the BLAS and OpenMP pools loaded in this process with ``OMP_NUM_THREADS`` threads (1 unless
+    set; ``threadpoolctl.threadpool_limits``), and those loaded later too (the variable is set).
+
+    The sgatwalk command runs its numerical work in process-pool workers of one thread each, and the
+    rounding of a threaded BLAS reduction depends on its thread count: the engine-gap calibration
+    computed with numpy's two OpenBLAS threads differs from the one-thread result in the 12th digit, and
+    the identified worlds built on it walk differently on random ground. The variable alone does not
+    reach a BLAS already loaded (an entry point that imported numpy before :func:`main`).
+
+    Returns:
+        The thread count applied.
+    """
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    try:
+        n = max(1, int(os.environ["OMP_NUM_THREADS"]))
+    except ValueError:  # e.g. a nested "4,2": leave the pools as they are
+        return 0
+    from threadpoolctl import threadpool_limits  # lazy: inspects the libraries loaded so far
+
+    threadpool_limits(limits=n)
+    return n
+
+
 class TaskFailed(RuntimeError):
     """A task failed twice (an exception or a dead worker); the message names the task."""
 

@@ -59,12 +59,12 @@ USE_GROUND_TRUTH = True
 
 def _record(out_dir: str, *, fixed_base: bool, profile, n_logs: int, seconds: float, seed: int,
             lumpy: bool = False) -> list[str]:
-    from envs import NaoRealEnv  # lazy: loads the engines
+    from envs import RealWorld  # lazy: loads the engines
     from envs.effects import get_profile  # lazy: loads the engines
     from sysid.worlds import record_excitation  # lazy: loads the engines
 
     prof = get_profile(profile)
-    env = NaoRealEnv(profile=prof, terrain="flat", fixed_base=fixed_base)
+    env = RealWorld(profile=prof, terrain="flat", fixed_base=fixed_base)
     ground = None
     if lumpy:
         lo, hi = prof.terrain_amplitude
@@ -101,7 +101,7 @@ _ENGINE_GAP_CODE = ("common", "robots", "terrain", "envs", "sysid", "experiments
 
 def _code_sha256() -> str:
     """SHA-256 over the Python files of :data:`_ENGINE_GAP_CODE` (relative paths and contents)."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]  # the repository: experiments/runtime/identify.py
     h = hashlib.sha256()
     for entry in _ENGINE_GAP_CODE:
         p = root / entry
@@ -200,8 +200,7 @@ def write_engine_gap(out_dir: str | os.PathLike = ENGINE_GAP_DIR, *, work_dir: s
     return written
 
 
-def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, seconds: float,
-            fixed_dir: str | None) -> list[dict]:
+def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, seconds: float) -> list[dict]:
     """The recording task of each stage of :func:`identify_real` that has logs (fixed base first), with
     its ``report`` path: ``{"kind", "report", "out_dir", "fixed_base", "profile", "n_logs", "seconds",
     "seed", "lumpy"}``."""
@@ -209,7 +208,7 @@ def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, 
     for kind, n in (("fixed", n_fixed), ("floating", n_floating)):
         if n <= 0:
             continue
-        stage = fixed_dir if kind == "fixed" and fixed_dir else os.path.join(out_dir, kind)
+        stage = os.path.join(out_dir, kind)
         out.append({"kind": kind, "report": os.path.join(stage, "report.json"), "out_dir": os.path.join(stage, "logs"),
                     "fixed_base": kind == "fixed", "profile": profile, "n_logs": n, "seconds": seconds,
                     "seed": seed + (0 if kind == "fixed" else 50), "lumpy": kind == "floating"})
@@ -230,20 +229,19 @@ def record_excitation_task(task: dict) -> list[str]:
 
 
 def excitation_tasks(out_dir: str, *, seed: int, profile="real", n_fixed: int = 3, n_floating: int = 3,
-                     seconds: float = 6.0, fixed_dir: str | None = None) -> list[dict]:
+                     seconds: float = 6.0) -> list[dict]:
     """The excitation recordings that :func:`identify_real` with these arguments still has to make
     (stages without a report or a complete set of logs), as tasks of :func:`record_excitation_task`: a
     caller with a process pool records every identification's logs side by side before the diagnoses
     (each diagnosis keeps the cores busy itself; a recording runs on one). The logs are the same as
     when :func:`identify_real` records them."""
     return [st for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating,
-                                 seconds=seconds, fixed_dir=fixed_dir)
+                                 seconds=seconds)
             if not os.path.exists(st["report"]) and _recorded(st) is None]
 
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
                   n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 60.0, rounds: int = 2,
-                  fixed_dir: str | None = None, stepping_budget_s: float | None = None, base_terms: dict | None = None,
                   progress=None) -> dict:
     """Excite the real world and diagnose it: the reports the identified sim is built from.
 
@@ -259,14 +257,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             rounds: the first finds what walking feels most (latency in the air, uneven ground on the
             floor); later rounds mostly add friction of the light arm joints, which the walk does not
             feel, for another minute per diagnosis.
-        fixed_dir: folder of the fixed-base stage (default ``out_dir/fixed``): identifications that
-            differ only in their stepping logs share one (its logs and report are reused).
-        stepping_budget_s: time budget of the stepping-log diagnosis (default ``time_budget_s``): more
-            logs take longer to screen, and a diagnosis whose budget runs out before its
-            uneven-ground stage leaves the ground out (its report says so).
-        base_terms: Term -> value added to the fixed-base stage's model under the stepping diagnosis
-            (e.g. a common servo stiffness fitted to the in-air logs, :func:`fit_servo_gain`); the
-            stepping report carries them in its ``base_model``.
+        progress: a callable given each of the diagnoses' progress lines (None: quiet).
 
     Returns:
         ``{"reports": [report.json paths, fixed first], "logs": n, "seconds": recorded seconds,
@@ -282,8 +273,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
     say = progress or (lambda s: None)
     reports, n_logs, secs, budget_hit = [], 0, 0.0, []
     base = None
-    for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating, seconds=seconds,
-                      fixed_dir=fixed_dir):
+    for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating, seconds=seconds):
         kind, rep_path, logs_dir = st["kind"], st["report"], st["out_dir"]
         if not os.path.exists(rep_path):
             paths = _recorded(st) or record_excitation_task(st)
@@ -293,10 +283,7 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
                 with open(calibration[kind]) as f:
                     cal = json.load(f)
             fams = IDENTIFY_FIXED_FAMILIES if kind == "fixed" else None
-            budget = stepping_budget_s if kind == "floating" and stepping_budget_s is not None else time_budget_s
-            if kind == "floating" and base_terms:
-                base = {**(base or {}), **base_terms}
-            rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=budget,
+            rep = diagnose(logs, calibration=cal, base_model=base, max_rounds=rounds, time_budget_s=time_budget_s,
                            families=fams,
                            progress=lambda s, k=kind: say(f"identify {kind}: {s}"), use_ground_truth=USE_GROUND_TRUTH)
             write_report(rep, logs, os.path.dirname(rep_path), plots=False)
@@ -317,81 +304,6 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
             "time_budget_reached": budget_hit, "wall_s": time.perf_counter() - t0}
 
 
-#: Start value of the common servo stiffness fit (:func:`fit_servo_gain`), x kp.
-SERVO_GAIN_START = 0.95
-#: Start values of the joints' common friction in the joint refit (:func:`fit_servo_gain` with
-#: ``refit``): dry [N m] and viscous [N m s/rad], the lower end of a NAO's plausible range.
-FRICTION_START = {"coulomb_friction_all": 0.02, "viscous_damping_all": 0.005}
-
-
-def fit_servo_gain(reports, logs_dir: str, calibration: str | None, out_path: str, *, confounded: bool,
-                   refit: bool = False) -> dict:
-    """Fit one kp scale common to every servo (``pd_gain_all``) to a draw's excitation logs, with the
-    diagnosis's identified model under it, and write it as a report that overrides that model
-    (``sysid.identified.load_identified`` reads reports in order).
-
-    The diagnosis screens the family on request only and, screened, does not keep it on these logs
-    (removing it changes the held-out cost by less than the selection margin); this is the refit alone
-    (:func:`sysid.diagnose.fit_terms`), a fidelity variant (``identified:servo=air`` on the fixed-base
-    logs, ``identified:servo=stepping`` on the stepping logs). With ``refit`` the scale is fitted
-    jointly with one dry and one viscous friction common to every joint (``coulomb_friction_all``,
-    ``viscous_damping_all``) and every term of the model under it (``identified:servo=refit``): the
-    diagnosis's final refit with those families forced in. A joint with friction, or a servo weaker
-    than the sim's, trails its command the way a delay does, and the screening keeps friction only
-    where one joint's term pays for itself, so the in-air model carries the rest of the lag in its
-    one global latency (fitted 16-27 ms in the air where the real world draws 10-20 ms; the
-    omitted-variable bias of least squares); refitted together, each takes its own share
-    (``sysid.candidates``, the common friction families).
-
-    Args:
-        reports: the ``report.json`` paths whose model goes under the fit (in the air: the fixed-base
-            diagnosis's; stepping: the draw's whole identification, fixed base first).
-        logs_dir: the logs to fit (fixed-base or floating-base, as the reports').
-        calibration: the engine-gap calibration file of that base kind (None: none).
-        out_path: the report to write.
-        confounded: build in the contact terms confounded with the uneven ground under the fit
-            (``sysid.identified.confounded_with_ground``).
-        refit: also fit the common friction (from :data:`FRICTION_START`) and every term of the
-            reports' model again (from their report values), jointly with the scale; the written
-            report then carries all of them.
-
-    Returns:
-        ``{"value": fitted scale, "heldout_cost_before", "heldout_cost_after", "path"}`` and, with
-        ``refit``, ``"refitted"``: label -> (value before, value after) of every refitted term; the
-        report is reused when it exists.
-
-    Raises:
-        FileNotFoundError: no logs in ``logs_dir``; what :func:`sysid.diagnose.fit_terms` raises.
-    """
-    if os.path.exists(out_path):
-        with open(out_path) as f:
-            rep = json.load(f)
-        return {"value": rep["model"]["pd_gain_all"], **rep["servo_fit"], "path": out_path}
-    from sysid.candidates import Term  # lazy: loads the engines
-    from sysid.data import load_logs  # lazy: loads the engines
-    from sysid.diagnose import fit_terms  # lazy: loads the engines and scipy
-    from sysid.identified import load_identified  # lazy: loads the engines
-
-    terms, _ = load_identified(reports, confounded)
-    logs = load_logs(logs_dir, use_ground_truth=USE_GROUND_TRUTH)
-    cal = None
-    if calibration:
-        with open(calibration) as f:
-            cal = json.load(f)
-    t = Term("pd_gain_all")
-    start = {**terms, **{Term(f): v for f, v in FRICTION_START.items()}} if refit else {}
-    start[t] = SERVO_GAIN_START
-    fit = fit_terms(logs, start, calibration=cal, base_model=terms, use_ground_truth=USE_GROUND_TRUTH)
-    info = {"heldout_cost_before": fit["heldout_cost_before"], "heldout_cost_after": fit["heldout_cost_after"]}
-    if refit:
-        info["refitted"] = {k.label(): [float(terms.get(k, k.fam.nominal)), float(fit["values"][k])]
-                            for k in sorted(fit["values"]) if k != t}
-    model = {k.label(): float(v) for k, v in sorted(fit["values"].items())}
-    os.makedirs(os.path.dirname(out_path) or ".", exist_ok=True)
-    atomic_write_text(out_path, json.dumps({"model": model, "base_model": {}, "effects": [], "servo_fit": info},
-                                           indent=1))
-    return {"value": model[t.label()], **info, "path": out_path}
-
 
 if __name__ == "__main__":  # python -m experiments.runtime.identify --engine-gap
     import argparse
@@ -401,7 +313,7 @@ if __name__ == "__main__":  # python -m experiments.runtime.identify --engine-ga
                     help=f"record and calibrate (about 2.5 min on 2 cores) and write {ENGINE_GAP_DIR}/{{fixed,floating}}.json")
     ap.add_argument("--work-dir", help="keep the recordings here (default: a temporary folder)")
     a = ap.parse_args()
-    from experiments.cli import limit_blas_threads
+    from experiments.runtime.executors import limit_blas_threads
 
     limit_blas_threads()  # the sgatwalk command's BLAS threads (1), on which the result's rounding depends
     print(json.dumps(write_engine_gap(work_dir=a.work_dir)))

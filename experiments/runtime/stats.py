@@ -333,3 +333,29 @@ def seed_level_test(per_seed_diff, confidence: float = 0.95) -> dict | None:
     ci = res.confidence_interval(confidence)
     return {"n_seeds": len(d), "mean_diff": float(d.mean()), "ci": [float(ci.low), float(ci.high)],
             "t": float(res.statistic), "df": int(res.df), "p_value": float(res.pvalue)}
+
+
+def paired_test(world_a, world_b, trials, *, n_boot: int = 1000, seed: int = 0) -> dict:
+    """:func:`paired_spearman_difference` of two worlds' per-episode fitness
+    ((D, G, E) each) on the real trials ``trials`` (G, M), for a new panel (``ci``, ``p_value``: the
+    gaits resampled too) and for this panel (``ci_panel``, ``p_value_panel``: the gaits kept).
+
+    Returns:
+        ``{"diff", "per_draw", "ci", "p_value", "n_boot", "ci_panel", "p_value_panel"}``.
+    """
+    panel = paired_spearman_difference(world_a, world_b, trials, n_boot=n_boot, seed=seed, resample_gaits=False)
+    return {**paired_spearman_difference(world_a, world_b, trials, n_boot=n_boot, seed=seed),
+            "ci_panel": panel["ci"], "p_value_panel": panel["p_value"]}
+
+
+def format_ci(ci) -> str:
+    """A difference's interval as text, ``"[-0.12, +0.30]"``, or ``"-"`` where it is undefined."""
+    return "-" if ci[0] is None or not math.isfinite(ci[0]) else f"[{ci[0]:+.2f}, {ci[1]:+.2f}]"
+
+
+def p_text(p: float, n_boot: int) -> str:
+    """A bootstrap p-value as text: ``"0.042"``, or ``"<0.001"`` for 0 (every one of ``n_boot``
+    replicates on one side: p < 1/n_boot)."""
+    if p is None or not math.isfinite(p):
+        return "-"
+    return f"<{1 / max(n_boot, 1):.2g}" if p == 0 else f"{p:.3f}"

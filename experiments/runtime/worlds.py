@@ -312,5 +312,181 @@ def options_help(kind: str | None = None) -> str:
     return "\n".join(f"  {o.name:9s} ({', '.join(o.kinds)}) {o.help}" + (f" [{o.unit}]" if o.unit else "") for o in rows)
 
 
-__all__ = ["GROUNDED", "IDENTIFIED", "KINDS", "LEARNED", "OPTIONS", "Option", "WorldSpec", "options_help",
-           "parse_hidden", "parse_world", "parse_worlds"]
+
+
+# ------------------------------------------------------------------------------ building worlds
+#: Worlds kept per process (a fidelity run builds one identified world per draw; an effect sweep one
+#: real world per value): the oldest beyond these are closed.
+WORLD_CACHE = 8
+_ENVS: dict = {}
+_TRANSFORMERS: dict = {}
+
+
+def mean_profile(profile):
+    """``profile`` (an ``envs.effects.RealProfile``) with every effect fixed at the middle of its
+    range, named ``"<name>:mean"``: the real world's mean physics without its spread from episode to
+    episode (the terrain's shape stays random per episode; its amplitude is fixed too). What a
+    training world that identified the real physics exactly, as one point, can at best be."""
+    import dataclasses
+
+    from envs.effects import EFFECTS  # lazy: loads the engines
+
+    mids = {f: ((lo + hi) / 2.0,) * 2 for f in EFFECTS for lo, hi in [getattr(profile, f)]}
+    return dataclasses.replace(profile, name=f"{profile.name}:mean", **mids)
+
+
+def real_profile(profile, robot):
+    """The real world's profile a task names: a name or dict as it is (``envs.effects.get_profile``
+    resolves it for ``robot``), ``"<name>:mean"`` as :func:`mean_profile` of that profile.
+
+    Raises:
+        ValueError: an unknown form after ``:``, or what ``get_profile`` raises.
+    """
+    from envs.effects import get_profile  # lazy: loads the engines
+
+    if not isinstance(profile, str):
+        return get_profile(profile, robot)
+    base, sep, form = profile.partition(":")
+    if not sep:
+        return get_profile(profile, robot)
+    if form != "mean":
+        raise ValueError(f"profile {profile!r}: unknown form {form!r} (NAME or NAME:mean)")
+    return mean_profile(get_profile(base, robot))
+
+
+def world_env(task):
+    """The physical world of an :class:`experiments.runtime.tasks.EpisodeTask`, built once per process
+    and kept (at most :data:`WORLD_CACHE` at a time): ``envs.SimWorld``, ``envs.RealWorld`` with the
+    task's profile on the real world's random lumpy ground, or ``sysid.identified.IdentifiedSimEnv``
+    with the effects and uneven ground of the task's diagnosis reports.
+
+    Raises:
+        ValueError: an unknown profile; what loading the reports raises.
+    """
+    import json
+
+    from robots import get_robot
+
+    # a world that lays given heightfields down keeps the last one as its ground: its own instance, so
+    # that the tasks on the world's own ground never walk on a stress test's field
+    key = (task.world, json.dumps(task.profile, sort_keys=True) if task.world == "real" else None, task.identified,
+           task.robot, task.terrain is not None)
+    if key not in _ENVS:
+        if len(_ENVS) >= WORLD_CACHE:
+            for env in _ENVS.values():
+                env.close()
+            _ENVS.clear()
+        robot = get_robot(task.robot)
+        if task.world == "real":
+            from envs import RealWorld  # lazy: loads the engines
+
+            _ENVS[key] = RealWorld(robot, profile=real_profile(task.profile, robot), terrain="lumpy")
+        elif task.world == "identified":
+            from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
+
+            terms, rms = load_identified(list(task.identified), confounded=False)
+            _ENVS[key] = IdentifiedSimEnv(terms, rms)
+        else:
+            from envs import SimWorld  # lazy: loads the engines
+
+            _ENVS[key] = SimWorld(robot)
+    return _ENVS[key]
+
+
+def load_transformer(path: str):
+    """The ``sgat.ActionTransformer`` saved in ``path``, loaded once per process (reloaded when its
+    ``transformer.json`` changes).
+
+    Raises:
+        FileNotFoundError, sgat.models.ModelFileError: what ``ActionTransformer.load`` raises.
+    """
+    import os
+
+    from sgat.transformer import ActionTransformer  # lazy: sgat loads torch
+
+    key = (path, os.path.getmtime(os.path.join(path, "transformer.json")))
+    if key not in _TRANSFORMERS:
+        _TRANSFORMERS.clear()
+        _TRANSFORMERS[key] = ActionTransformer.load(path)
+    return _TRANSFORMERS[key]
+
+
+def task_env(task):
+    """The world an episode task walks: :func:`world_env`, on the task's heightfield if it names one,
+    with the task's action noise on the leg targets (``envs.wrappers.ActionMismatch``, seeded by the
+    episode), grounded by the task's transformer (``sgat.GroundedEnv``) if it has one."""
+    import gymnasium as gym
+
+    env = world_env(task)
+    if task.terrain is not None:
+        hf = terrain_field(*task.terrain)
+
+        class OnTerrain(gym.Wrapper):  # reset always lays the task's field down
+            def reset(self, *, seed=None, options=None):
+                return self.env.reset(seed=seed, options={**(options or {}), "terrain": hf})
+
+        env = OnTerrain(env)
+    if task.action_noise > 0:
+        from envs.wrappers import ActionMismatch  # lazy: loads the engines
+        from experiments.runtime.grounding import walk_spec  # lazy: loads torch (sgat)
+
+        env = ActionMismatch(env, noise_std=float(task.action_noise), index=walk_spec(1, task.robot).action_index,
+                             seed=task.seed)
+    if task.transformer:
+        from sgat.transformer import GroundedEnv  # lazy: sgat loads torch
+
+        env = GroundedEnv(env, load_transformer(task.transformer))
+    return env
+
+
+_TERRAINS: dict = {}
+
+
+def terrain_field(kind: str, seed: int, level: float):
+    """The heightfield of a (kind, terrain seed, level) (``terrain.make``): identical in every process
+    and world (the last 16 kept)."""
+    key = (str(kind), int(seed), float(level))
+    if key not in _TERRAINS:
+        from terrain import make
+
+        if len(_TERRAINS) >= 16:
+            _TERRAINS.pop(next(iter(_TERRAINS)))
+        _TERRAINS[key] = make(key[0], seed=key[1], amplitude=key[2])
+    return _TERRAINS[key]
+
+
+def episode_task(spec: WorldSpec, theta, seed: int, *, seconds: float, robot: str = "nao", profile="real",
+                 transformer: str | None = None, identified=(), record: bool = False, key: str = "", meta=None):
+    """The :class:`experiments.runtime.tasks.EpisodeTask` of one episode in the training world ``spec``.
+
+    Args:
+        spec: the training world.
+        theta: the gait (SI); seed: the episode seed; seconds: its length [s].
+        profile: the real world's profile (the ``real`` world, ``real:mean=1`` its mean physics).
+        transformer: the grounded worlds' fitted transformer (a directory).
+        identified: the identified worlds' diagnosis reports.
+
+    Raises:
+        ValueError: a grounded world without ``transformer``, an identified one without ``identified``.
+    """
+    from experiments.runtime.tasks import EpisodeTask
+
+    if spec.grounded and not transformer:
+        raise ValueError(f"world {spec.name!r} needs its fitted transformer")
+    if spec.needs_identification and not identified:
+        raise ValueError(f"world {spec.name!r} needs the real world's identification (its reports)")
+    kw: dict[str, Any] = {"robot": robot, "record": record, "key": key, "meta": dict(meta or {})}
+    if spec.kind == "real":
+        kw.update(world="real", profile=f"{profile}:mean" if spec.get("mean") else profile)
+    elif spec.needs_identification:
+        kw.update(world="identified", identified=tuple(identified))
+    else:
+        kw.update(world="sim")
+    if spec.grounded:
+        kw["transformer"] = transformer
+    return EpisodeTask(theta=tuple(theta), seed=int(seed), seconds=float(seconds), action_noise=spec.noise, **kw)
+
+
+__all__ = ["GROUNDED", "IDENTIFIED", "KINDS", "LEARNED", "OPTIONS", "WORLD_CACHE", "Option", "WorldSpec", "episode_task",
+           "load_transformer", "mean_profile", "options_help", "parse_hidden", "parse_world", "parse_worlds", "real_profile",
+           "task_env", "terrain_field", "world_env"]

@@ -48,14 +48,10 @@ import io
 import json
 import math
 import os
-import sys
-import time
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
-import gymnasium as gym
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
@@ -63,8 +59,10 @@ from common.files import WallClock
 from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.parse import parse_values
 from experiments.runtime.executors import make_executor
+from experiments.runtime.progress import Reporter
+from experiments.runtime.seeds import derive_seeds
 from experiments.runtime.stats import wilson_interval
-from terrain import make
+from experiments.runtime.tasks import EpisodeResult, EpisodeTask
 from robots import get_robot
 from walk_engine import params_for
 
@@ -172,8 +170,8 @@ def trial_seeds(seed: int, trial: int) -> tuple[int, int]:
     """(terrain seed, episode seed) of trial ``trial`` of a run with seed ``seed``.
 
     The same for every policy and every level: the pairing of the comparison."""
-    a, b = np.random.SeedSequence([int(seed), int(trial)]).generate_state(2)
-    return int(a), int(b)
+    a, b = derive_seeds(int(seed), int(trial), n=2)
+    return a, b
 
 
 @dataclass
@@ -303,16 +301,37 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
                         profile=prof.to_dict() if prof is not None else None, seconds=float(seconds), robot=robot)
 
 
-def plan_tasks(cfg: StressConfig) -> list[dict]:
-    """One picklable task per (level, trial, policy), in that order (level-major).
+@dataclass(frozen=True)
+class Trial:
+    """One planned stress episode: which policy, level and trial it is, and its episode task.
 
-    Task keys: ``policy``, ``theta``, ``theta_hash``, ``world``, ``profile`` (dict or None),
-    ``terrain`` (None or ``[kind, terrain seed, amplitude]``), ``level``, ``trial``,
-    ``terrain_seed``, ``episode_seed``, ``seconds``, ``record``.
+    Attributes:
+        policy, theta_hash: the gait's label and hash; level: the level's value; trial: its index.
+        terrain_seed, episode_seed: the trial's seeds (:func:`trial_seeds`).
+        task: the :class:`experiments.runtime.tasks.EpisodeTask` it walks.
     """
-    from envs.effects import RealProfile  # lazy: loads the engines
 
-    tasks = []
+    policy: str
+    theta_hash: str
+    level: float
+    trial: int
+    terrain_seed: int
+    episode_seed: int
+    task: EpisodeTask
+
+    @property
+    def key(self) -> tuple:
+        """Identity of the episode in ``trials.csv``: (policy label, gait hash, level, trial)."""
+        return (self.policy, self.theta_hash, self.level, self.trial)
+
+
+def plan_tasks(cfg: StressConfig) -> list[Trial]:
+    """One :class:`Trial` per (level, trial, policy), in that order (level-major): a terrain level is
+    the trial's field of that kind at the level's amplitude, laid down at reset; an effect level is
+    the real profile with that effect fixed (``RealProfile.with_effect``)."""
+    from envs.effects import RealProfile  # imports no engine
+
+    out = []
     for level in cfg.levels:
         if cfg.axis == "terrain":
             profile, amp = cfg.profile, level
@@ -321,120 +340,21 @@ def plan_tasks(cfg: StressConfig) -> list[dict]:
             amp = cfg.amplitude
         for j in range(cfg.trials):
             ts, es = trial_seeds(cfg.seed, j)
-            terr = None if cfg.terrain is None else [cfg.terrain, ts, float(amp)]
+            terr = None if cfg.terrain is None else (cfg.terrain, ts, float(amp))
             for p in cfg.policies:
-                tasks.append({"policy": p.label, "theta": list(p.theta), "theta_hash": p.theta_hash,
-                              "world": cfg.world, "profile": profile, "terrain": terr, "level": level,
-                              "trial": j, "terrain_seed": ts, "episode_seed": es, "seconds": cfg.seconds,
-                              "record": False, **({"robot": cfg.robot} if cfg.robot != "nao" else {})})
-    return tasks
-
-
-# --------------------------------------------------------------------------------------------
-# Worker side (runs in executor workers; caches worlds and terrains per process)
-# --------------------------------------------------------------------------------------------
-
-_ENVS: dict = {}
-
-
-@lru_cache(maxsize=16)
-def terrain_of(kind: str, seed: int, amplitude: float):
-    """The heightfield of a (kind, terrain seed, level): identical in every process and world."""
-    return make(kind, seed=int(seed), amplitude=float(amplitude))
-
-
-def _world(world: str, profile: dict | None, robot: str = "nao"):
-    from envs import NaoRealEnv, NaoSimEnv  # lazy: loads the engines
-
-    key = (world, json.dumps(profile, sort_keys=True), robot)
-    if key not in _ENVS:
-        if len(_ENVS) >= 4:  # an effect sweep makes one world per value: keep a few
-            for env in _ENVS.values():
-                env.close()
-            _ENVS.clear()
-        r = get_robot(robot)
-        _ENVS[key] = NaoRealEnv(r, profile=profile, terrain="lumpy") if world == "real" else NaoSimEnv(r)
-    return _ENVS[key]
-
-
-def _with_terrain(env, hf):
-    """``env`` whose ``reset`` always puts ``hf`` down (``options={"terrain": hf}``): lets
-    :func:`experiments.runtime.fitness.run_walk` (which passes no reset options) walk on a given field."""
-    class WithTerrain(gym.Wrapper):
-        def reset(self, *, seed=None, options=None):
-            return self.env.reset(seed=seed, options={**(options or {}), "terrain": hf})
-
-    return WithTerrain(env)
-
-
-def run_trial(task: dict) -> dict:
-    """Run one stress episode (see :func:`plan_tasks` for the task); top level, so it pickles.
-
-    Returns:
-        a :data:`TRIAL_COLUMNS` row; with ``task["record"]`` also ``recording`` = (columns, meta).
-        A fall (or an unstable simulation) is a row with ``fell`` True, never an exception.
-    """
-    from experiments.runtime.fitness import run_walk  # lazy: loads the engines
-
-    t0 = time.perf_counter()
-    env = _world(task["world"], task["profile"], task.get("robot", "nao"))
-    hf = None
-    if task["terrain"] is not None:
-        hf = terrain_of(*task["terrain"])
-        env = _with_terrain(env, hf)
-    params = params_for(env.unwrapped.robot).from_array(np.asarray(task["theta"], dtype=float))
-    rec, res = run_walk(params, seed=int(task["episode_seed"]), seconds=float(task["seconds"]), env=env)
-    return _trial_row(task, hf, env.unwrapped, rec, res, time.perf_counter() - t0)
-
-
-def _trial_row(task: dict, hf, base, rec, res, wall_s: float) -> dict:
-    """The :data:`TRIAL_COLUMNS` row of one finished trial (and its recording if asked)."""
-    row = {
-        "policy": task["policy"], "theta_hash": task["theta_hash"], "level": float(task["level"]),
-        "trial": int(task["trial"]), "terrain_seed": int(task["terrain_seed"]),
-        "episode_seed": int(task["episode_seed"]), "world": task["world"],
-        "terrain": hf.name if hf is not None else (base.terrain.name if base.terrain is not None else "flat"),
-        "fell": bool(res.fell), "fall_reason": res.fall_reason, "fall_time_s": res.fall_time_s,
-        "speed_cm_s": float(res.speed_cm_s), "distance_m": float(res.distance_m), "drift_m": float(res.drift_m),
-        "fitness": float(res.fitness), "steps": int(res.steps), "wall_s": wall_s,
-    }
-    if task.get("record"):
-        rec.meta.update({"stress": {k: task[k] for k in ("policy", "level", "trial", "terrain_seed")}})
-        row["recording"] = (rec.columns, rec.meta)
-    return row
-
-
-def _batch_key(task: dict):
-    """Sim-world trials of the same duration run in lock-step (:func:`run_trials`; the batched walk
-    engine is the NAO's, other robots' trials run one by one)."""
-    return ("sim", float(task["seconds"])) if task["world"] == "sim" and task.get("robot", "nao") == "nao" else None
-
-
-def run_trials(tasks: list[dict]) -> list[dict]:
-    """:func:`run_trial` of each task, the sim-world ones in lock-step
-    (:func:`experiments.runtime.batch.lockstep_walks`, every trial on its own heightfield): the same rows
-    bit for bit, except ``wall_s``, which is the batch's time divided among its trials."""
-    from experiments.runtime.batch import lockstep_walks  # lazy: loads the engines and torch
-
-    out: list = [None] * len(tasks)
-    groups: dict = {}
-    for i, t in enumerate(tasks):
-        k = _batch_key(t)
-        if k is None:
-            out[i] = run_trial(t)
-        else:
-            groups.setdefault(k, []).append(i)
-    for idx in groups.values():
-        group = [tasks[i] for i in idx]
-        t0 = time.perf_counter()
-        env = _world(group[0]["world"], group[0]["profile"])
-        fields = [terrain_of(*t["terrain"]) if t["terrain"] is not None else None for t in group]
-        walks = lockstep_walks(env, [t["theta"] for t in group], [int(t["episode_seed"]) for t in group],
-                               float(group[0]["seconds"]), terrains=fields)
-        wall = (time.perf_counter() - t0) / len(group)
-        for i, t, hf, (rec, res) in zip(idx, group, fields, walks):
-            out[i] = _trial_row(t, hf, env, rec, res, wall)
+                task = EpisodeTask(cfg.world, p.theta, es, cfg.seconds, robot=cfg.robot,
+                                   profile=profile if profile is not None else "real", terrain=terr)
+                out.append(Trial(p.label, p.theta_hash, level, j, ts, es, task))
     return out
+
+
+def trial_row(trial: Trial, res: EpisodeResult) -> dict:
+    """The :data:`TRIAL_COLUMNS` row of one finished trial."""
+    return {"policy": trial.policy, "theta_hash": trial.theta_hash, "level": float(trial.level),
+            "trial": int(trial.trial), "terrain_seed": int(trial.terrain_seed), "episode_seed": int(trial.episode_seed),
+            "world": trial.task.world, "terrain": res.terrain, "fell": bool(res.fell), "fall_reason": res.fall_reason,
+            "fall_time_s": res.fall_time_s, "speed_cm_s": float(res.speed_cm_s), "distance_m": float(res.distance_m),
+            "drift_m": float(res.drift_m), "fitness": float(res.fitness), "steps": int(res.steps), "wall_s": res.wall_s}
 
 
 # --------------------------------------------------------------------------------------------
@@ -679,8 +599,7 @@ def _check_resume(out: Path, cfg: StressConfig) -> list[dict]:
 
 def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, executor=None,
                workers: int | None = None, ray_address: str | None = None, rerun: bool = False,
-               progress: bool = False, chunk: int | None = None,
-               log: Callable[[str], None] | None = None) -> dict:
+               reporter: Reporter | None = None, chunk: int | None = None) -> dict:
     """Run (or resume) a stress test and write its files (module docstring).
 
     Args:
@@ -689,9 +608,8 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
         executor: an executor (``.map``); default ``make_executor(workers, ray_address)``, closed
             at the end.
         rerun: write ``rerun/<policy>.rrd`` with the worst trial of each level.
-        progress: a tqdm bar on stderr (terminals only).
-        chunk: episodes between two saves of ``trials.csv`` (default: 4 per worker, at least 8).
-        log: called with one-line progress notes (e.g. ``print``).
+        reporter: progress (default: quiet).
+        chunk: episodes between two saves of ``trials.csv`` (default 150).
 
     Returns:
         dict: ``rows`` (the table, :data:`SUMMARY_COLUMNS`), ``out``, ``files``, ``episodes``
@@ -702,51 +620,35 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
         ValueError: ``out`` holds a run with other settings or a malformed ``trials.csv``;
         experiments.runtime.executors.TaskFailed: an episode failed twice.
     """
-    from tqdm import tqdm  # lazy: tqdm
+    from experiments.runtime.batch import map_episodes  # lazy: loads the engines and torch
 
+    report = reporter or Reporter.quiet()
     out = Path(out) if out is not None else default_out(cfg)
     old_rows = _check_resume(out, cfg)
     out.mkdir(parents=True, exist_ok=True)
     clock = WallClock(out)  # the run's time over all the invocations that resumed it
     _atomic_write_bytes(out / "stress.json", json.dumps(cfg.to_dict(), indent=1).encode())
-    tasks = plan_tasks(cfg)
+    trials = plan_tasks(cfg)
     rows: dict[tuple, dict] = {_key(r): r for r in old_rows}
-    todo = [t for t in tasks if _key(t) not in rows]
-    resumed = len(tasks) - len(todo)
-    if log and resumed:
-        log(f"stress: {resumed} of {len(tasks)} episodes already in {out / 'trials.csv'}; running the other {len(todo)}")
+    todo = [t for t in trials if t.key not in rows]
+    resumed = len(trials) - len(todo)
+    if resumed:
+        report.say(f"{resumed} of {len(trials)} episodes already in {out / 'trials.csv'}; running the other {len(todo)}")
     own = executor is None
     ex = make_executor(workers, ray_address) if own else executor
     trials_csv = out / "trials.csv"
     try:
-        from experiments.runtime.batch import MAX_BATCH, chunk_tasks  # lazy: loads the engines and torch
-
-        n = chunk or max(8, 2 * MAX_BATCH)  # trials.csv is rewritten after each chunk (resume point)
-        bar = tqdm(total=len(tasks), initial=resumed, desc="stress", unit="ep", file=sys.stderr,
-                   disable=None if progress else True)
-        t_start = last = time.perf_counter()
+        n = chunk or 150  # trials.csv is rewritten after each chunk (resume point)
         try:
-            for i in range(0, len(todo), n):
-                part = todo[i:i + n]
-                batches = chunk_tasks(part, int(getattr(ex, "workers", 1)), key=_batch_key)
-                for res in ex.map(run_trials, [[part[j] for j in b] for b in batches], progress=bar.update,
-                                  weights=[len(b) for b in batches]):
-                    for r in res:
-                        rows[_key(r)] = r
-                write_csv(_ordered(rows, cfg), TRIAL_COLUMNS, trials_csv)
-                now = time.perf_counter()
-                if bar.disable and (now - last > 30 or i + n >= len(todo)):  # no terminal: a line on stderr
-                    done = min(i + n, len(todo))
-                    print(f"[stress {now - t_start:7.1f} s] {done}/{len(todo)} episodes, ETA "
-                          f"{(now - t_start) / done * (len(todo) - done):.0f} s", file=sys.stderr, flush=True)
-                    last = now
+            with report.count(len(trials), "stress", initial=resumed) as update:
+                for i in range(0, len(todo), n):
+                    part = todo[i:i + n]
+                    for t, r in zip(part, map_episodes(ex, [t.task for t in part], progress=update)):
+                        rows[t.key] = trial_row(t, r)
+                    write_csv(_ordered(rows, cfg), TRIAL_COLUMNS, trials_csv)
         except KeyboardInterrupt:
-            if log:
-                log(f"stress: stopped; {len(rows)} episodes are saved in {trials_csv}: "
-                    "run the same command again to resume")
+            report.say(f"stopped; {len(rows)} episodes are saved in {trials_csv}: run the same command again to resume")
             raise
-        finally:
-            bar.close()
         all_rows = _ordered(rows, cfg)
         write_csv(all_rows, TRIAL_COLUMNS, trials_csv)
         table = summarize(all_rows, cfg)
@@ -763,7 +665,7 @@ def run_stress(cfg: StressConfig, out: str | os.PathLike | None = None, *, execu
     finally:
         if own:
             ex.close()
-    result.update({"rows": table, "out": str(out), "files": files, "episodes": len(tasks), "ran": len(todo),
+    result.update({"rows": table, "out": str(out), "files": files, "episodes": len(trials), "ran": len(todo),
                    "resumed": resumed, "wall_s": clock.save(), "executor": getattr(ex, "name", "?"),
                    "workers": int(getattr(ex, "workers", 1)), "config": cfg.to_dict(),
                    "table": format_table(table, cfg)})
@@ -774,29 +676,26 @@ def _rerun_worst(cfg: StressConfig, rows: list[dict], ex, out: Path, files: dict
     """Re-run the worst trial of each policy and level with recording on, check that it repeats,
     and log them into ``rerun/<policy>.rrd`` (one entity per level)."""
     from envs import Recording  # lazy: loads the engines
+    from experiments.runtime.tasks import run_episode  # lazy: loads the engines
+    from experiments.runtime.worlds import terrain_field
     from experiments.viz import log_rollouts_to_rrd  # lazy: loads the engines
 
     worst = worst_trials(rows, cfg)
-    by_key = {_key(t): t for t in plan_tasks(cfg)}
+    by_key = {t.key: t for t in plan_tasks(cfg)}
     pol = {p.label: p for p in cfg.policies}
-    tasks = []
-    for (label, level), r in worst.items():
-        t = dict(by_key[(label, pol[label].theta_hash, level, r["trial"])])
-        t["record"] = True
-        tasks.append(t)
-    results = ex.map(run_trial, tasks)
+    trials = [by_key[(label, pol[label].theta_hash, level, r["trial"])] for (label, level), r in worst.items()]
+    results = ex.map(run_episode, [t.task.replace(record=True) for t in trials])
     notes = []
     recs: dict[str, dict[str, Recording]] = {}
     terrains: dict[str, dict] = {}
-    for t, res in zip(tasks, results):
-        cols, meta = res.pop("recording")
-        old = worst[(t["policy"], t["level"])]
-        same = (res["fell"] == old["fell"] and abs(res["speed_cm_s"] - old["speed_cm_s"]) < 1e-6)
-        lab = f"L{cfg.levels.index(t['level']):02d}_{cfg.level_display(t['level']):g}_trial{t['trial']}".replace("-", "m")
-        recs.setdefault(t["policy"], {})[lab] = Recording(cols, meta)
-        terrains.setdefault(t["policy"], {})[lab] = terrain_of(*t["terrain"]) if t["terrain"] else None
-        notes.append({"policy": t["policy"], "level": t["level"], "trial": t["trial"], "fell": res["fell"],
-                      "fall_time_s": res["fall_time_s"], "speed_cm_s": res["speed_cm_s"], "label": lab,
+    for t, res in zip(trials, results):
+        old = worst[(t.policy, t.level)]
+        same = (res.fell == old["fell"] and abs(res.speed_cm_s - old["speed_cm_s"]) < 1e-6)
+        lab = f"L{cfg.levels.index(t.level):02d}_{cfg.level_display(t.level):g}_trial{t.trial}".replace("-", "m")
+        recs.setdefault(t.policy, {})[lab] = Recording(*res.recording)
+        terrains.setdefault(t.policy, {})[lab] = terrain_field(*t.task.terrain) if t.task.terrain else None
+        notes.append({"policy": t.policy, "level": t.level, "trial": t.trial, "fell": res.fell,
+                      "fall_time_s": res.fall_time_s, "speed_cm_s": res.speed_cm_s, "label": lab,
                       "repeats": bool(same)})
     paths = {}
     for label, rs in recs.items():

@@ -29,32 +29,35 @@ identification reused) and walks only the new gaits.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import os
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
 from common.files import WallClock, atomic_write_text, jsonable
+from experiments.runtime.progress import Reporter
 from experiments.runtime.rundir import EpisodeLog
+from experiments.runtime.seeds import derive_seeds
 from experiments.runtime.stats import mcnemar_test, paired_permutation_test, seed_level_test, wilson_interval
+from experiments.runtime.tasks import EpisodeTask
+from experiments.runtime.worlds import parse_world
+from experiments.table1.config import EVAL, Table1Config
 
 #: Comparisons tested at every grounding step (a, b): "a vs b" (and :func:`comparisons` adds those of
-#: the ``<base>+ane`` methods).
-COMPARISONS = (("sgat", "gat"), ("sgat", "none"), ("hybrid", "sgat"), ("hybrid", "ane"), ("hybrid", "identified"))
+#: worlds with the action-noise envelope on top).
+COMPARISONS = (("sgat", "gat"), ("sgat", "sim"), ("hybrid", "sgat"), ("hybrid", "ane"), ("hybrid", "identified"),
+               ("sgat", "real"), ("gat", "real"), ("hybrid", "real"))
 
 
 def noise_partners(method: str) -> tuple:
-    """What a ``<base>+ane`` method (``experiments.optimize.run.ANE_SUFFIX``) is tested against besides
-    itself: ``(base, "ane")`` -- what the noise adds to the grounding, what the grounding adds to the
-    noise; ``()`` for any other method."""
-    from experiments.optimize.run import ANE_SUFFIX, base_method  # lazy: loads torch and the engines
-
-    return (base_method(method), "ane") if method.endswith(ANE_SUFFIX) else ()
+    """What a grounded or identified world with the action-noise envelope on top (``sgat:ane=0.05``) is
+    tested against besides itself: ``(the world without it, "ane")`` -- what the noise adds to the
+    grounding, what the grounding adds to the noise; ``()`` for any other method."""
+    spec = parse_world(method)
+    return (spec.without("ane").name, "ane") if spec.kind != "ane" and spec.noise else ()
 
 
 def comparisons(methods) -> list[tuple[str, str]]:
@@ -64,71 +67,37 @@ def comparisons(methods) -> list[tuple[str, str]]:
     return [(a, b) for a, b in pairs if a in methods and b in methods]
 
 
-_EVAL = 31
-
-
-@dataclass
-class Table1Config:
-    """Settings of a Table I run (written to ``config.json``)."""
-
-    methods: tuple = ("sgat", "gat", "none", "ane", "hybrid")
-    seeds: int = 3
-    trials: int = 30
-    seed: int = 0
-    optimize: dict = dataclasses.field(default_factory=dict)  # OptimizeConfig overrides (e.g. popsize)
-    baseline: str | None = None  # an earlier run's table1.json to pair every row with (compare_runs)
-
-    def validate(self) -> None:
-        from experiments.optimize.run import OptimizeConfig, method_names  # lazy: loads torch and the engines; keeps sgatwalk --help fast
-
-        bad = [m for m in self.methods if m not in method_names() or m == "real"]
-        if bad or not self.methods:
-            raise ValueError(f"unknown method(s) {bad or '(none)'}; choose from "
-                             f"{', '.join(m for m in method_names() if m != 'real')}")
-        if self.seeds < 1 or self.trials < 2:
-            raise ValueError(f"need >= 1 optimization seed and >= 2 trials, got {self.seeds}, {self.trials}")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
-        OptimizeConfig(**{**self.optimize, "methods": tuple(self.methods)}).validate()
-        if self.baseline is not None:
-            load_baseline(self.baseline, self)
-
-    def to_dict(self) -> dict:
-        d = dataclasses.asdict(self)
-        d["methods"] = list(self.methods)
-        return d
 
 
 class Table1:
     """Runs (or resumes) a Table I run in ``run_dir`` with ``executor``."""
 
-    def __init__(self, cfg: Table1Config, run_dir: str, executor, *, log=None, progress: bool = False):
+    def __init__(self, cfg: Table1Config, run_dir: str, executor, *, reporter: Reporter | None = None):
         cfg.validate()
         self.cfg, self.run_dir, self.ex = cfg, run_dir, executor
-        self.log = log or (lambda s: None)
-        self.progress = progress
-        self.t0 = time.perf_counter()
+        self.report = reporter or Reporter.quiet()
         self._episodes: dict[str, dict] = {}
 
     def _say(self, msg: str) -> None:
-        self.log(f"[table1 {time.perf_counter() - self.t0:7.1f} s] {msg}")
+        self.report.say(msg)
 
     def _check_config(self) -> None:
         """Claim the run directory (``experiments.runtime.rundir.EpisodeLog``); more seeds or methods reuse what was done."""
-        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=("seeds", "baseline", "methods"),
-                               say=self._say)
+        self._log = EpisodeLog(self.run_dir, self.cfg.to_dict(), "Table I run", ignore=self.cfg.RESUMABLE,
+                               reporter=self.report)
         self._episodes = self._log.done
 
-    def _optimize(self, s: int) -> dict:
-        from experiments.optimize.run import OptimizeConfig, Optimizer  # lazy: loads torch and the engines; keeps sgatwalk --help fast
+    def _optimize(self, s: int):
+        """Optimization seed ``s``: one ``sgatwalk optimize`` run of every method without its own real
+        trials, in ``opt_seed<s>/`` (resumed where it stopped; methods added to it)."""
+        from experiments.optimize import OptimizeConfig, Optimizer  # lazy: loads torch and the engines
 
         run = os.path.join(self.run_dir, f"opt_seed{s}")
         cfg = OptimizeConfig(**{**self.cfg.optimize, "methods": tuple(self.cfg.methods), "seed": s, "eval_trials": 0})
-        opt = Optimizer(cfg, run, self.ex, progress=self.progress, log=lambda m: self._say(f"seed {s} {m}"))
+        opt = Optimizer(cfg, run, self.ex, reporter=self.report.child(f"seed {s}"))
         t0 = time.perf_counter()
         res = opt.run(resume=os.path.exists(opt.state_path), add_methods=self.cfg.methods)
         self._say(f"optimization seed {s} done ({time.perf_counter() - t0:.0f} s)")
-        res["theta0"] = opt.state["theta0"]
         return res
 
     def run(self) -> dict:
@@ -140,20 +109,21 @@ class Table1:
         real_data = {}
         for s in range(cfg.seeds):
             res = self._optimize(s)
-            real_data[s] = res["real_data"]
-            gaits.setdefault("theta0", res["theta0"])
-            for r in res["rows"]:
-                if r["method"] != "theta0":
-                    gaits[f"{r['method']}|{r['step']}|{s}"] = r["theta"]
-                    if r.get("select_scores"):
-                        predicted[f"{r['method']}|{r['step']}|{s}"] = max(r["select_scores"].values())
-        seeds = [int(x) for x in np.random.SeedSequence([cfg.seed, _EVAL]).generate_state(cfg.trials, dtype=np.uint32)]
+            real_data[s] = res.real_data
+            gaits.setdefault("theta0", res.theta0)
+            for r in res.rows:
+                if r.method in cfg.methods:
+                    gaits[f"{r.method}|{r.step}|{s}"] = r.theta
+                    if r.select_scores:
+                        predicted[f"{r.method}|{r.step}|{s}"] = max(r.select_scores.values())
+        seeds = derive_seeds(cfg.seed, EVAL, n=cfg.trials)
         prof = cfg.optimize.get("profile", "real")
         secs = cfg.optimize.get("seconds", EPISODE_SECONDS)
-        tasks = [{"world": "real", "theta": th, "seed": sd, "seconds": secs, "profile": prof, "key": f"{g}|t{j}"}
+        robot = cfg.optimize.get("robot", "nao")
+        tasks = [EpisodeTask("real", th, sd, secs, robot=robot, profile=prof, key=f"{g}|t{j}")
                  for g, th in gaits.items() for j, sd in enumerate(seeds)]
         self._say(f"real evaluation: {len(gaits)} gaits x {cfg.trials} paired trials")
-        self._log.run(self.ex, tasks, "real evaluation", progress=self.progress)
+        self._log.run(self.ex, tasks, "real evaluation", self.report)
         out = self.result(gaits, real_data, predicted)
         if cfg.baseline is not None:
             out["baseline"] = {"path": cfg.baseline, "command": load_baseline(cfg.baseline, cfg).get("command"),

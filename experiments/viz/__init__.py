@@ -78,8 +78,8 @@ Rerun and w, x, y, z in recordings.
 """
 
 from experiments.viz.inputs import _PART, _is_recording_file, check_recording, find_recordings, sanitize_label
-from experiments.viz.kinematics import (_measured_cop, _robot_scale, _sole_geometry, _xyzw, forward_kinematics,
-                                        frame_positions, link_poses)
+from experiments.viz.kinematics import _measured_cop, _robot_scale, _sole_geometry, _xyzw, link_poses
+from robots.kinematics import forward_kinematics, frame_positions
 from experiments.viz.plan import footsteps_from_phases, plan_from_engine
 from experiments.viz.rerun_log import (EYE_OFFSET, LEGEND_MD, MESH_MEDIA_TYPES, SOLE_BOX, SOLE_CENTER, _Logger,
                                        build_blueprint, log_recording, log_rollouts_to_rrd)

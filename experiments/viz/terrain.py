@@ -67,7 +67,7 @@ def terrain_for(rec: Recording) -> tuple[Heightfield | None, str]:
     guessing, tried in order:
 
     1. the real world's per-episode field: ``lumpy(default_rng(SeedSequence(seed).spawn(3)[1]),
-       amplitude=effects["terrain_amplitude"])`` (``envs.NaoRealEnv._reset_world``);
+       amplitude=effects["terrain_amplitude"])`` (``envs.RealWorld._reset_world``);
     2. ``terrain.make(kind, seed=seed, amplitude=a)`` with kind and amplitude parsed from the
        terrain name (what ``sgatwalk stand --terrain`` builds);
     3. ``terrain.flat`` of the recorded size.
