@@ -7,9 +7,9 @@ import numpy as np
 
 def short_rollout(seed: int) -> list:
     """A seeded 0.3 s MuJoCo rollout with random leg targets; returns the final joint angles."""
-    from envs import NaoSimEnv
+    from envs import SimWorld
 
-    env = NaoSimEnv()
+    env = SimWorld()
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
     a0 = env.robot.pose("crouch", actuated=True)
