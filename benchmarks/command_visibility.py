@@ -61,22 +61,124 @@ def walk_paths(run: str, key: tuple, seed: int, draw: int) -> list[str]:
     return [os.path.join(run, "data", f"{tag}_{s}.parquet") for s in derive_seeds(seed, GROUND_SIM, draw, n=n)]
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The command line: the run directory, the leads, ``--json``."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  epilog="Reads a fidelity run directory only; takes seconds.")
     ap.add_argument("--run", required=True, help="a sgatwalk fidelity run directory (a NAO run with grounded worlds)")
     ap.add_argument("--leads", type=int, nargs="+", default=[1, 2, 3, 4, 5],
                     help="leads k [control steps] (default 1 2 3 4 5)")
     ap.add_argument("--json", action="store_true", help="print one JSON object (its \"text\": the table)")
+    return ap
+
+
+def set_labels(sets: dict) -> dict:
+    """{set key: its row label}: the sim's name (``sim`` or ``identified``) where one set walked in it,
+    else also the walks, noise [rad] and history (e.g. ``sim 4x0.02rad h2``)."""
+    kinds = [k[0] for k in sets]
+    return {k: k[0] if kinds.count(k[0]) == 1 else f"{k[0]} {k[1]}x{k[2]:g}rad h{k[3]}" for k in sets}
+
+
+def draw_row(run: str, cfg: dict, d: int, sets: dict, labels: dict, leads: list[int], layout) -> dict:
+    """One draw's figures: ``latency_ms`` (the draw's identified actuation latency [ms], where its
+    identification wrote reports) and, per set label whose walks are all there (2 or more),
+    :func:`sgat.grounding.command_visibility`'s result at ``leads``; progress on stderr."""
+    from envs import Recording
+    from experiments.runtime.grounding import identified_latency, walk_spec
+    from sgat.grounding import command_visibility
+
+    row = {}
+    reps = [os.path.join(run, "identified", f"d{d}", stage, "report.json") for stage in ("fixed", "floating")]
+    reps = [r for r in reps if os.path.exists(r)]
+    if reps:
+        row["latency_ms"] = 1000 * identified_latency(reps)
+    for key in sets:
+        paths = walk_paths(run, key, int(cfg["seed"]), d)
+        if len(paths) < 2 or not all(os.path.exists(p) for p in paths):
+            continue
+        row[labels[key]] = command_visibility([Recording.from_parquet(p) for p in paths], layout,
+                                              walk_spec(key[3], "nao"), leads)
+        print(f"[command_visibility] draw {d}, {labels[key]}: R² by lead "
+              + ", ".join(f"{v:+.2f}" for v in row[labels[key]]["r2"]), file=sys.stderr, flush=True)
+    return row
+
+
+def measure(run: str, cfg: dict, sets: dict, leads: list[int]) -> tuple[dict, dict]:
+    """The visibility of every draw's sets of walks in the run directory ``run`` (its ``config.json``
+    read as ``cfg``; ``sets`` from :func:`walk_sets`).
+
+    Returns:
+        ({"run", "leads", "control_dt_ms", "sets": {label: {"sim", "walks", "explore_rad", "history",
+        "worlds"}}, "draws": {draw: :func:`draw_row`'s row, for draws with a set measured}},
+        :func:`set_labels`' labels).
+    """
+    from common.defaults import CONTROL_DT
+    from envs import ObservationLayout
+    from robots import get_robot
+
+    labels = set_labels(sets)
+    layout = ObservationLayout(get_robot("nao"))
+    out = {"run": os.path.basename(os.path.normpath(run)), "leads": leads, "control_dt_ms": 1000 * CONTROL_DT,
+           "sets": {labels[k]: {"sim": k[0], "walks": k[1], "explore_rad": k[2], "history": k[3], "worlds": w}
+                    for k, w in sets.items()},
+           "draws": {}}
+    for d in range(int(cfg["data_seeds"])):
+        row = draw_row(run, cfg, d, sets, labels, leads, layout)
+        if any(lab in row for lab in labels.values()):
+            out["draws"][str(d)] = row
+    return out, labels
+
+
+def summarize(draws: dict, labels: dict, leads: list[int]) -> dict:
+    """Per set label measured in some draw: {"draws", "median_r2" (per lead, over the draws),
+    "best_lead_of_median", "lead1_r2_max" (R² of the first lead, best draw), "best_r2_min" (the best
+    lead's R², worst draw)}."""
+    summary = {}
+    for lab in labels.values():
+        got = [row[lab] for row in draws.values() if lab in row]
+        if not got:
+            continue
+        med = [statistics.median(g["r2"][i] for g in got) for i in range(len(leads))]
+        summary[lab] = {"draws": len(got), "median_r2": med,
+                        "best_lead_of_median": leads[max(range(len(med)), key=med.__getitem__)],
+                        "lead1_r2_max": max(g["r2"][0] for g in got), "best_r2_min": min(max(g["r2"]) for g in got)}
+    return summary
+
+
+def table(out: dict, labels: dict, leads: list[int]) -> str:
+    """The printed table of :func:`measure`'s figures with ``out["summary"]`` (:func:`summarize`): the
+    sets, a row per draw and set (latency, R² per lead, best lead), a median row per set."""
+    lines = [f"{out['run']}: grounding walks of θ0 per draw, cross-validated R² of their exploration noise on the leg "
+             f"targets from the state history and s_(t+k) - s_t, by lead k [control steps of {out['control_dt_ms']:g} ms]",
+             *(f"  {lab}: {s['walks']} walks in the {'identified' if s['sim'] == 'identified' else 'plain'} sim, noise "
+               f"{s['explore_rad']:g} rad, history {s['history']} (worlds {', '.join(s['worlds'])})"
+               for lab, s in out["sets"].items()),
+             f"{'draw':>6s} {'walks':>22s} {'latency':>9s}  " + " ".join(f"{'k = ' + str(k):>7s}" for k in leads)
+             + "  best k"]
+    for d, row in out["draws"].items():
+        for key, lab in labels.items():
+            if lab not in row:
+                continue
+            lat = row.get("latency_ms") if key[0] == "identified" else None
+            lat_s = "none" if key[0] == "sim" else "–" if lat is None else f"{lat:.1f} ms"
+            lines.append(f"{d:>6s} {lab:>22s} {lat_s:>9s}  " + " ".join(f"{v:+7.2f}" for v in row[lab]["r2"])
+                         + f"  {row[lab]['best_lead']:>6d}")
+    for lab, summ in out["summary"].items():
+        lines.append(f"{'median':>6s} {lab:>22s} {'':>9s}  " + " ".join(f"{v:+7.2f}" for v in summ["median_r2"])
+                     + f"  {summ['best_lead_of_median']:>6d}")
+    lines.append("R² near 0 or below: the state change at that lead says nothing of the command (a linear inverse "
+                 "model there returns the commands it saw for similar states)")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    """Parse the command line, measure the run directory's walks, print the table (or JSON with
+    ``--json``); returns 0. Errors in the options or the run directory exit through ``argparse``
+    (status 2)."""
+    ap = build_parser()
     args = ap.parse_args(argv)
     if min(args.leads) < 1:
         ap.error("--leads must be >= 1")
-    from common.defaults import CONTROL_DT
-    from envs import ObservationLayout, Recording
-    from experiments.runtime.grounding import identified_latency, walk_spec
-    from robots import get_robot
-    from sgat.grounding import command_visibility
-
     cfg_path = os.path.join(args.run, "config.json")
     if not os.path.exists(cfg_path):
         ap.error(f"{args.run!r} is not a fidelity run directory (no config.json)")
@@ -87,60 +189,11 @@ def main(argv=None) -> int:
     sets = walk_sets(list(cfg.get("worlds", [])))
     if not sets:
         ap.error(f"{args.run!r}: no grounded world (gat, sgat, hybrid) in its config")
-    kinds = [k[0] for k in sets]
-    labels = {k: k[0] if kinds.count(k[0]) == 1 else f"{k[0]} {k[1]}x{k[2]:g}rad h{k[3]}" for k in sets}
-    layout = ObservationLayout(get_robot("nao"))
-    out = {"run": os.path.basename(os.path.normpath(args.run)), "leads": args.leads, "control_dt_ms": 1000 * CONTROL_DT,
-           "sets": {labels[k]: {"sim": k[0], "walks": k[1], "explore_rad": k[2], "history": k[3], "worlds": w}
-                    for k, w in sets.items()},
-           "draws": {}}
-    for d in range(int(cfg["data_seeds"])):
-        row = {}
-        reps = [os.path.join(args.run, "identified", f"d{d}", stage, "report.json") for stage in ("fixed", "floating")]
-        reps = [r for r in reps if os.path.exists(r)]
-        if reps:
-            row["latency_ms"] = 1000 * identified_latency(reps)
-        for key in sets:
-            paths = walk_paths(args.run, key, int(cfg["seed"]), d)
-            if len(paths) < 2 or not all(os.path.exists(p) for p in paths):
-                continue
-            row[labels[key]] = command_visibility([Recording.from_parquet(p) for p in paths], layout,
-                                                  walk_spec(key[3], "nao"), args.leads)
-            print(f"[command_visibility] draw {d}, {labels[key]}: R² by lead "
-                  + ", ".join(f"{v:+.2f}" for v in row[labels[key]]["r2"]), file=sys.stderr, flush=True)
-        if any(lab in row for lab in labels.values()):
-            out["draws"][str(d)] = row
+    out, labels = measure(args.run, cfg, sets, args.leads)
     if not out["draws"]:
         ap.error(f"no complete set of grounding walks (2 or more per draw) found in {args.run!r}/data")
-    lines = [f"{out['run']}: grounding walks of θ0 per draw, cross-validated R² of their exploration noise on the leg "
-             f"targets from the state history and s_(t+k) - s_t, by lead k [control steps of {out['control_dt_ms']:g} ms]",
-             *(f"  {lab}: {s['walks']} walks in the {'identified' if s['sim'] == 'identified' else 'plain'} sim, noise "
-               f"{s['explore_rad']:g} rad, history {s['history']} (worlds {', '.join(s['worlds'])})"
-               for lab, s in out["sets"].items()),
-             f"{'draw':>6s} {'walks':>22s} {'latency':>9s}  " + " ".join(f"{'k = ' + str(k):>7s}" for k in args.leads)
-             + "  best k"]
-    for d, row in out["draws"].items():
-        for key, lab in labels.items():
-            if lab not in row:
-                continue
-            lat = row.get("latency_ms") if key[0] == "identified" else None
-            lat_s = "none" if key[0] == "sim" else "–" if lat is None else f"{lat:.1f} ms"
-            lines.append(f"{d:>6s} {lab:>22s} {lat_s:>9s}  " + " ".join(f"{v:+7.2f}" for v in row[lab]["r2"])
-                         + f"  {row[lab]['best_lead']:>6d}")
-    out["summary"] = {}
-    for key, lab in labels.items():
-        got = [row[lab] for row in out["draws"].values() if lab in row]
-        if not got:
-            continue
-        med = [statistics.median(g["r2"][i] for g in got) for i in range(len(args.leads))]
-        out["summary"][lab] = {"draws": len(got), "median_r2": med,
-                               "best_lead_of_median": args.leads[max(range(len(med)), key=med.__getitem__)],
-                               "lead1_r2_max": max(g["r2"][0] for g in got), "best_r2_min": min(max(g["r2"]) for g in got)}
-        lines.append(f"{'median':>6s} {lab:>22s} {'':>9s}  " + " ".join(f"{v:+7.2f}" for v in med)
-                     + f"  {out['summary'][lab]['best_lead_of_median']:>6d}")
-    lines.append("R² near 0 or below: the state change at that lead says nothing of the command (a linear inverse "
-                 "model there returns the commands it saw for similar states)")
-    out["text"] = "\n".join(lines)
+    out["summary"] = summarize(out["draws"], labels, args.leads)
+    out["text"] = table(out, labels, args.leads)
     print(json.dumps(out) if args.json else out["text"], flush=True)
     return 0
 

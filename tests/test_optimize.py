@@ -199,7 +199,6 @@ def test_identification_uses_the_shared_budget_and_calibration_and_warns_when_a_
     rounds, copies the testbed's engine-gap calibration (``ENGINE_GAP_SEED``) whatever the run's seed,
     and says so on its log line when a diagnosis still ran out of its budget."""
     import experiments.optimize.run as opt_mod
-    from experiments.optimize import OptimizeConfig
     from experiments.runtime.grounding import IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS
     from experiments.runtime.identify import ENGINE_GAP_SEED
     from experiments.runtime.progress import Reporter
@@ -217,8 +216,7 @@ def test_identification_uses_the_shared_budget_and_calibration_and_warns_when_a_
                         lambda *a, seed, **k: cal_seeds.append(seed) or {"fixed": None, "floating": None})
     for hit in ([], ["floating"]):
         lines = []
-        Optimizer(OptimizeConfig(methods=("hybrid",), seed=len(hit) + 3), str(tmp_path / f"run{len(hit)}"), None,
-                  reporter=Reporter.to(lines.append))._identify()
+        opt_mod.identify(str(tmp_path / f"run{len(hit)}"), seed=len(hit) + 3, reporter=Reporter.to(lines.append))
         assert seen["time_budget_s"] == IDENTIFY_BUDGET_S and seen["rounds"] == IDENTIFY_ROUNDS == 2
         warned = [ln for ln in lines if "WARNING" in ln]
         assert len(warned) == len(hit) and all("floating diagnosis ran out" in ln for ln in warned)

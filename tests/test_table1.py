@@ -53,7 +53,7 @@ def test_table1_resumes_after_sigkill(tmp_path):
     proc = subprocess.Popen(cmd, cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     t0 = time.time()
-    while not (run / "opt_seed1" / "generations.csv").exists() and proc.poll() is None and time.time() - t0 < 300:
+    while not (run / "opt_seed1" / "sgat" / "generations.csv").exists() and proc.poll() is None and time.time() - t0 < 300:
         time.sleep(0.05)
     assert proc.poll() is None, "the run finished before it could be killed"
     proc.send_signal(signal.SIGKILL)
@@ -80,9 +80,10 @@ def test_table1_resumes_after_sigkill(tmp_path):
 
 
 def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
-    """More methods given to a finished Table I run: every seed's optimization run gains them (its real
-    grounding walks reused), only the new gaits walk the real trials, the old rows stay as they were,
-    and a noise-enveloped method is tested against its base method and against ANE."""
+    """More methods given to a finished Table I run: only the new (method, seed) optimizations run (their
+    real grounding walks the very walks of the others, on the same seeds), only the new gaits walk the
+    real trials, the old rows stay as they were, and a noise-enveloped method is tested against its
+    base method and against ANE."""
     from experiments.table1.run import comparisons
 
     assert comparisons(("sgat", "gat", "ane", "sgat:ane=0.05", "hybrid:ane=0.05")) == [  # only pairs of methods run
@@ -95,14 +96,21 @@ def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
     assert main(["table1", "--methods", "sgat,ane", *args, "--out", str(run), "--json"]) == 0
     a = json.loads((run / "table1.json").read_text())
     walked = (run / "episodes.jsonl").read_text().splitlines()
-    real = sorted(p.name for p in (run / "opt_seed0" / "data").glob("real_*"))
+    real = {p.name: p.read_bytes() for p in (run / "opt_seed0" / "sgat" / "data").glob("real_*")}
+    assert real
     assert main(["table1", "--methods", "sgat,ane,sgat:ane=0.05", *args, "--out", str(run), "--json"]) == 0
     b = json.loads((run / "table1.json").read_text())
     assert b["rows"][:3] == a["rows"] and b["rows"][3]["method"] == "sgat:ane=0.05" and b["rows"][3]["n"] == 3
     now = (run / "episodes.jsonl").read_text().splitlines()
     assert now[:len(walked)] == walked and len(now) == len(walked) + 3  # 3 trials of the one new gait
     assert all(json.loads(x)["key"].startswith("sgat:ane=0.05|1|0|t") for x in now[len(walked):])
-    assert sorted(p.name for p in (run / "opt_seed0" / "data").glob("real_*")) == real
+    from experiments.runtime.tasks import EpisodeTask  # noqa: F401 - the walks below are recordings of those tasks
+    import pyarrow.parquet as pq
+
+    new = {p.name: p for p in (run / "opt_seed0" / "sgat_ane0.05" / "data").glob("real_*")}
+    assert set(new) == set(real)  # the same gaits on the same seeds
+    for name, path in new.items():
+        assert pq.read_table(path).equals(pq.read_table(run / "opt_seed0" / "sgat" / "data" / name))
     assert {(t["a"], t["b"]) for t in b["tests"]} - {(t["a"], t["b"]) for t in a["tests"]} == {
         ("sgat:ane=0.05", "sgat"), ("sgat:ane=0.05", "ane"), ("sgat:ane=0.05", "theta0")}
 

@@ -9,11 +9,12 @@ from experiments.optimize.results import OptimizeResult, RealData, StepRow
 
 
 def __getattr__(name: str):
-    if name == "Optimizer":  # loads the engines and torch: only when asked for
-        from experiments.optimize.run import Optimizer
+    if name in ("Optimizer", "identify", "slug"):  # they load the engines and torch: only when asked for
+        from experiments.optimize import run
 
-        return Optimizer
+        return getattr(run, name)
     raise AttributeError(f"module 'experiments.optimize' has no attribute {name!r}")
 
 
-__all__ = ["OptimizeConfig", "OptimizeResult", "Optimizer", "RealData", "StepRow", "default_methods", "with_preset"]
+__all__ = ["OptimizeConfig", "OptimizeResult", "Optimizer", "RealData", "StepRow", "default_methods", "identify", "slug",
+           "with_preset"]

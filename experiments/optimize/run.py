@@ -86,6 +86,33 @@ def summarize(results: list) -> dict:
             "falls": int(sum(bool(r.fell) for r in results)), "fitness_mean": float(fit.mean())}
 
 
+def identify(root: str, *, seed: int, profile="real", reporter: Reporter | None = None) -> dict:
+    """Identify the real world once for the worlds built on it: the testbed's engine-gap calibration,
+    excitation logs in the air and stepping, two diagnoses (:func:`experiments.runtime.identify.identify_real`),
+    all in ``root``; reused when there.
+
+    Args:
+        root: the folder (``RUN_DIR/identified``); seed: the run seed (the logs' seed is derived from it);
+        profile: the real world's effect profile; reporter: progress.
+
+    Returns:
+        :func:`experiments.runtime.identify.identify_real`'s result.
+    """
+    report = reporter or Reporter.quiet()
+    t0 = time.perf_counter()
+    report.say("identify: engine-gap calibration and excitation logs of the real world, then two diagnoses")
+    # the engine gap (PyBullet vs MuJoCo on the real world without its effects) is a constant of the
+    # testbed: the package ships it for the pinned engines and a run copies it
+    cal = calibrate_engines(os.path.join(root, "calibration"), seed=ENGINE_GAP_SEED)
+    res = identify_real(root, seed=derive_seed(seed, IDENTIFICATION) % 1_000_000, profile=profile, calibration=cal,
+                        time_budget_s=IDENTIFY_BUDGET_S, rounds=IDENTIFY_ROUNDS)
+    report.say(f"identify: {len(res['effects'])} terms, uneven ground Sq {1000 * res['terrain_rms_height']:.2f} mm "
+               f"from {res['logs']} logs ({res['seconds']:.0f} s of recording; {time.perf_counter() - t0:.0f} s)"
+               + "".join(f"; WARNING: the {k} diagnosis ran out of its {IDENTIFY_BUDGET_S:g} s budget, so the "
+                         f"identified world depends on this machine's speed" for k in res.get("time_budget_reached", [])))
+    return res
+
+
 class CheckpointError(ValueError):
     """The run directory's checkpoint is unreadable, from another version of cma or of this project."""
 
@@ -99,11 +126,14 @@ class Optimizer:
         executor: an ``experiments.runtime.executors`` executor.
         reporter: where stage lines and progress go (default: quiet).
         rerun: log selected candidates and real trials as ``.rrd`` files (Rerun).
+        identification: the real world's identification (:func:`identify`) to build the identified
+            worlds on, made elsewhere (a Table I seed's methods share one); None: made in the run.
     """
 
     def __init__(self, cfg: OptimizeConfig, run_dir: str, executor, *, reporter: Reporter | None = None,
-                 rerun: bool = False):
+                 rerun: bool = False, identification: dict | None = None):
         self.cfg, self.run_dir, self.ex, self.rerun = cfg, run_dir, executor, rerun
+        self.identification = identification
         self.report = reporter or Reporter.quiet()
         os.makedirs(run_dir, exist_ok=True)
         for sub in ("data", "models", "thetas"):
@@ -384,7 +414,8 @@ class Optimizer:
         else:
             self._start()
         if any(s.needs_identification for s in self.cfg.specs) and not self.state.get("identification"):
-            self.state["identification"] = self._identify()
+            self.state["identification"] = self.identification or identify(
+                os.path.join(self.run_dir, "identified"), seed=self.cfg.seed, profile=self.cfg.profile, reporter=self.report)
             self._save()
         if not any(r["method"] == "theta0" for r in self.state["rows"]):
             self.state["rows"].append({"method": "theta0", "step": 0, **self._evaluate(self.state["theta0"], 0, "theta0")})
@@ -427,23 +458,6 @@ class Optimizer:
             self.report.say(f"adding method(s) {', '.join(new)} to {self.run_dir}")
             self._write_config()
             self._save()
-
-    def _identify(self) -> dict:
-        """Identify the real world once for the worlds built on it (``experiments.runtime.identify``)."""
-        t0 = time.perf_counter()
-        root = os.path.join(self.run_dir, "identified")
-        self.report.say("identify: engine-gap calibration and excitation logs of the real world, then two diagnoses")
-        # the engine gap (PyBullet vs MuJoCo on the real world without its effects) is a constant of the
-        # testbed: the package ships it for the pinned engines and a run copies it
-        cal = calibrate_engines(os.path.join(root, "calibration"), seed=ENGINE_GAP_SEED)
-        res = identify_real(root, seed=derive_seed(self.cfg.seed, IDENTIFICATION) % 1_000_000, profile=self.cfg.profile,
-                            calibration=cal, time_budget_s=IDENTIFY_BUDGET_S, rounds=IDENTIFY_ROUNDS)
-        self.report.say(f"identify: {len(res['effects'])} terms, uneven ground Sq {1000 * res['terrain_rms_height']:.2f} mm "
-                        f"from {res['logs']} logs ({res['seconds']:.0f} s of recording; {time.perf_counter() - t0:.0f} s)"
-                        + "".join(f"; WARNING: the {k} diagnosis ran out of its {IDENTIFY_BUDGET_S:g} s budget, so the "
-                                  f"identified world depends on this machine's speed"
-                                  for k in res.get("time_budget_reached", [])))
-        return res
 
     # ---------------------------------------------------------------- outputs
     def real_data(self) -> dict[str, RealData]:
@@ -503,4 +517,4 @@ class Optimizer:
             _atomic_write(os.path.join(self.run_dir, "table.txt"), (format_table(self.state["rows"]) + "\n").encode())
 
 
-__all__ = ["CheckpointError", "Optimizer", "slug", "summarize"]
+__all__ = ["CheckpointError", "Optimizer", "identify", "slug", "summarize"]

@@ -86,6 +86,53 @@ def _run_sim_group(tasks: list[EpisodeTask]) -> list[EpisodeResult]:
     return [episode_result(t, rec, res, wall) for t, (rec, res) in zip(tasks, walks)]
 
 
+class _GroundedBatch:
+    """``sgat.GroundedEnv`` for B episodes at once: each episode its own copy of the transformer (its
+    generator and ensemble member), its state history, its past commands and, with a delay, the
+    actions it sent; every step one :meth:`sgat.transformer.ActionTransformer.transform_episodes` call."""
+
+    def __init__(self, tr, B: int, n: int):
+        self.tr, self.spec = tr, tr.spec
+        spec = tr.spec
+        self.eps = [copy.copy(tr) for _ in range(B)]
+        self.H = np.empty((B, spec.history, spec.state_dim))
+        self.P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
+        self.E = np.empty((B, tr.delay, spec.action_dim)) if tr.delay else None  # ... and the actions sent before
+        self.Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
+
+    def start(self, i: int, seed: int, obs: np.ndarray) -> None:
+        """Episode ``i`` begins: its generator reseeded (and its member drawn), its history filled."""
+        self.eps[i].reset(seed)
+        self.H[i] = self.spec.states(obs)
+        if self.Z is not None:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
+            self.Z[i] = self.eps[i].rng.standard_normal(self.Z.shape[1:])
+
+    def ground(self, idx: np.ndarray, k: int, cmd: np.ndarray) -> np.ndarray:
+        """The actions to apply at step ``k`` for the commands ``cmd`` (len(idx), n_act) of episodes ``idx``."""
+        tr, ai = self.tr, self.spec.action_index
+        act = cmd.copy()
+        past = sent = None
+        if self.P is not None:
+            if k == 0:  # padded with the first command, as sgat.GroundedEnv and sgat.grounding.stack_past
+                self.P[idx] = cmd[:, ai][:, None]
+            past = self.P[idx].reshape(len(idx), -1)
+        if self.E is not None:
+            if k == 0:  # padded with the first command, as sgat.GroundedEnv pads
+                self.E[idx] = cmd[:, ai][:, None]
+            sent = self.E[idx].reshape(len(idx), -1)
+        act[:, ai] = tr.transform_episodes(self.H[idx].reshape(len(idx), -1), cmd[:, ai], [self.eps[i].member for i in idx],
+                                           None if self.Z is None else self.Z[idx, k], past, sent)
+        if self.E is not None:
+            self.E[idx] = np.concatenate([self.E[idx, 1:], act[:, ai][:, None]], axis=1)
+        if self.P is not None:
+            self.P[idx] = np.concatenate([self.P[idx, 1:], cmd[:, ai][:, None]], axis=1)
+        return act
+
+    def observe(self, live: np.ndarray, obs: np.ndarray) -> None:
+        """The episodes still walking append their new state to their history."""
+        self.H[live] = np.concatenate([self.H[live, 1:], self.spec.states(obs[live])[:, None]], axis=1)
+
+
 def lockstep_walks(env: SimWorld, thetas, seeds, seconds: float, *, terrains=None, action_noise=None,
                    transformer=None) -> list:
     """Walk B gaits of the ZMP engine in the sim ``env`` in lock-step (see the module docstring).
@@ -109,93 +156,73 @@ def lockstep_walks(env: SimWorld, thetas, seeds, seconds: float, *, terrains=Non
     """
     B = len(thetas)
     seeds = [int(s) for s in seeds]
-    terrains = list(terrains) if terrains is not None else None
     sigma = list(action_noise) if action_noise is not None else [0.0] * B
     if len(seeds) != B or len(sigma) != B or (terrains is not None and len(terrains) != B):
         raise ValueError(f"lockstep_walks: {B} gaits but {len(seeds)} seeds, {len(sigma)} noise levels"
-                         + ("" if terrains is None else f", {len(terrains)} terrains"))
+                         + ("" if terrains is None else f", {len(list(terrains))} terrains"))
     n = int(round(seconds / env.control_dt))
     sim = SimBatch(env, B)
     # the wrappers of experiments.runtime.worlds.task_env, one per episode (their state is per episode)
     noise = [ActionMismatch(env, noise_std=s, index=walk_spec().action_index, seed=seeds[i]) if s > 0 else None
              for i, s in enumerate(sigma)]
-    noisy = np.array([x is not None for x in noise])
-    tr = transformer
-    grounded = tr is not None and not tr.is_identity
-    if grounded:  # sgat.GroundedEnv per episode: its generator, its ensemble member, its state history
-        eps = [copy.copy(tr) for _ in range(B)]
-        spec = tr.spec
-        H = np.empty((B, spec.history, spec.state_dim))
-        P = np.empty((B, tr.commands, spec.action_dim)) if tr.commands else None  # each episode's past commands
-        E = np.empty((B, tr.delay, spec.action_dim)) if tr.delay else None  # ... and the actions sent before (a delay)
-        Z = np.empty((B, n, tr.noise_dim)) if tr.samples else None
+    grounding = _GroundedBatch(transformer, B, n) if transformer is not None and not transformer.is_identity else None
     params = [GaitParams.from_array(np.asarray(th, dtype=float)) for th in thetas]
     engine = BatchWalkEngine(env.robot, params, dt=env.control_dt)
-    sim.reset(seeds, terrains)
+    sim.reset(seeds, None if terrains is None else list(terrains))
     for i in range(B):
         if noise[i] is not None:
             noise[i].reseed(seeds[i])
-        if grounded:
-            eps[i].reset(seeds[i])
-            H[i] = spec.states(sim.obs[i])
-            if tr.samples:  # the episode's SGAT noise, drawn at once: the same numbers, step by step
-                Z[i] = eps[i].rng.standard_normal((n, tr.noise_dim))
+        if grounding is not None:
+            grounding.start(i, seeds[i], sim.obs[i])
     engine.reset(sim.obs)
-    layout = env.layout
-    na = env.action_space.shape[0]
-    O = np.empty((B, n, layout.size))
-    C = np.empty((B, n, na))
-    A = np.empty((B, n, na))
-    G = np.full((B, n, 22), np.nan)
-    rows = np.zeros(B, dtype=int)
-    fall_time: list = [None] * B
-    actions = np.zeros((B, na))
+    tape = _Tape(env, B, n)
+    _walk(sim, engine, grounding, noise, tape, n)
+    return [(rec, walk_fitness(rec, seconds)) for rec in
+            (assemble_recording(env, tape.O[i], tape.C[i], tape.A[i], tape.G[i], int(tape.rows[i]), seed=seeds[i],
+                                seconds=seconds, fell=sim.reason[i] is not None, reason=sim.reason[i],
+                                fall_time=tape.fall_time[i], meta=walk_meta(params[i]), terrain=sim.terrain(i))
+             for i in range(B))]
+
+
+class _Tape:
+    """What a lock-step walk records per episode and control step: observations ``O``, commands ``C``,
+    applied targets ``A``, ground truth ``G``, rows walked and the time of each fall."""
+
+    def __init__(self, env, B: int, n: int):
+        na = env.action_space.shape[0]
+        self.O = np.empty((B, n, env.layout.size))
+        self.C = np.empty((B, n, na))
+        self.A = np.empty((B, n, na))
+        self.G = np.full((B, n, 22), np.nan)
+        self.rows = np.zeros(B, dtype=int)
+        self.fall_time: list = [None] * B
+        self.dt = env.control_dt
+
+
+def _walk(sim, engine, grounding, noise, tape: _Tape, n: int) -> None:
+    """The control loop of :func:`lockstep_walks`: every step, the episodes still walking are observed,
+    commanded by the engine, grounded, perturbed and stepped; an episode that falls leaves the batch."""
+    noisy = np.array([x is not None for x in noise])
+    actions = np.zeros(tape.C.shape[::2])
     for k in range(n):
         idx = np.flatnonzero(sim.active)
         if not len(idx):
             break
-        O[idx, k] = sim.obs[idx]
-        G[idx, k, :19] = sim.gt[idx]
+        tape.O[idx, k] = sim.obs[idx]
+        tape.G[idx, k, :19] = sim.gt[idx]
         cmd = engine.step(sim.obs, idx)
-        C[idx, k] = cmd
-        act = cmd.copy()
-        if grounded:
-            ai = spec.action_index
-            past = None
-            if P is not None:
-                if k == 0:  # padded with the first command, as sgat.GroundedEnv and sgat.grounding.stack_past
-                    P[idx] = cmd[:, ai][:, None]
-                past = P[idx].reshape(len(idx), -1)
-            sent = None
-            if E is not None:
-                if k == 0:  # padded with the first command, as sgat.GroundedEnv pads
-                    E[idx] = cmd[:, ai][:, None]
-                sent = E[idx].reshape(len(idx), -1)
-            act[:, ai] = tr.transform_episodes(H[idx].reshape(len(idx), -1), cmd[:, ai], [eps[i].member for i in idx],
-                                               None if Z is None else Z[idx, k], past, sent)
-            if E is not None:
-                E[idx] = np.concatenate([E[idx, 1:], act[:, ai][:, None]], axis=1)
-            if P is not None:
-                P[idx] = np.concatenate([P[idx, 1:], cmd[:, ai][:, None]], axis=1)
+        tape.C[idx, k] = cmd
+        act = grounding.ground(idx, k, cmd) if grounding is not None else cmd.copy()
         actions[idx] = act
         for j in np.flatnonzero(noisy[idx]).tolist():
             actions[idx[j]] = noise[idx[j]].perturb(act[j])
         sim.step(actions)
-        A[idx, k] = sim.applied[idx]
-        rows[idx] = k + 1
-        ended = idx[~sim.active[idx]]
-        for i in ended:
-            fall_time[i] = (k + 1) * env.control_dt
-        if grounded:
-            live = idx[sim.active[idx]]
-            H[live] = np.concatenate([H[live, 1:], spec.states(sim.obs[live])[:, None]], axis=1)
-    out = []
-    for i in range(B):
-        rec = assemble_recording(env, O[i], C[i], A[i], G[i], int(rows[i]), seed=seeds[i], seconds=seconds,
-                                 fell=sim.reason[i] is not None, reason=sim.reason[i], fall_time=fall_time[i],
-                                 meta=walk_meta(params[i]), terrain=sim.terrain(i))
-        out.append((rec, walk_fitness(rec, seconds)))
-    return out
+        tape.A[idx, k] = sim.applied[idx]
+        tape.rows[idx] = k + 1
+        for i in idx[~sim.active[idx]]:
+            tape.fall_time[i] = (k + 1) * tape.dt
+        if grounding is not None:
+            grounding.observe(idx[sim.active[idx]], sim.obs)
 
 
 #: Most episodes in one batch by default: a paper-scale population (150) on 2 workers is 2 batches;

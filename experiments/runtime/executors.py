@@ -1,15 +1,17 @@
 """Executors: run ``fn(task)`` for many tasks, serially, in a local process pool, or on Ray.
 
 Every task carries its own seed, so results never depend on the executor or on the order tasks
-finish in (docs/architecture.md, "Conventions"). ``map`` returns results in task order.
+finish in (docs/architecture.md, "Conventions"). ``map`` returns results in task order; ``jobs``
+runs coarse independent jobs (one optimization, one draw of real data), one after the other locally
+and side by side on a Ray cluster.
 
 * :class:`SerialExecutor` -- in this process (tests, debugging).
 * :class:`ProcessExecutor` -- the default: ``concurrent.futures.ProcessPoolExecutor`` with the
   ``forkserver`` start method, one worker per core, ``OMP_NUM_THREADS=1`` and one torch thread per
   worker. A worker that dies (segfault, OOM kill) breaks the pool: the pool is rebuilt and the
   unfinished tasks are re-submitted; a task that fails twice raises :class:`TaskFailed`.
-* :class:`RayExecutor` -- only when a cluster address is given; ``ray`` is imported lazily.
-  Ray retries a task whose worker died once (``max_retries=1``).
+* :class:`RayExecutor` -- only when a cluster address is given (``--ray-address``); ``ray`` is
+  imported lazily. Ray runs a task whose worker died again, up to three times.
 """
 
 from __future__ import annotations
@@ -83,6 +85,32 @@ class SerialExecutor:
                     raise TaskFailed(f"task {i} failed twice: {type(exc2).__name__}: {exc2}") from exc2
             if progress:
                 progress(weights[i] if weights else 1)
+        return out
+
+    def jobs(self, fn: Callable, jobs: Sequence, labels: Sequence[str] | None = None, reporter=None) -> list:
+        """Run independent coarse jobs ``fn(job, executor)`` (a Table I optimization, a fidelity draw):
+        here one after the other in this process, each sending its own tasks to this executor. A job
+        carries its seeds and writes its own files, so the results do not depend on the executor; a job
+        that raises stops the run with :class:`TaskFailed` naming it (what it saved stays saved).
+
+        Args:
+            fn: a top-level function ``fn(job, executor) -> result`` (picklable for Ray).
+            jobs: the jobs' arguments; labels: their names in messages (default their indices).
+            reporter: an ``experiments.runtime.progress.Reporter`` told when each job ends.
+
+        Returns:
+            The results in job order.
+        """
+        jobs = list(jobs)
+        labels = list(labels or [str(i) for i in range(len(jobs))])
+        out = []
+        for i, (job, label) in enumerate(zip(jobs, labels)):
+            try:
+                out.append(fn(job, self))
+            except Exception as exc:
+                raise TaskFailed(f"job {label} failed: {type(exc).__name__}: {exc}") from exc
+            if reporter is not None:
+                reporter.say(f"{i + 1}/{len(jobs)} jobs done ({label})")
         return out
 
     def close(self) -> None:
@@ -179,53 +207,109 @@ class ProcessExecutor(SerialExecutor):
             self._pool = None
 
 
+def _in_worker(fn: Callable, arg):
+    """Run ``fn(arg)`` in a Ray worker set up as the process pool's workers are (one BLAS and torch thread)."""
+    _worker_init()
+    return fn(arg)
+
+
+def _job_in_worker(fn: Callable, job, label: str):
+    """Run the coarse job ``fn(job, executor)`` in a Ray worker, its own tasks on the same cluster."""
+    _worker_init()
+    return fn(job, RayExecutor(None))
+
+
 class RayExecutor(SerialExecutor):
-    """Tasks on a Ray cluster (``address``: ``"auto"``, ``"local"``, ``"ray://host:10001"``, ...)."""
+    """Tasks on a Ray cluster.
+
+    Args:
+        address: the cluster's address (``"auto"``: the one started on this machine with ``ray start``,
+            ``"HOST:PORT"`` of its head, ``"ray://HOST:10001"`` through Ray Client); ``"local"`` starts a
+            private one-machine cluster for this process; None inside a Ray task (the cluster it runs on).
+
+    Every task runs with one BLAS and one torch thread. A task whose worker process dies (killed, out of
+    memory, a lost node) is run again, up to :attr:`RETRIES` times, with the same result (tasks carry their
+    seeds); a task that raises is not retried (an exception is a bug or bad input) and fails the map with
+    :class:`TaskFailed` naming it. Coarse jobs (:meth:`jobs`) run side by side as tasks of their own, each
+    sending its episodes to the same cluster.
+
+    Raises:
+        ValueError: Ray is not installed, or the cluster cannot be reached (named).
+    """
 
     name = "ray"
+    #: Times a task is run again after its worker died.
+    RETRIES = 3
 
-    def __init__(self, address: str):
+    def __init__(self, address: str | None):
         try:
-            import ray  # lazy: ray (optional)
+            import ray  # lazy: ray (the dev install has it; a user's may not)
         except ImportError:
             raise ValueError("--ray-address needs Ray: pip install 'sgatwalk[ray]'") from None
         self._ray = ray
+        self._owns = False
         if not ray.is_initialized():
-            pkg_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-            kw = dict(include_dashboard=False, log_to_driver=False,
+            if address is None:
+                raise ValueError("no Ray cluster to join (give its address)")
+            pkg_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+            kw = dict(include_dashboard=False, log_to_driver=True,
                       runtime_env={"env_vars": {"PYTHONPATH": pkg_root, "OMP_NUM_THREADS": "1"}})
-            if address == "local":
-                ray.init(**kw)
-            else:
-                ray.init(address=address, **kw)
+            try:
+                ray.init(**kw) if address == "local" else ray.init(address=address, **kw)
+            except (ConnectionError, RuntimeError, ValueError) as exc:
+                raise ValueError(f"cannot reach the Ray cluster at {address!r}: {exc}") from None
             self._owns = True
-        else:
-            self._owns = False
-        self.workers = int(ray.cluster_resources().get("CPU", 1))
-        self._remote = {}
+        self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        self._task = ray.remote(max_retries=self.RETRIES, retry_exceptions=False)(_in_worker)
+        self._job = ray.remote(max_retries=self.RETRIES, retry_exceptions=False)(_job_in_worker)
 
-    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None,
-            weights: Sequence[int] | None = None) -> list:
+    def _gather(self, refs: list, labels: Sequence[str], progress, weights) -> list:
         ray = self._ray
-        if fn not in self._remote:
-            self._remote[fn] = ray.remote(max_retries=1, retry_exceptions=True)(fn)
-        refs = [self._remote[fn].remote(t) for t in tasks]
         index = {r: i for i, r in enumerate(refs)}
         out: list[Any] = [None] * len(refs)
         remaining = list(refs)
-        while remaining:
-            ready, remaining = ray.wait(remaining, num_returns=1)
-            for r in ready:
-                try:
-                    out[index[r]] = ray.get(r)
-                except Exception as exc:
-                    raise TaskFailed(f"task {index[r]} failed on Ray after a retry: {exc}") from exc
-                if progress:
-                    progress(weights[index[r]] if weights else 1)
+        try:
+            while remaining:
+                ready, remaining = ray.wait(remaining, num_returns=1)
+                for r in ready:
+                    i = index[r]
+                    try:
+                        out[i] = ray.get(r)
+                    except ray.exceptions.RayTaskError as exc:  # the task raised: its own error, named
+                        cause = exc.cause if getattr(exc, "cause", None) is not None else exc
+                        raise TaskFailed(f"{labels[i]} failed: {type(cause).__name__}: {cause}") from cause
+                    except ray.exceptions.RayError as exc:  # its worker died more often than it is retried
+                        raise TaskFailed(f"{labels[i]} failed on Ray after {self.RETRIES} retries: {exc}") from exc
+                    if progress:
+                        progress(weights[i] if weights else 1)
+        except BaseException:
+            for r in remaining:  # nothing left running behind a failure or an interrupt
+                ray.cancel(r, force=True)
+            raise
         return out
 
+    def map(self, fn: Callable, tasks: Sequence, progress: Callable[[int], None] | None = None,
+            weights: Sequence[int] | None = None) -> list:
+        tasks = list(tasks)
+        refs = [self._task.remote(fn, t) for t in tasks]
+        return self._gather(refs, [f"task {i}" for i in range(len(tasks))], progress, weights)
+
+    def jobs(self, fn: Callable, jobs: Sequence, labels: Sequence[str] | None = None, reporter=None) -> list:
+        """Run independent coarse jobs ``fn(job, executor)`` side by side, one Ray task each (their own
+        episodes on the same cluster); results in job order. See :meth:`SerialExecutor.jobs`."""
+        jobs = list(jobs)
+        labels = [f"job {lab}" for lab in (labels or [str(i) for i in range(len(jobs))])]
+        refs = [self._job.remote(fn, j, lab) for j, lab in zip(jobs, labels)]
+        done = [0]
+
+        def one(n):
+            done[0] += n
+            if reporter is not None:
+                reporter.say(f"{done[0]}/{len(jobs)} jobs done")
+        return self._gather(refs, labels, one, None)
+
     def close(self) -> None:
-        if self._owns and self._ray.is_initialized():  # never shut down a cluster we joined
+        if self._owns and self._ray.is_initialized():  # never shut down a cluster this process joined
             self._ray.shutdown()
 
 
@@ -233,7 +317,7 @@ def make_executor(workers: int | None = None, ray_address: str | None = None):
     """``ray_address`` -> :class:`RayExecutor`; ``workers == 1`` -> serial; else a process pool.
 
     Raises:
-        ValueError: workers < 1.
+        ValueError: workers < 1; an unreachable Ray cluster.
     """
     if ray_address:
         return RayExecutor(ray_address)

@@ -146,12 +146,35 @@ def paired_spearman_difference(world_a, world_b, trials, *, n_boot: int = 1000, 
         ValueError: shapes that do not match (gaits, draws other than 1 or the other's D), fewer than
             3 gaits, or n_boot < 1.
     """
+    A, B, R = _paired_inputs(world_a, world_b, trials, n_boot)
+    D = A.shape[0]
+    real = R.mean(1)
+    per_draw = [spearman(A[d].mean(1), real) - spearman(B[d].mean(1), real) for d in range(D)]
+    diff = _replicate_differences(A, B, R, int(n_boot), seed, resample_gaits)
+    obs = float(np.mean(per_draw))
+    if not len(diff):
+        return {"diff": obs, "per_draw": [float(x) for x in per_draw], "ci": [math.nan, math.nan],
+                "p_value": math.nan, "n_boot": 0}
+    a = (1 - level) / 2
+    ci = [float(np.quantile(diff, a)), float(np.quantile(diff, 1 - a))]
+    p = float(min(1.0, 2 * min(np.mean(diff <= 0), np.mean(diff >= 0))))  # 1 for the same world twice
+    return {"diff": obs, "per_draw": [float(x) for x in per_draw], "ci": ci, "p_value": p, "n_boot": int(len(diff))}
+
+
+def _paired_inputs(world_a, world_b, trials, n_boot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`paired_spearman_difference`'s inputs as float arrays, both worlds broadcast to the same
+    number of draws D: (D, G, E_a), (D, G, E_b) and the trials (G, M).
+
+    Raises:
+        ValueError: shapes that do not match (gaits, draws other than 1 or the other's D), fewer than
+            3 gaits, or n_boot < 1.
+    """
     A, B = (np.asarray(w, dtype=float) for w in (world_a, world_b))
     R = np.asarray(trials, dtype=float)
     if A.ndim != 3 or B.ndim != 3 or R.ndim != 2:
         raise ValueError(f"need worlds of shape (draws, gaits, episodes) and trials (gaits, trials), got "
                          f"{A.shape}, {B.shape}, {R.shape}")
-    G, M = R.shape
+    G = R.shape[0]
     if A.shape[1] != G or B.shape[1] != G:
         raise ValueError(f"the worlds have {A.shape[1]} and {B.shape[1]} gaits, the trials {G}")
     if G < 3:
@@ -161,11 +184,20 @@ def paired_spearman_difference(world_a, world_b, trials, *, n_boot: int = 1000, 
         raise ValueError(f"draws must match or be 1, got {A.shape[0]} and {B.shape[0]}")
     if int(n_boot) < 1:
         raise ValueError(f"n_boot must be >= 1, got {n_boot}")
-    A, B = np.broadcast_to(A, (D, *A.shape[1:])), np.broadcast_to(B, (D, *B.shape[1:]))
-    real = R.mean(1)
-    per_draw = [spearman(A[d].mean(1), real) - spearman(B[d].mean(1), real) for d in range(D)]
+    return np.broadcast_to(A, (D, *A.shape[1:])), np.broadcast_to(B, (D, *B.shape[1:])), R
+
+
+def _replicate_differences(A: np.ndarray, B: np.ndarray, R: np.ndarray, n: int, seed: int,
+                           resample_gaits: bool) -> np.ndarray:
+    """The ``n`` bootstrap replicates of the mean over the draws of ρ_a − ρ_b (see
+    :func:`paired_spearman_difference`), those with every ρ defined; |Δ| < 1e-12 set to 0.
+
+    Args:
+        A, B: per-episode fitness (D, G, E_a) and (D, G, E_b); R: real fitness per trial (G, M).
+        n: replicates; seed: of the resampling; resample_gaits: resample the gaits too.
+    """
+    G, M = R.shape
     rng = np.random.default_rng(seed)
-    n = int(n_boot)
     gi = rng.integers(0, G, (n, G)) if resample_gaits else np.broadcast_to(np.arange(G), (n, G))
     ti = rng.integers(0, M, (n, M))
     ea = rng.integers(0, A.shape[2], (n, A.shape[2]))
@@ -180,14 +212,7 @@ def paired_spearman_difference(world_a, world_b, trials, *, n_boot: int = 1000, 
     diff = diff[np.isfinite(diff)]
     # replicates where both worlds rank alike give 0 up to rounding: counted as 0 (on both sides of the test)
     diff[np.abs(diff) < 1e-12] = 0.0
-    obs = float(np.mean(per_draw))
-    if not len(diff):
-        return {"diff": obs, "per_draw": [float(x) for x in per_draw], "ci": [math.nan, math.nan],
-                "p_value": math.nan, "n_boot": 0}
-    a = (1 - level) / 2
-    ci = [float(np.quantile(diff, a)), float(np.quantile(diff, 1 - a))]
-    p = float(min(1.0, 2 * min(np.mean(diff <= 0), np.mean(diff >= 0))))  # 1 for the same world twice
-    return {"diff": obs, "per_draw": [float(x) for x in per_draw], "ci": ci, "p_value": p, "n_boot": int(len(diff))}
+    return diff
 
 
 def brier_score(p, outcomes) -> float:

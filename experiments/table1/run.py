@@ -32,7 +32,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import time
 
 import numpy as np
 
@@ -69,6 +68,35 @@ def comparisons(methods) -> list[tuple[str, str]]:
 
 
 
+def _slug(method: str) -> str:
+    """A training world's name as a folder name (``experiments.optimize.slug``)."""
+    from experiments.optimize import slug
+
+    return slug(method)
+
+
+def _identify_job(job, executor) -> dict:
+    """One optimization seed's identification of the real world (an executor job)."""
+    from experiments.optimize import identify  # lazy: loads the engines
+    from experiments.runtime.progress import Reporter
+
+    root, seed, profile = job
+    return identify(root, seed=seed, profile=profile, reporter=Reporter(f"identify seed {seed}"))
+
+
+def _optimize_job(job, executor):
+    """One method's optimization on one seed (an executor job): ``sgatwalk optimize`` without real
+    trials, resumed where it stopped; its episodes on ``executor``."""
+    from experiments.optimize import OptimizeConfig, Optimizer  # lazy: loads the engines and torch
+    from experiments.runtime.progress import Reporter
+
+    settings, run_dir, identification = job
+    cfg = OptimizeConfig(**settings)
+    opt = Optimizer(cfg, run_dir, executor, reporter=Reporter(f"{cfg.methods[0]} seed {cfg.seed}"),
+                    identification=identification)
+    return opt.run(resume=os.path.exists(opt.state_path))
+
+
 class Table1:
     """Runs (or resumes) a Table I run in ``run_dir`` with ``executor``."""
 
@@ -87,18 +115,35 @@ class Table1:
                                reporter=self.report)
         self._episodes = self._log.done
 
-    def _optimize(self, s: int):
-        """Optimization seed ``s``: one ``sgatwalk optimize`` run of every method without its own real
-        trials, in ``opt_seed<s>/`` (resumed where it stopped; methods added to it)."""
-        from experiments.optimize import OptimizeConfig, Optimizer  # lazy: loads torch and the engines
+    def _optimizations(self) -> list:
+        """Every (method, optimization seed) optimization, as independent jobs (side by side on a Ray
+        cluster; in order on this machine): first the real world's identification of each seed that a
+        method building on it needs (the seed's methods share it), then one ``sgatwalk optimize`` run
+        per method and seed without its own real trials, in ``opt_seed<s>/<method>/`` (each resumed where
+        it stopped). The results are those of one run of every method per seed: every draw is keyed by
+        (seed, purpose), not by the method.
 
-        run = os.path.join(self.run_dir, f"opt_seed{s}")
-        cfg = OptimizeConfig(**{**self.cfg.optimize, "methods": tuple(self.cfg.methods), "seed": s, "eval_trials": 0})
-        opt = Optimizer(cfg, run, self.ex, reporter=self.report.child(f"seed {s}"))
-        t0 = time.perf_counter()
-        res = opt.run(resume=os.path.exists(opt.state_path), add_methods=self.cfg.methods)
-        self._say(f"optimization seed {s} done ({time.perf_counter() - t0:.0f} s)")
-        return res
+        Returns:
+            ``[(method, seed, experiments.optimize.OptimizeResult)]``.
+        """
+        from experiments.runtime.worlds import parse_world
+
+        cfg = self.cfg
+        seeds = list(range(cfg.seeds))
+        ident = {}
+        if any(parse_world(m).needs_identification for m in cfg.methods):
+            self._say(f"identifying the real world for {len(seeds)} optimization seed(s)")
+            jobs = [(os.path.join(self.run_dir, f"opt_seed{s}", "identified"), s, cfg.optimize.get("profile", "real"))
+                    for s in seeds]
+            ident = dict(zip(seeds, self.ex.jobs(_identify_job, jobs, [f"identification seed {s}" for s in seeds],
+                                                 self.report)))
+        runs = [(m, s) for s in seeds for m in cfg.methods]
+        jobs = [({**cfg.optimize, "methods": (m,), "seed": s, "eval_trials": 0},
+                 os.path.join(self.run_dir, f"opt_seed{s}", _slug(m)), ident.get(s) if parse_world(m).needs_identification
+                 else None) for m, s in runs]
+        self._say(f"{len(jobs)} optimizations (methods x seeds)")
+        results = self.ex.jobs(_optimize_job, jobs, [f"{m} seed {s}" for m, s in runs], self.report)
+        return [(m, s, r) for (m, s), r in zip(runs, results)]
 
     def run(self) -> dict:
         cfg = self.cfg
@@ -106,13 +151,12 @@ class Table1:
         clock = WallClock(self.run_dir, legacy=os.path.join(self.run_dir, "table1.json"))
         gaits: dict[str, list] = {}
         predicted: dict[str, float] = {}  # the training world's fitness of each selected gait
-        real_data = {}
-        for s in range(cfg.seeds):
-            res = self._optimize(s)
-            real_data[s] = res.real_data
+        real_data: dict = {}
+        for m, s, res in self._optimizations():
+            real_data.setdefault(s, {}).update(res.real_data)
             gaits.setdefault("theta0", res.theta0)
             for r in res.rows:
-                if r.method in cfg.methods:
+                if r.method == m:
                     gaits[f"{r.method}|{r.step}|{s}"] = r.theta
                     if r.select_scores:
                         predicted[f"{r.method}|{r.step}|{s}"] = max(r.select_scores.values())

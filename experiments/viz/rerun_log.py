@@ -144,18 +144,32 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
     """
     import rerun as rr  # lazy: rerun
 
-    robot = rec.robot
     world = str(rec.meta.get("world", "unknown"))
     color = tuple(color or WORLD_COLORS.get(world, PALETTE[0]))
     L = _Logger(stream, label, rec)
-    T = len(rec)
-
-    # ---------------------------------------------------------------- scene
+    # scene: the subtree's axes and its ground
     L.static("", rr.ViewCoordinates.RIGHT_HAND_Z_UP)
     L.static("terrain", rr.Mesh3D(**terrain_mesh(terrain)))
-
-    # ---------------------------------------------------------------- robot
     links, pos, quat, grounded = link_poses(rec)
+    skipped_meshes = _log_robot(L, rec.robot, links, pos, quat, color)
+    balance = _log_balance(L, rec, terrain, links, pos, quat, color)
+    _log_footsteps(L, label, rec, terrain)
+    start_msg = _start_message(rec, world, terrain_note, grounded, skipped_meshes)
+    _log_events(L, rec, terrain, pos, start_msg)
+    _log_time_series(L, label, rec, balance, color)
+    return L.rows
+
+
+def _log_robot(L: _Logger, robot: RobotModel, links: list[str], pos: np.ndarray, quat: np.ndarray,
+               color) -> list[str]:
+    """Log every link's pose (``pos`` (T, links, 3) [m], ``quat`` (T, links, 4) w, x, y, z) at
+    ``robot/<link>``, its primitives (the soles' links darker) and its meshes; returns the mesh files
+    not drawn (see :func:`_log_meshes`).
+
+    Raises:
+        ValueError: a geometry kind other than box, capsule, sphere or mesh.
+    """
+    rr = L.rr
     xyzw = _xyzw(quat)
     geoms = {robot.root: robot.root_geoms, **{j.child: j.geoms for j in robot.joints}}
     body_col = _color(color, 0.35)
@@ -174,8 +188,16 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
                 path = f"robot/{link}/geom" if len(kinds) == 1 else f"robot/{link}/geom/{kind}"
                 L.static(path, _primitives(rr, [g for g in prims if g.kind == kind], col, link))
         skipped_meshes += _log_meshes(L, rr, link, [g for g in gs if g.kind == "mesh"], mesh_col)
+    return skipped_meshes
 
-    # ---------------------------------------------------------------- balance markers
+
+def _log_balance(L: _Logger, rec: Recording, terrain: Heightfield | None, links: list[str], pos: np.ndarray,
+                 quat: np.ndarray, color) -> dict[str, np.ndarray]:
+    """Log the balance markers the recording has: measured CoM (and its trail), measured CoP, planned
+    CoM (and its trail) and ZMP reference (on the ground). Returns {``com``, ``cop``, ``plan_com``,
+    ``zmp_ref``: (T, 3) [m] world positions} for those logged."""
+    rr = L.rr
+    robot = rec.robot
     balance: dict[str, np.ndarray] = {}
     if rec.has("gt.com"):
         com = rec.group("gt.com")
@@ -188,7 +210,7 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
         L.points("cop", cop, [230, 30, 30], 0.010)
     if "plan.com.x" in rec.columns:
         pc = np.column_stack([rec.columns["plan.com.x"], rec.columns["plan.com.y"],
-                              rec.columns.get("plan.com.z", np.full(T, np.nan))])
+                              rec.columns.get("plan.com.z", np.full(len(rec), np.nan))])
         if not np.isfinite(pc[:, 2]).any():
             pc[:, 2] = balance["com"][:, 2] if "com" in balance else 0.26 * _robot_scale(robot)
         balance["plan_com"] = pc
@@ -200,48 +222,80 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
         pz = np.column_stack([zx, zy, _ground_z(terrain, zx, zy) + 0.002])
         balance["zmp_ref"] = pz
         L.points("plan/zmp", pz, [0, 200, 200], 0.008)
+    return balance
 
-    # ---------------------------------------------------------------- footsteps
+
+def _footstep_fields(label: str, steps) -> tuple:
+    """The columns of ``footsteps`` metadata: x, y [m], yaw [rad] (S,), sides ("L"/"R"), start and end
+    times [s] (S,; an open end is inf).
+
+    Raises:
+        RecordingError: a malformed entry (message names the label).
+    """
+    try:
+        fx = np.array([float(s["x"]) for s in steps])
+        fy = np.array([float(s["y"]) for s in steps])
+        fyaw = np.array([float(s.get("yaw", 0.0)) for s in steps])
+        side = [str(s.get("side", "L")) for s in steps]
+        t0 = np.array([float(s.get("t_start") or 0.0) for s in steps])
+        t1 = np.array([math.inf if s.get("t_end") is None else float(s["t_end"]) for s in steps])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RecordingError(f"{label}: metadata 'footsteps' must be a list of {{x, y, yaw, side, t_start, "
+                             f"t_end}}: {exc}") from None
+    return fx, fy, fyaw, side, t0, t1
+
+
+def _log_footsteps(L: _Logger, label: str, rec: Recording, terrain: Heightfield | None) -> None:
+    """Log the planned footsteps (``meta["footsteps"]``), static wireframe boxes of the robot's sole
+    on the ground at ``plan/footsteps``, and solid copies while each is in use at
+    ``plan/footsteps/active``; nothing when there are none.
+
+    Raises:
+        RecordingError: malformed ``footsteps`` metadata (message names the label).
+    """
     steps = rec.meta.get("footsteps") or []
-    if steps:
-        try:
-            fx = np.array([float(s["x"]) for s in steps])
-            fy = np.array([float(s["y"]) for s in steps])
-            fyaw = np.array([float(s.get("yaw", 0.0)) for s in steps])
-            side = [str(s.get("side", "L")) for s in steps]
-            t0 = np.array([float(s.get("t_start") or 0.0) for s in steps])
-            t1 = np.array([math.inf if s.get("t_end") is None else float(s["t_end"]) for s in steps])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise RecordingError(f"{label}: metadata 'footsteps' must be a list of {{x, y, yaw, side, t_start, "
-                                 f"t_end}}: {exc}") from None
-        sole_box, sole_center = _sole_geometry(robot)
-        sgn = np.array([1.0 if s == "L" else -1.0 for s in side])
-        cx = fx + np.cos(fyaw) * sole_center[0] - np.sin(fyaw) * sgn * sole_center[1]
-        cy = fy + np.sin(fyaw) * sole_center[0] + np.cos(fyaw) * sgn * sole_center[1]
-        cz = _ground_z(terrain, cx, cy) + sole_box[2] / 2
-        centers = np.column_stack([cx, cy, cz])
-        qs = np.column_stack([np.zeros((len(steps), 2)), np.sin(fyaw / 2), np.cos(fyaw / 2)])
-        cols = np.array([[60, 60, 230] if s == "L" else [230, 60, 60] for s in side], np.uint8)
-        half = np.tile(np.asarray(sole_box) / 2, (len(steps), 1))
-        labels = [f"{s}{k}" for k, s in enumerate(side)]
-        L.static("plan/footsteps", rr.Boxes3D(centers=centers, half_sizes=half, quaternions=qs, colors=cols,
-                                              labels=labels, show_labels=False, fill_mode="MajorWireframe"))
-        active = (t0[None, :] <= rec.t[:, None]) & (rec.t[:, None] < t1[None, :])  # (T, S)
-        rows, idx = np.nonzero(active)
-        L.static("plan/footsteps/active", rr.Boxes3D.from_fields(fill_mode="solid"))
-        L.columns("plan/footsteps/active", rr.Boxes3D.columns(
-            centers=centers[idx], half_sizes=half[idx], quaternions=qs[idx], colors=cols[idx]
-        ).partition(active.sum(1).astype(np.int64)))
+    if not steps:
+        return
+    rr = L.rr
+    fx, fy, fyaw, side, t0, t1 = _footstep_fields(label, steps)
+    sole_box, sole_center = _sole_geometry(rec.robot)
+    sgn = np.array([1.0 if s == "L" else -1.0 for s in side])
+    cx = fx + np.cos(fyaw) * sole_center[0] - np.sin(fyaw) * sgn * sole_center[1]
+    cy = fy + np.sin(fyaw) * sole_center[0] + np.cos(fyaw) * sgn * sole_center[1]
+    cz = _ground_z(terrain, cx, cy) + sole_box[2] / 2
+    centers = np.column_stack([cx, cy, cz])
+    qs = np.column_stack([np.zeros((len(steps), 2)), np.sin(fyaw / 2), np.cos(fyaw / 2)])
+    cols = np.array([[60, 60, 230] if s == "L" else [230, 60, 60] for s in side], np.uint8)
+    half = np.tile(np.asarray(sole_box) / 2, (len(steps), 1))
+    labels = [f"{s}{k}" for k, s in enumerate(side)]
+    L.static("plan/footsteps", rr.Boxes3D(centers=centers, half_sizes=half, quaternions=qs, colors=cols,
+                                          labels=labels, show_labels=False, fill_mode="MajorWireframe"))
+    active = (t0[None, :] <= rec.t[:, None]) & (rec.t[:, None] < t1[None, :])  # (T, S)
+    _, idx = np.nonzero(active)
+    L.static("plan/footsteps/active", rr.Boxes3D.from_fields(fill_mode="solid"))
+    L.columns("plan/footsteps/active", rr.Boxes3D.columns(
+        centers=centers[idx], half_sizes=half[idx], quaternions=qs[idx], colors=cols[idx]
+    ).partition(active.sum(1).astype(np.int64)))
 
-    # ---------------------------------------------------------------- fall and events
+
+def _start_message(rec: Recording, world: str, terrain_note: str, grounded: bool, skipped_meshes: list[str]) -> str:
+    """The events log's first line: world, rows, control period, seed, profile, terrain, and what is
+    not drawn as recorded (no ground-truth base pose, mesh files)."""
     seed, prof = rec.meta.get("seed"), rec.meta.get("profile")
     tinfo = rec.meta.get("terrain") or {}
-    start_msg = (f"{world} rollout: {T} rows x {float(rec.meta['control_dt']) * 1e3:g} ms, seed {seed}"
-                 + (f", profile {prof}" if prof else "") + f", terrain {tinfo.get('name', 'flat')}"
-                 + (f" ({terrain_note})" if terrain_note else "")
-                 + ("" if grounded else "; no ground-truth base pose: robot drawn upright at the origin")
-                 + (f"; {len(skipped_meshes)} mesh file(s) not drawn (missing or not STL/OBJ/glTF): "
-                    f"{', '.join(skipped_meshes[:3])}" if skipped_meshes else ""))
+    return (f"{world} rollout: {len(rec)} rows x {float(rec.meta['control_dt']) * 1e3:g} ms, seed {seed}"
+            + (f", profile {prof}" if prof else "") + f", terrain {tinfo.get('name', 'flat')}"
+            + (f" ({terrain_note})" if terrain_note else "")
+            + ("" if grounded else "; no ground-truth base pose: robot drawn upright at the origin")
+            + (f"; {len(skipped_meshes)} mesh file(s) not drawn (missing or not STL/OBJ/glTF): "
+               f"{', '.join(skipped_meshes[:3])}" if skipped_meshes else ""))
+
+
+def _log_events(L: _Logger, rec: Recording, terrain: Heightfield | None, pos: np.ndarray, start_msg: str) -> None:
+    """Log the events text log (``start_msg`` at the first row; a warning at the fall) and, for a fall,
+    a labelled marker on the ground under the last base position (``pos`` (T, links, 3) [m])."""
+    rr = L.rr
+    T = len(rec)
     texts, levels, times = [start_msg], ["INFO"], [float(rec.t[0])]
     if rec.fell:
         ft = rec.meta.get("fall_time")
@@ -260,7 +314,12 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
               index=[rr.TimeColumn(TIMELINE, duration=times),
                      rr.TimeColumn(STEP_TIMELINE, sequence=[0] + [T] * (len(times) - 1))], n=len(times))
 
-    # ---------------------------------------------------------------- time series
+
+def _log_time_series(L: _Logger, label: str, rec: Recording, balance: Mapping[str, np.ndarray], color) -> None:
+    """Log the plotted series under ``ts/``: each leg joint's commanded, applied and measured angle
+    [rad], gyro [rad/s], torso roll and pitch [rad], foot forces [N], and x, y [m] of the ``balance``
+    markers (from :func:`_log_balance`)."""
+    robot = rec.robot
     idx = {n: i for i, n in enumerate(robot.joint_names)}
     q = rec.group("q")
     cmd = robot.expand_action(rec.group("cmd"))
@@ -283,7 +342,6 @@ def log_recording(stream, label: str, rec: Recording, terrain: Heightfield | Non
         mix, width = styles[key]
         for i, ax in enumerate("xy"):
             L.scalar(f"ts/balance/{ax}/{key}", arr[:, i], f"{label} {key} {ax}", _color(color, mix), width)
-    return L.rows
 
 
 def build_blueprint(labels: list[str], robot: RobotModel, worlds: Mapping[str, str] | None = None,
@@ -404,6 +462,43 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
         raise ValueError("no recordings to visualize")
     if path is None and not spawn:
         raise ValueError("give a path for the .rrd file (or spawn=True)")
+    labels, orig = _entity_labels(recordings)
+    terrains = dict(terrains or {})
+    robot = _common_robot(labels)
+    t_start = time.perf_counter()
+    stream = rr.RecordingStream(application_id, recording_id=recording_id)
+    if not stream.is_enabled():
+        raise ValueError("Rerun logging is disabled (environment variable RERUN=off?); unset it to write .rrd files")
+    bp = _default_blueprint(labels, robot) if blueprint else None
+    if spawn:
+        _put_viewer_on_path()
+    else:
+        path = os.fspath(path)
+    # a file is written to a temporary beside it and renamed when complete (common.files.atomic_path)
+    with contextlib.nullcontext(None) if spawn else atomic_path(path, suffix=".rrd") as tmp:
+        if spawn:
+            stream.spawn(default_blueprint=bp)
+        else:
+            stream.save(tmp, default_blueprint=bp)
+        try:
+            rows, notes = _log_labelled(stream, labels, orig, terrains)
+            t_log = time.perf_counter() - t_start
+            stream.flush()
+        finally:
+            stream.disconnect()
+    size = 0 if spawn else os.path.getsize(path)
+    return {"path": None if spawn else path, "labels": list(labels), "rows": rows, "notes": notes,
+            "log_seconds": t_log, "seconds": time.perf_counter() - t_start, "bytes": size}
+
+
+def _entity_labels(recordings: Mapping[str, Recording]) -> tuple[dict[str, Recording], dict[str, str]]:
+    """Check each recording and sanitize its label: ({entity label: recording}, {entity label: label
+    as given}), in the order given.
+
+    Raises:
+        ValueError: two labels that map to one entity path, or one that is a prefix path of another;
+            RecordingError (a ValueError) for a recording :func:`check_recording` refuses.
+    """
     labels: dict[str, Recording] = {}
     orig: dict[str, str] = {}
     for lab, rec in recordings.items():
@@ -417,55 +512,65 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
     for a, b in zip(keys, keys[1:]):
         if b.startswith(a + "/"):
             raise ValueError(f"label {orig[a]!r} is a prefix of {orig[b]!r}; rename one")
-    terrains = dict(terrains or {})
+    return labels, orig
+
+
+def _common_robot(labels: Mapping[str, Recording]) -> RobotModel:
+    """The robot of every recording.
+
+    Raises:
+        ValueError: recordings of different robots.
+    """
     robot = next(iter(labels.values())).robot
     others = {r.robot.name for r in labels.values()} - {robot.name}
     if others:
         raise ValueError(f"recordings of different robots ({robot.name} and {', '.join(sorted(others))}) cannot share "
                          "one view; visualize each robot's recordings separately")
+    return robot
+
+
+def _default_blueprint(labels: Mapping[str, Recording], robot: RobotModel):
+    """:func:`build_blueprint` for these recordings: each world's label its own column, each camera
+    looking at the middle of the base path's x and y extent (where the recording has ``gt.base``),
+    0.2 m above the ground for the NAO, scaled by ``robot``'s size for others."""
     scale = _robot_scale(robot)
-    t_start = time.perf_counter()
-    stream = rr.RecordingStream(application_id, recording_id=recording_id)
-    if not stream.is_enabled():
-        raise ValueError("Rerun logging is disabled (environment variable RERUN=off?); unset it to write .rrd files")
-    bp = None
-    if blueprint:
-        centers = {}
-        for k, r in labels.items():
-            if r.has("gt.base"):
-                b = r.group("gt.base")
-                centers[k] = (0.5 * (b[:, 0].min() + b[:, 0].max()), 0.5 * (b[:, 1].min() + b[:, 1].max()), 0.2 * scale)
-        bp = build_blueprint(list(labels), robot, {k: str(r.meta.get("world", k)) for k, r in labels.items()}, centers)
+    centers = {}
+    for k, r in labels.items():
+        if r.has("gt.base"):
+            b = r.group("gt.base")
+            centers[k] = (0.5 * (b[:, 0].min() + b[:, 0].max()), 0.5 * (b[:, 1].min() + b[:, 1].max()), 0.2 * scale)
+    return build_blueprint(list(labels), robot, {k: str(r.meta.get("world", k)) for k, r in labels.items()}, centers)
+
+
+def _put_viewer_on_path() -> None:
+    """Put this Python's ``bin`` folder on PATH when the ``rerun`` viewer is there and not on PATH (the
+    viewer ships with rerun-sdk, next to python)."""
+    venv_bin = os.path.dirname(sys.executable)
+    if shutil.which("rerun") is None and os.path.exists(os.path.join(venv_bin, "rerun")):
+        os.environ["PATH"] = venv_bin + os.pathsep + os.environ.get("PATH", "")
+
+
+def _log_labelled(stream, labels: Mapping[str, Recording], orig: Mapping[str, str],
+                  terrains: Mapping[str, Heightfield | None]) -> tuple[dict[str, int], dict[str, str]]:
+    """Log the legend and every recording (:func:`log_recording`, colours picked per world) on its
+    terrain: the one given in ``terrains`` (by entity label or label as given; None: flat) or else
+    :func:`terrain_for`'s. Returns ({entity path: time-varying rows}, {entity label: terrain note}).
+
+    Raises:
+        RecordingError, ValueError: what :func:`log_recording` raises.
+    """
+    import rerun as rr  # lazy: rerun
+
     rows: dict[str, int] = {}
     notes: dict[str, str] = {}
     used: dict[str, int] = {}
-    t_log = 0.0
-    if spawn:
-        venv_bin = os.path.dirname(sys.executable)  # the viewer ships with rerun-sdk, next to python
-        if shutil.which("rerun") is None and os.path.exists(os.path.join(venv_bin, "rerun")):
-            os.environ["PATH"] = venv_bin + os.pathsep + os.environ.get("PATH", "")
-    else:
-        path = os.fspath(path)
-    # a file is written to a temporary beside it and renamed when complete (common.files.atomic_path)
-    with contextlib.nullcontext(None) if spawn else atomic_path(path, suffix=".rrd") as tmp:
-        if spawn:
-            stream.spawn(default_blueprint=bp)
+    stream.log("/legend", rr.TextDocument(LEGEND_MD, media_type=rr.MediaType.MARKDOWN), static=True)
+    for lab, rec in labels.items():
+        if lab in terrains or orig[lab] in terrains:
+            hf = terrains.get(lab, terrains.get(orig[lab]))
+            note = "flat ground (plane at z = 0)" if hf is None else "the rollout's terrain"
         else:
-            stream.save(tmp, default_blueprint=bp)
-        try:
-            stream.log("/legend", rr.TextDocument(LEGEND_MD, media_type=rr.MediaType.MARKDOWN), static=True)
-            for lab, rec in labels.items():
-                if lab in terrains or orig[lab] in terrains:
-                    hf = terrains.get(lab, terrains.get(orig[lab]))
-                    note = "flat ground (plane at z = 0)" if hf is None else "the rollout's terrain"
-                else:
-                    hf, note = terrain_for(rec)
-                notes[lab] = note
-                rows.update(log_recording(stream, lab, rec, hf, note, _pick_color(str(rec.meta.get("world", "")), used)))
-            t_log = time.perf_counter() - t_start
-            stream.flush()
-        finally:
-            stream.disconnect()
-    size = 0 if spawn else os.path.getsize(path)
-    return {"path": None if spawn else path, "labels": list(labels), "rows": rows, "notes": notes,
-            "log_seconds": t_log, "seconds": time.perf_counter() - t_start, "bytes": size}
+            hf, note = terrain_for(rec)
+        notes[lab] = note
+        rows.update(log_recording(stream, lab, rec, hf, note, _pick_color(str(rec.meta.get("world", "")), used)))
+    return rows, notes
