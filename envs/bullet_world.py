@@ -63,7 +63,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from common.spatial import cross, quat_to_mat
 from envs.base import HumanoidEnv, StepState, make_terrain
-from envs.effects import EffectDraw, RealProfile, get_profile
+from envs.effects import EffectDraw, RealProfile, Stochasticity, get_profile
 from robots import RobotModel
 from terrain import Heightfield, lumpy
 
@@ -125,17 +125,21 @@ class RealWorld(HumanoidEnv):
         ground: ``seed -> Heightfield | None``, the uneven ground of each episode in place of the
             lumpy terrain of ``terrain="lumpy"`` (e.g. the identified sim's Gaussian surface,
             ``sysid.identified.model_ground``: the real world's physics on the sim's ground model).
+        stochasticity: the level of per-step randomness (:class:`envs.effects.Stochasticity`: servo
+            torque noise per control step, foot friction and contact softness per touchdown); 0, the
+            default, draws none.
 
     Raises:
-        ValueError: unknown profile or terrain.
+        ValueError: unknown profile or terrain; a negative stochasticity.
     """
 
     world = "real"
 
     def __init__(self, robot: RobotModel | None = None, *, profile="real", terrain="lumpy",
-                 solver_iterations: int = 50, ground=None, **kwargs):
+                 solver_iterations: int = 50, ground=None, stochasticity: float = 0.0, **kwargs):
         super().__init__(robot, **kwargs)
         self.ground = ground
+        self.stochasticity = Stochasticity(float(stochasticity))
         self.profile: RealProfile = get_profile(profile, self.robot)
         if not (terrain == "lumpy" or terrain is None or terrain == "flat" or isinstance(terrain, Heightfield)):
             raise ValueError(f"terrain must be 'lumpy', 'flat', None or a Heightfield, got {terrain!r}")
@@ -163,9 +167,13 @@ class RealWorld(HumanoidEnv):
         r, p = self.robot, self.client
         # Independent streams for effects, terrain and sensor noise, all from the episode seed.
         seed = int(seed if seed is not None else self.np_random.integers(2**31))
-        eff_ss, _, noise_ss = np.random.SeedSequence(seed).spawn(3)  # the terrain's stream: real_ground
+        # spawn(4)[:3] == spawn(3): the per-step stream leaves the others as they were
+        eff_ss, _, noise_ss, step_ss = np.random.SeedSequence(seed).spawn(4)  # the terrain's stream: real_ground
         self.effects = self.profile.draw(np.random.default_rng(eff_ss), len(r.joint_names), len(r.links))
         self._noise_rng = np.random.default_rng(noise_ss)
+        if "stochastic_seed" in options:
+            step_ss = np.random.SeedSequence(int(options["stochastic_seed"]))
+        self._step_rng = np.random.default_rng(step_ss)
         spec = options.get("terrain", self.terrain_spec)
         if spec == "lumpy":
             spec = self.ground(seed) if self.ground is not None else real_ground(seed, self.effects.terrain_amplitude)
@@ -239,6 +247,23 @@ class RealWorld(HumanoidEnv):
         self._bias = e.encoder_bias_rad
         self._delay = int(round(e.latency_s / self.physics_dt))
         self._fifo = deque([self.q0.copy()] * self._delay)
+        self._touching = [False, False]
+        self.touchdowns: list[tuple[float, int, dict]] = []  # (time [s], foot 0 left / 1 right, contact drawn)
+        if self.stochasticity.active:
+            self._touchdown_check()  # the feet's contact at the start: a foot already down draws its own
+
+    def _touchdown_check(self) -> None:
+        """Per-step stochasticity: a foot that touched down since the last control step gets a contact
+        of its own (:meth:`envs.effects.Stochasticity.touchdown`)."""
+        p, b, r = self.client, self.body, self.robot
+        for k, foot in enumerate(("l_sole", "r_sole")):
+            link = self._link[r.frames[foot].link]
+            down = bool(p.getContactPoints(bodyA=b, linkIndexA=link))
+            if down and not self._touching[k]:
+                c = self.stochasticity.touchdown(self._step_rng, float(self.effects.foot_friction), float(self._masses.sum()))
+                p.changeDynamics(b, link, **c)
+                self.touchdowns.append((self.time, k, c))
+            self._touching[k] = down
 
     def _base_link_pose(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The root's centre of mass (3,) [m], and the world position (3,) [m] and orientation (w, x, y,
@@ -273,6 +298,9 @@ class RealWorld(HumanoidEnv):
         kdv = kd + self.effects.viscous_damping
         use_play = bool(np.any(play > 0))
         n = len(idx)
+        stochastic = self.stochasticity.active
+        if stochastic:  # servo torque noise, one draw per control step
+            noise = self.stochasticity.torque_noise(self._step_rng, tmax)
         for _ in range(self.n_substeps):
             if delay:
                 fifo.append(targets)
@@ -285,9 +313,14 @@ class RealWorld(HumanoidEnv):
             err = cmd - (q + bias)
             if use_play:
                 err = np.sign(err) * np.maximum(np.abs(err) - play, 0.0)
-            tau = np.minimum(np.maximum(kp * err - kdv * dq, lo), tmax)  # np.clip without its wrapper
+            tau = kp * err - kdv * dq
+            if stochastic:
+                tau = tau + noise
+            tau = np.minimum(np.maximum(tau, lo), tmax)  # np.clip without its wrapper
             set_motors(b, idx, pybullet.TORQUE_CONTROL, forces=tau.tolist(), physicsClientId=cid)
             step(physicsClientId=cid)
+        if stochastic:
+            self._touchdown_check()
 
     def _state(self) -> StepState:
         p, b = self.client, self.body

@@ -254,3 +254,67 @@ def get_profile(profile: str | dict | RealProfile, robot=None) -> RealProfile:
         scaled = real_profile_for(robot)
         return scaled if profile == "real" else _on_flat_ground(scaled)
     return PROFILES[profile]
+
+
+@dataclass(frozen=True)
+class Stochasticity:
+    """Per-step randomness of the real world within an episode, apart from the per-episode effects.
+
+    The effects of a :class:`RealProfile` are drawn once per episode; within an episode only the sensors
+    are noisy. A level ``L >= 0`` adds two processes the physics draws while the robot walks, from a
+    stream of their own (the episode seed's, or ``reset(options={"stochastic_seed": s})``):
+
+    ==================  =============================================  ============================
+    process             draw                                           stands for
+    ==================  =============================================  ============================
+    servo torque noise  per control step and joint, ``N(0, (0.03 L        current ripple and gear
+                        tau_max)^2)`` [N m] added to the PD torque     friction that vary per step
+                        (held over the control step's physics steps)
+    touchdown friction  at each touchdown of a foot, its friction      turf: grip that differs at
+                        ``mu * exp(N(0, (0.2 L)^2))``, clipped to      every footstep
+                        [0.3, 2.0]
+    touchdown softness  at each touchdown, the contact stiffness       foam under the turf: a sole
+                        ``k = 10^U(6 - 0.75 L, 6)`` [N/m], damping     sinks 0.05 mm to 5 cm,
+                        ``2 sqrt(k m / 2)`` [N s/m] (m the robot's     different at every step
+                        mass: critically damped on one foot)
+    ==================  =============================================  ============================
+
+    Level 0 draws nothing: the real world as it is, bit for bit. The NAO's initial gait θ0 walks 7.5 s
+    on level 0-3 in most episodes (``docs/concepts/worlds.md`` has the measured fall rates).
+    The NAO walking on "foam under turf", where the forces acting on the foot differ at every step, is
+    the setting of Desai et al., "Stochastic Grounded Action Transformation for Robot Learning in
+    Simulation" (IROS 2020), Sec. V.
+
+    Raises:
+        ValueError: a negative or non-finite level.
+    """
+
+    level: float = 0.0
+
+    #: Servo torque noise per level, as a fraction of each joint's torque limit (std).
+    TORQUE = 0.03
+    #: Log-normal spread of the foot friction drawn at each touchdown, per level.
+    FRICTION = 0.2
+    #: Decades of contact stiffness below 10^6 N/m that a touchdown draws from, per level.
+    SOFTNESS = 0.75
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.level) and self.level >= 0):
+            raise ValueError(f"stochasticity must be a number >= 0, got {self.level!r}")
+
+    @property
+    def active(self) -> bool:
+        return self.level > 0
+
+    def torque_noise(self, rng: np.random.Generator, tau_max: np.ndarray) -> np.ndarray:
+        """One control step's torque noise per joint [N m], shape of ``tau_max``."""
+        return rng.normal(0.0, 1.0, tau_max.shape) * (self.TORQUE * self.level) * tau_max
+
+    def touchdown(self, rng: np.random.Generator, friction: float, mass: float) -> dict:
+        """One touchdown's contact: ``{"lateralFriction", "contactStiffness", "contactDamping"}``
+        (``pybullet.changeDynamics`` keywords) for a foot of nominal friction ``friction`` on a robot
+        of ``mass`` [kg]."""
+        mu = float(np.clip(friction * np.exp(rng.normal(0.0, self.FRICTION * self.level)), 0.3, 2.0))
+        k = 10.0 ** rng.uniform(6.0 - self.SOFTNESS * self.level, 6.0)
+        return {"lateralFriction": mu, "contactStiffness": float(k),
+                "contactDamping": float(2.0 * np.sqrt(k * mass / 2.0))}

@@ -37,3 +37,13 @@ def raise_once(arg):
         open(marker, "w").close()
         raise RuntimeError("transient failure")
     return value + 1
+
+
+def write_then_fail(job, executor):
+    """A coarse job (``executor.jobs``) that writes its file, then raises if told to."""
+    path, fail = job
+    with open(path, "w") as f:
+        f.write("started")
+    if fail:
+        raise ValueError(f"bad input in job {path[-5]}")
+    return path

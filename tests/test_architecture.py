@@ -27,7 +27,7 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LIBS = ("common", "robots", "terrain", "envs", "walk_engine", "sgat", "sysid")
-EXPERIMENTS = ("optimize", "fidelity", "table1", "compare", "stress", "gym", "cliff", "demos")
+EXPERIMENTS = ("optimize", "fidelity", "table1", "compare", "stress", "gym", "cliff", "demos", "stochasticity")
 BELOW_EXPERIMENTS = set(LIBS) | {"experiments.runtime", "experiments.viz"}
 #: Node -> the nodes it may import.
 ALLOWED: dict[str, set[str]] = {
@@ -47,7 +47,10 @@ ALLOWED: dict[str, set[str]] = {
 }
 #: The modules through which one experiment may use another (its public API and result types).
 RESULTS_OF = {"experiments.table1": {"experiments.optimize", "experiments.optimize.results"},
-              "experiments.compare": {"experiments.fidelity.results"}}
+              "experiments.compare": {"experiments.fidelity.results"},
+              # a study composes whole runs of other experiments
+              "experiments.stochasticity": {"experiments.fidelity.config", "experiments.fidelity.run",
+                                            "experiments.table1.config", "experiments.table1.run"}}
 
 
 def _node(module: str) -> str | None:

@@ -105,12 +105,17 @@ def test_table1_grows_by_methods_without_redoing_anything(tmp_path):
     assert now[:len(walked)] == walked and len(now) == len(walked) + 3  # 3 trials of the one new gait
     assert all(json.loads(x)["key"].startswith("sgat:ane=0.05|1|0|t") for x in now[len(walked):])
     from experiments.runtime.tasks import EpisodeTask  # noqa: F401 - the walks below are recordings of those tasks
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     new = {p.name: p for p in (run / "opt_seed0" / "sgat_ane0.05" / "data").glob("real_*")}
     assert set(new) == set(real)  # the same gaits on the same seeds
-    for name, path in new.items():
-        assert pq.read_table(path).equals(pq.read_table(run / "opt_seed0" / "sgat" / "data" / name))
+    for name, path in new.items():  # equal column by column (the CoP is NaN while no foot touches)
+        x, y = pq.read_table(path), pq.read_table(run / "opt_seed0" / "sgat" / "data" / name)
+        assert x.schema.equals(y.schema, check_metadata=True)
+        for c in x.column_names:
+            assert np.array_equal(x[c].to_numpy(zero_copy_only=False), y[c].to_numpy(zero_copy_only=False),
+                                  equal_nan=x[c].type in (pa.float32(), pa.float64())), c
     assert {(t["a"], t["b"]) for t in b["tests"]} - {(t["a"], t["b"]) for t in a["tests"]} == {
         ("sgat:ane=0.05", "sgat"), ("sgat:ane=0.05", "ane"), ("sgat:ane=0.05", "theta0")}
 

@@ -38,6 +38,7 @@ COMMANDS: list[str] = [
     "experiments.cli.fidelity",
     "experiments.cli.compare",
     "experiments.cli.table1",
+    "experiments.cli.stochasticity",
 ]
 
 

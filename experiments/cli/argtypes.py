@@ -107,6 +107,19 @@ workers = Number(int, 1, 256)
 fraction = Number(float, 0.0, 1.0)
 
 
+def levels(text: str) -> tuple[float, ...]:
+    """Per-step stochasticity levels (``--levels``): a comma list or ``start:stop:count`` of numbers >= 0."""
+    from common.parse import parse_values
+
+    try:
+        vals = parse_values(text, "levels", hint="expected a comma list (e.g. 0,1,2,3) or start:stop:count")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if any(v < 0 for v in vals):
+        raise argparse.ArgumentTypeError(f"levels must be >= 0, got {min(vals):g}")
+    return tuple(vals)
+
+
 def worlds(text: str) -> tuple[str, ...]:
     """Training worlds as a comma list (``--methods``): their canonical names
     (:func:`experiments.runtime.worlds.parse_worlds`)."""
@@ -212,9 +225,13 @@ def profile(text: str) -> str:
 
 
 def add_profile(parser: argparse.ArgumentParser) -> None:
-    """Add ``--profile`` (default real): the real world's effect profile."""
+    """Add ``--profile`` (default real) and ``--stochasticity`` (default 0): the real world's effect profile and
+    per-step randomness (``envs.effects.Stochasticity``)."""
     parser.add_argument("--profile", type=profile, help="real-world effect profile: real (default), none, real-flat "
                         "(real on flat ground) or real-ground (its uneven ground alone)")
+    parser.add_argument("--stochasticity", type=real(0.0, 10.0, unit="level"), default=0.0, metavar="LEVEL",
+                        help="the real world's per-step randomness: servo torque noise per control step, foot "
+                             "friction and contact softness per touchdown (0: none, the default; 1-3: docs/concepts/worlds.md)")
 
 
 def add_executor(parser: argparse.ArgumentParser) -> None:
@@ -240,5 +257,5 @@ def fail(prog: str, message: str) -> int:
     return 2
 
 
-__all__ = ["Number", "Parser", "UsageError", "user_input", "add_executor", "add_profile", "add_robot", "count", "fail", "fraction", "in_dir", "in_file",
+__all__ = ["Number", "Parser", "UsageError", "user_input", "add_executor", "levels", "add_profile", "add_robot", "count", "fail", "fraction", "in_dir", "in_file",
            "in_path", "out_dir", "out_file", "profile", "real", "seconds", "seed", "workers", "world", "worlds"]

@@ -77,7 +77,8 @@ def run(args) -> dict:
     with A.user_input():
         cfg = FidelityConfig(worlds=tuple(worlds), gaits=args.gaits, box=args.box, params=tuple(args.params),
                              real_trials=args.real_trials, data_seeds=args.data_seeds, episodes=args.episodes,
-                             seconds=args.seconds, profile=args.profile or "real", identify_budget_s=args.identify_budget,
+                             seconds=args.seconds, profile=args.profile or "real", stochasticity=args.stochasticity,
+                             identify_budget_s=args.identify_budget,
                              seed=args.seed, robot=args.robot)
         cfg.validate()
         for p in cfg.params:  # every θ file readable as the robot's gait

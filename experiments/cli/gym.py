@@ -53,8 +53,7 @@ def register(sub) -> argparse.ArgumentParser:
                    help="training budgets: quick (default; minutes) or paper (the GARAT/SGAT code's budgets; hours)")
     p.add_argument("--seed", type=A.seed, help="base seed (default 0)")
     p.add_argument("--out", type=A.out_dir, help="sweep directory (default runs/gym_<env>_<experiment>_<preset>)")
-    p.add_argument("--workers", type=A.workers, help="worker processes (default: one per core; 1 = serial)")
-    p.add_argument("--ray-address", help="run jobs on Ray (auto, local, ray://host:10001)")
+    A.add_executor(p)
     p.add_argument("--pole-factor", type=A.real(0.0, 1000.0, open_lo=True), help="InvertedPendulum: real pole mass/inertia factor (default 10, "
                                                     "the paper; the GARAT code's 100 kg pole is ≈20)")
     p.add_argument("--mass-factor", type=A.real(0.0, 1000.0, open_lo=True), help="HalfCheetah: real mass/inertia factor (default 20/14)")

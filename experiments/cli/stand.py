@@ -38,7 +38,8 @@ def run(args) -> dict:
     with A.user_input():
         cfg = StandConfig(worlds=tuple(w.strip() for w in args.world.split(",") if w.strip()), pose=args.pose,
                           seconds=args.seconds, seed=args.seed, profile=args.profile or "real", terrain=args.terrain,
-                          amplitude=args.amplitude, fixed_base=args.fixed_base, robot=args.robot, record=args.record)
+                          amplitude=args.amplitude, fixed_base=args.fixed_base, robot=args.robot, record=args.record,
+                          stochasticity=args.stochasticity)
     res = stand(cfg)
     if not args.json:
         print(format_stand(res["worlds"]))

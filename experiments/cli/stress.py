@@ -55,7 +55,7 @@ def run(args) -> dict:
     with A.user_input():
         cfg = make_config(args.params, world=args.world, terrain=terrain, amplitude=args.amplitude,
                           trials=args.trials, seed=args.seed, profile=args.profile, sweep=args.sweep,
-                          seconds=args.seconds, robot=args.robot)
+                          seconds=args.seconds, robot=args.robot, stochasticity=args.stochasticity)
     res = run_stress(cfg, args.out, workers=args.workers, ray_address=args.ray_address, rerun=args.rerun,
                      reporter=Reporter("stress"))
     if not args.json:

@@ -50,8 +50,11 @@ def register(sub) -> argparse.ArgumentParser:
 def optimize_overrides(args) -> dict:
     """The :class:`experiments.optimize.OptimizeConfig` settings given on the command line (the rest stay
     optimize's defaults)."""
-    return {k: getattr(args, k) for k in ("popsize", "generations", "grounding_steps", "seconds", "profile")
-            if getattr(args, k, None) is not None}
+    given = {k: getattr(args, k) for k in ("popsize", "generations", "grounding_steps", "seconds", "profile")
+             if getattr(args, k, None) is not None}
+    if args.stochasticity:  # runs at level 0 keep the settings they were saved with
+        given["stochasticity"] = args.stochasticity
+    return given
 
 
 def run(args):

@@ -77,7 +77,8 @@ def run(args) -> dict:
         else:
             cfg = LiveConfig(worlds=tuple(w.strip() for w in args.world.split(",") if w.strip()), robot=args.robot or "nao",
                              params=args.params, pose=args.pose, seed=args.seed, seconds=args.seconds,
-                             profile=args.profile or "real", transformer=args.transformer, record=args.record)
+                             profile=args.profile or "real", stochasticity=args.stochasticity,
+                             transformer=args.transformer, record=args.record)
             gait = cfg.gait()
     if not args.inputs:
         recs, terrains, notes = live_rollouts(cfg, gait)

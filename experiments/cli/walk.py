@@ -46,7 +46,7 @@ def run(args) -> dict:
     with A.user_input():
         cfg = WalkConfig(params=args.params, world=args.world, report=tuple(args.report or ()), seconds=args.seconds,
                          seed=args.seed, profile=args.profile, terrain=args.terrain, amplitude=args.amplitude, vx=args.vx,
-                         vy=args.vy, wz=args.wz, robot=args.robot, record=args.record)
+                         vy=args.vy, wz=args.wz, robot=args.robot, record=args.record, stochasticity=args.stochasticity)
         gait, identified = cfg.gait(), cfg.identified_terms()
     res = walk(cfg, gait, identified)
     if not args.json:

@@ -7,11 +7,12 @@ simulation speed, and optionally each rollout as a Parquet recording.
 
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
+
+from experiments.runtime.rundir import record_path
 
 WORLDS = ("sim", "real")
 
@@ -21,7 +22,8 @@ class StandConfig:
     """What to hold, where: ``worlds`` (sim, real), ``pose`` (a pose of the robot), ``seconds``,
     ``seed``, ``profile`` (the real world's), ``terrain``/``amplitude`` (a heightfield for both worlds;
     None: flat sim, the profile's random field in the real world), ``fixed_base`` (hang the robot),
-    ``robot`` and ``record`` (a path; ``{world}`` in it is replaced).
+    ``robot``, ``record`` (a path; ``{world}`` in it is replaced) and ``stochasticity`` (the real world's
+    per-step randomness level, ``envs.effects.Stochasticity``).
 
     Raises:
         ValueError: an unknown world or pose, an amplitude without a terrain.
@@ -37,6 +39,7 @@ class StandConfig:
     fixed_base: bool = False
     robot: str = "nao"
     record: str | None = None
+    stochasticity: float = 0.0
 
     def __post_init__(self) -> None:
         from robots import get_robot
@@ -47,21 +50,12 @@ class StandConfig:
         if bad or not self.worlds:
             raise ValueError(f"unknown world {bad[0] if bad else '(none)'!r}; choose from sim, real")
         get_robot(self.robot).pose(self.pose)  # KeyError naming the known poses
+        if self.stochasticity and "real" not in self.worlds:
+            raise ValueError("--stochasticity applies to the real world only (add real to --world)")
         if self.amplitude is not None and self.terrain is None:
             raise ValueError("--amplitude needs --terrain (e.g. --terrain lumpy --amplitude 0.01)")
         if self.terrain is not None:
             check_amplitude(self.terrain, 0.01 if self.amplitude is None else self.amplitude)
-
-
-def record_path(path: str, world: str, n_worlds: int) -> str:
-    """Where the recording of ``world`` goes: ``{world}`` in ``path`` replaced, or ``_sim``/``_real``
-    before the suffix when two worlds share one path."""
-    if "{world}" in path:
-        return path.format(world=world)
-    if n_worlds == 1:
-        return path
-    root, ext = os.path.splitext(path)
-    return f"{root}_{world}{ext or '.parquet'}"
 
 
 def stand(cfg: StandConfig) -> dict:
@@ -83,7 +77,10 @@ def stand(cfg: StandConfig) -> dict:
     results = []
     for w in cfg.worlds:
         kw = {"fixed_base": cfg.fixed_base, "robot": robot}
-        kw.update(profile=cfg.profile, terrain=hf if hf is not None else "lumpy") if w == "real" else kw.update(terrain=hf)
+        if w == "real":
+            kw.update(profile=cfg.profile, terrain=hf if hf is not None else "lumpy", stochasticity=cfg.stochasticity)
+        else:
+            kw.update(terrain=hf)
         env = make_world(w, **kw)
         t0 = time.perf_counter()
         rec = rollout(env, HoldPose(env.robot, cfg.pose), seed=cfg.seed, seconds=cfg.seconds)
@@ -96,6 +93,7 @@ def stand(cfg: StandConfig) -> dict:
                "wall_s": wall, "realtime_factor": float(len(rec) * env.control_dt / wall)}
         if w == "real":
             res["profile"] = env.profile.name
+            res["stochasticity"] = cfg.stochasticity
         if cfg.record:
             res["recording"] = rec.to_parquet(record_path(cfg.record, w, len(cfg.worlds)))
         results.append(res)
@@ -118,4 +116,4 @@ def format_stand(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["StandConfig", "format_stand", "record_path", "stand"]
+__all__ = ["StandConfig", "format_stand", "stand"]

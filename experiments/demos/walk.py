@@ -17,10 +17,11 @@ class WalkConfig:
     identified world's diagnosis reports), ``seconds``, ``seed``, ``profile`` (the real world's),
     ``terrain``/``amplitude`` (a heightfield; None: flat sim, the profile's random field in the real
     world), the command ``vx`` [m/s] (None: the gait's own speed), ``vy`` [m/s], ``wz`` [rad/s],
-    ``robot`` and ``record`` (a Parquet path).
+    ``robot``, ``record`` (a Parquet path) and ``stochasticity`` (the real world's per-step randomness
+    level, ``envs.effects.Stochasticity``).
 
     Raises:
-        ValueError: an unknown world, a profile outside the real world, an identified world without
+        ValueError: an unknown world, a profile or stochasticity outside the real world, an identified world without
             reports (or reports without it, or for a robot other than the NAO), an amplitude without a
             terrain.
     """
@@ -38,6 +39,7 @@ class WalkConfig:
     wz: float = 0.0
     robot: str = "nao"
     record: str | None = None
+    stochasticity: float = 0.0
 
     def __post_init__(self) -> None:
         if self.world not in WORLDS:
@@ -46,6 +48,8 @@ class WalkConfig:
             raise ValueError("--world identified models the NAO only (sgatwalk diagnose identifies the NAO's physics)")
         if self.world != "real" and self.profile is not None:
             raise ValueError("--profile applies to the real world only (use --world real)")
+        if self.world != "real" and self.stochasticity:
+            raise ValueError("--stochasticity applies to the real world only (use --world real)")
         if (self.world == "identified") != bool(self.report):
             raise ValueError("--world identified needs --report REPORT_JSON (and --report needs --world identified)")
         if self.amplitude is not None and self.terrain is None:
@@ -112,10 +116,10 @@ def walk(cfg: WalkConfig, gait=None, identified=None) -> dict:
     t0 = time.perf_counter()
     rec, res = run_walk(params, world=cfg.world, seed=cfg.seed, seconds=cfg.seconds, profile=cfg.profile or "real",
                         terrain=terrain, command=WalkCommand(cfg.vx, cfg.vy, cfg.wz), env=env,
-                        robot=robot if env is None else None)
+                        robot=robot if env is None else None, stochasticity=cfg.stochasticity)
     out = {"robot": cfg.robot, "world": cfg.world, "seed": cfg.seed, **res.to_dict(), "profile": rec.meta.get("profile"),
            "terrain": rec.meta["terrain"]["name"] if rec.meta.get("terrain") else "flat", "params": params.to_dict(),
-           "wall_s": time.perf_counter() - t0}
+           "stochasticity": cfg.stochasticity, "wall_s": time.perf_counter() - t0}
     if cfg.record:
         out["recording"] = rec.to_parquet(cfg.record)
     return out
@@ -125,7 +129,8 @@ def format_walk(out: dict) -> str:
     """The line ``sgatwalk walk`` prints, from its result."""
     fall = f"fell ({out['fall_reason']} at {out['fall_time_s']:.2f} s)" if out["fell"] else "did not fall"
     who = f"{out['robot']}, " if out.get("robot", "nao") != "nao" else ""
-    return (f"{who}{out['world']} seed {out['seed']} [{out['terrain']}{', profile ' + out['profile'] if out['profile'] else ''}]: "
+    level = f", stochasticity {out['stochasticity']:g}" if out.get("stochasticity") else ""
+    return (f"{who}{out['world']} seed {out['seed']} [{out['terrain']}{', profile ' + out['profile'] if out['profile'] else ''}{level}]: "
             f"speed {out['speed_cm_s']:.2f} cm/s, {fall}, drift {100 * out['drift_m']:.1f} cm, "
             f"distance {100 * out['distance_m']:.1f} cm, fitness {out['fitness']:.2f}"
             + (f"  -> {out['recording']}" if out.get("recording") else ""))

@@ -54,6 +54,7 @@ class FidelityConfig:
         data_seeds: independent draws of the real data every learned world is fitted on.
         episodes: episodes per gait in a stochastic world (a deterministic one walks one).
         seconds: episode length [s]; profile: the real world's effect profile.
+        stochasticity: the real world's per-step randomness level (``envs.effects.Stochasticity``; 0: none).
         identify_fixed_logs, identify_floating_logs, identify_seconds: excitation logs per
             identification (in the air, stepping) and their length [s].
         identify_budget_s: wall-clock budget of each diagnosis [s], a safety net; not part of the
@@ -75,6 +76,7 @@ class FidelityConfig:
     episodes: int = 8
     seconds: float = EPISODE_SECONDS
     profile: str = "real"
+    stochasticity: float = 0.0
     identify_fixed_logs: int = 3
     identify_floating_logs: int = 3
     identify_seconds: float = 6.0
@@ -109,6 +111,8 @@ class FidelityConfig:
             raise ValueError(f"seconds must be positive, got {self.seconds}")
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if not (math.isfinite(self.stochasticity) and self.stochasticity >= 0):
+            raise ValueError(f"stochasticity must be a number >= 0, got {self.stochasticity}")
         if self.identify_fixed_logs < 2 or self.identify_floating_logs < 0:
             raise ValueError("identification needs >= 2 fixed-base logs (a held-out split) and >= 0 stepping logs")
         specs = parse_worlds(self.worlds)

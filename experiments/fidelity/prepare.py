@@ -10,8 +10,9 @@ For every draw d of the real data (``data_seeds`` draws, each from seeds of its 
 * the **fits**: one action transformer per grounded world and draw, exactly as ``sgatwalk optimize``'s
   first grounding step fits it (:class:`experiments.runtime.tasks.FitTask`).
 
-Everything is cached in the run directory (``identified/d<draw>/``, ``data/``, ``models/``) and reused
-on a resume; walks and fits of all worlds and draws go to the executor together.
+Each draw is an independent job (:func:`prepare_draw_job`; side by side on a Ray cluster, one after the
+other on this machine, its walks and fits on the executor's workers either way). Everything is cached
+in the run directory (``identified/d<draw>/``, ``data/``, ``models/``) and reused on a resume.
 """
 
 from __future__ import annotations
@@ -35,15 +36,17 @@ from experiments.runtime.worlds import WorldSpec
 
 class Phases:
     """Wall time per phase of :data:`experiments.fidelity.config.PHASES`, accumulated over a run's
-    invocations in ``phases.json``."""
+    invocations in ``phases.json`` (``run_dir`` None: in memory only, as a job keeps them for its run)."""
 
-    def __init__(self, run_dir: str):
-        self.path = os.path.join(run_dir, "phases.json")
-        try:
-            with open(self.path) as f:
-                self.seconds = {k: float(v) for k, v in json.load(f).items() if k in PHASES}
-        except (OSError, ValueError, AttributeError):  # none yet, or unreadable: count from here
-            self.seconds = {}
+    def __init__(self, run_dir: str | None):
+        self.path = os.path.join(run_dir, "phases.json") if run_dir else None
+        self.seconds: dict[str, float] = {}
+        if self.path:
+            try:
+                with open(self.path) as f:
+                    self.seconds = {k: float(v) for k, v in json.load(f).items() if k in PHASES}
+            except (OSError, ValueError, AttributeError):  # none yet, or unreadable: count from here
+                self.seconds = {}
 
     @contextlib.contextmanager
     def __call__(self, name: str):
@@ -51,7 +54,13 @@ class Phases:
         try:
             yield
         finally:
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - t0
+            self.add({name: time.perf_counter() - t0})
+
+    def add(self, seconds: dict[str, float]) -> None:
+        """Add seconds per phase (a job's) and save."""
+        for k, v in seconds.items():
+            self.seconds[k] = self.seconds.get(k, 0.0) + float(v)
+        if self.path:
             atomic_write_text(self.path, json.dumps(self.seconds))
 
     def ordered(self) -> dict[str, float]:
@@ -60,16 +69,18 @@ class Phases:
 
 
 class WorldData:
-    """The identifications, grounding walks and fitted transformers of a fidelity run's learned worlds.
+    """The identification, grounding walks and fitted transformers of one draw of a fidelity run's
+    learned worlds.
 
     Args:
-        cfg: the run's settings; specs: its worlds; run_dir: its directory; executor: where walks and
-        fits run; reporter: its progress; phases: its phase clock.
+        cfg: the run's settings; specs: its worlds; run_dir: its directory; draw: the draw of real
+        data; executor: where walks and fits run; reporter: progress; phases: the phase clock.
     """
 
-    def __init__(self, cfg: FidelityConfig, specs: list[WorldSpec], run_dir: str, executor, reporter: Reporter,
-                 phases: Phases):
-        self.cfg, self.specs, self.run_dir, self.ex, self.report, self.phase = cfg, specs, run_dir, executor, reporter, phases
+    def __init__(self, cfg: FidelityConfig, specs: list[WorldSpec], run_dir: str, draw: int, executor,
+                 reporter: Reporter, phases: Phases):
+        self.cfg, self.specs, self.run_dir, self.draw = cfg, specs, run_dir, draw
+        self.ex, self.report, self.phase = executor, reporter, phases
         self._queued: dict[str, EpisodeTask] = {}
 
     # ---------------------------------------------------------------- walks
@@ -79,8 +90,9 @@ class WorldData:
         paths = [os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet") for s in seeds]
         for s, p in zip(seeds, paths):
             if not os.path.exists(p):
-                self._queued.setdefault(p, EpisodeTask(world, tuple(theta), s, self.cfg.seconds, robot=self.cfg.robot,
-                                                       profile=self.cfg.profile, record=True, **kw))
+                self._queued.setdefault(p, EpisodeTask(
+                    world, tuple(theta), s, self.cfg.seconds, robot=self.cfg.robot, profile=self.cfg.profile,
+                    stochasticity=self.cfg.stochasticity if world == "real" else 0.0, record=True, **kw))
         return paths
 
     def record_walks(self) -> None:
@@ -99,82 +111,70 @@ class WorldData:
         self.report.say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
 
     # ---------------------------------------------------------------- identification
-    def _identify_args(self, draw: int) -> dict:
-        """Where and from what draw ``draw``'s identification records (what :func:`identify_real` and
+    def _identify_args(self) -> dict:
+        """Where and from what seed this draw's identification records (what :func:`identify_real` and
         :func:`excitation_tasks` share)."""
         cfg = self.cfg
-        return {"out_dir": os.path.join(self.run_dir, "identified", f"d{draw}"),
-                "seed": derive_seed(cfg.seed, IDENT, draw) % 1_000_000, "profile": cfg.profile,
+        return {"out_dir": os.path.join(self.run_dir, "identified", f"d{self.draw}"),
+                "seed": derive_seed(cfg.seed, IDENT, self.draw) % 1_000_000, "profile": cfg.profile,
                 "n_fixed": cfg.identify_fixed_logs, "n_floating": cfg.identify_floating_logs,
-                "seconds": cfg.identify_seconds}
+                "seconds": cfg.identify_seconds, "stochasticity": cfg.stochasticity}
 
-    def identify(self) -> dict[int, dict]:
-        """Every draw's identification of the real world (none when no world needs one): the excitation
-        logs of all draws recorded side by side first, then the diagnoses one by one (each keeps the
-        cores busy itself).
+    def identify(self, calibration: dict) -> dict:
+        """This draw's identification of the real world: its excitation logs recorded side by side, then
+        the diagnoses (:func:`experiments.runtime.identify.identify_real`).
 
-        Returns:
-            ``{draw: identify_real's result}``.
+        Args:
+            calibration: :func:`experiments.runtime.identify.calibrate_engines`'s output.
         """
-        if not any(s.needs_identification for s in self.specs):
-            return {}
-        cfg = self.cfg
-        t0 = time.perf_counter()
-        # one constant of the testbed, whatever the run's seed; the package ships it for the pinned engines
-        calibration = calibrate_engines(os.path.join(self.run_dir, "identified", "calibration"), seed=ENGINE_GAP_SEED,
-                                        floating=cfg.identify_floating_logs > 0)
-        self.report.say(f"engine-gap calibration ready ({time.perf_counter() - t0:.0f} s)")
-        todo = [t for d in range(cfg.data_seeds) for t in excitation_tasks(**self._identify_args(d))]
+        todo = excitation_tasks(**self._identify_args())
         if todo:
             t0 = time.perf_counter()
             self.report.say(f"recording {len(todo)} sets of excitation logs ({sum(t['n_logs'] for t in todo)} logs)")
             with self.phase("excitation logs"):
                 list(self.ex.map(record_excitation_task, todo))
             self.report.say(f"  recorded ({time.perf_counter() - t0:.0f} s)")
-        out = {}
-        for d in range(cfg.data_seeds):
-            with self.phase("diagnoses"):
-                out[d] = r = identify_real(**self._identify_args(d), calibration=calibration,
-                                           time_budget_s=cfg.identify_budget_s, rounds=IDENTIFY_ROUNDS)
-            self.report.say(f"identified draw {d}: {len(r['effects'])} terms, ground Sq {1000 * r['terrain_rms_height']:.2f} "
-                            f"mm, {r['logs']} logs ({r['wall_s']:.0f} s)"
-                            + "".join(f"; WARNING: the {k} diagnosis ran out of time (raise --identify-budget)"
-                                      for k in r.get("time_budget_reached", [])))
-        return out
+        with self.phase("diagnoses"):
+            r = identify_real(**self._identify_args(), calibration=calibration,
+                              time_budget_s=self.cfg.identify_budget_s, rounds=IDENTIFY_ROUNDS)
+        self.report.say(f"identified: {len(r['effects'])} terms, ground Sq {1000 * r['terrain_rms_height']:.2f} "
+                        f"mm, {r['logs']} logs ({r['wall_s']:.0f} s)"
+                        + "".join(f"; WARNING: the {k} diagnosis ran out of time (raise --identify-budget)"
+                                  for k in r.get("time_budget_reached", [])))
+        return r
 
     # ---------------------------------------------------------------- fits
-    def model_dir(self, spec: WorldSpec, draw: int) -> str:
-        return os.path.join(self.run_dir, "models", f"{spec.key}_d{draw}")
+    def model_dir(self, spec: WorldSpec) -> str:
+        return os.path.join(self.run_dir, "models", f"{spec.key}_d{self.draw}")
 
-    def prepare(self, theta0) -> dict:
-        """Identifications, grounding walks and fitted transformers for every world and draw.
+    def prepare(self, theta0, calibration: dict | None) -> dict:
+        """This draw's identification, grounding walks and fitted transformers for every world.
 
         Args:
             theta0: the gait the grounding walks walk (SI).
+            calibration: the engine-gap calibration (:func:`calibrate_engines`; None when no world
+                needs an identification).
 
         Returns:
-            ``{world name: {draw: {"transformer": dir or None, "identified": [reports] or None,
-            "real_walks", "real_seconds", "real_walk_falls", "excitation_logs", "excitation_seconds",
-            "effects", "terrain_rms_height", "delay", "real_paths"}}}``.
+            ``{world name: {"transformer": dir or None, "identified": [reports] or None, "real_walks",
+            "real_seconds", "real_walk_falls", "excitation_logs", "excitation_seconds", "effects",
+            "terrain_rms_height", "delay", "real_paths"}}``.
         """
-        cfg = self.cfg
-        idents = self.identify()
-        out: dict = {s.name: {} for s in self.specs}
+        idn = self.identify(calibration) if any(s.needs_identification for s in self.specs) else None
+        out: dict = {}
         fits = []
-        for d in range(cfg.data_seeds):
-            for s in self.specs:
-                info: dict = {"transformer": None, "identified": None, "real_walks": 0, "real_seconds": 0.0,
-                              "excitation_logs": 0, "excitation_seconds": 0.0}
-                if s.needs_identification:
-                    idn = idents[d]
-                    info.update(identified=list(idn["reports"]), excitation_logs=idn["logs"],
-                                excitation_seconds=idn["seconds"], effects=idn["effects"],
-                                terrain_rms_height=idn["terrain_rms_height"])
-                if s.grounded:
-                    fits.append(self._grounding(s, d, info, theta0))
-                out[s.name][d] = info
+        for s in self.specs:
+            info: dict = {"transformer": None, "identified": None, "real_walks": 0, "real_seconds": 0.0,
+                          "excitation_logs": 0, "excitation_seconds": 0.0}
+            if s.needs_identification:
+                info.update(identified=list(idn["reports"]), excitation_logs=idn["logs"],
+                            excitation_seconds=idn["seconds"], effects=idn["effects"],
+                            terrain_rms_height=idn["terrain_rms_height"])
+            if s.grounded:
+                fits.append(self._grounding(s, info, theta0))
+            out[s.name] = info
         self.record_walks()
-        for info in (i for per in out.values() for i in per.values() if i.get("real_paths")):
+        for info in (i for i in out.values() if i.get("real_paths")):
             walks = [recording_summary(p) for p in info["real_paths"]]
             info["real_walks"] = len(walks)
             info["real_seconds"] = float(sum(w[0] for w in walks))
@@ -182,10 +182,10 @@ class WorldData:
         self._fit([f for f in fits if not os.path.exists(os.path.join(f.out, "transformer.json"))], len(fits))
         return out
 
-    def _grounding(self, s: WorldSpec, d: int, info: dict, theta0) -> FitTask:
-        """Queue draw ``d``'s grounding walks of world ``s`` and return its fit (``info`` gains the
+    def _grounding(self, s: WorldSpec, info: dict, theta0) -> FitTask:
+        """Queue this draw's grounding walks of world ``s`` and return its fit (``info`` gains the
         transformer's directory, the real walks and the delay)."""
-        cfg = self.cfg
+        cfg, d = self.cfg, self.draw
         hybrid = s.needs_identification
         real = self.walks("real", derive_seeds(cfg.seed, GROUND_REAL, d, n=int(s.get("real"))), f"real_d{d}", theta0)
         noise = float(s.get("explore"))
@@ -194,9 +194,9 @@ class WorldData:
                          action_noise=noise, identified=tuple(info["identified"] or ()))
         delay = identified_delay(info["identified"]) if s.get("delay") == "auto" else None
         gcfg = s.grounding_config(delay=delay)
-        info.update(transformer=self.model_dir(s, d), real_paths=real, data_gait=list(theta0), delay=int(gcfg.delay))
+        info.update(transformer=self.model_dir(s), real_paths=real, data_gait=list(theta0), delay=int(gcfg.delay))
         return FitTask(tuple(real), tuple(sim), gcfg.to_dict(), int(s.get("history")),
-                       derive_seed(cfg.seed, FIT, d) % 1_000_000, self.model_dir(s, d), cfg.robot, f"{s.name} draw {d}")
+                       derive_seed(cfg.seed, FIT, d) % 1_000_000, self.model_dir(s), cfg.robot, f"{s.name} draw {d}")
 
     def _fit(self, todo: list[FitTask], total: int) -> None:
         if not todo:
@@ -211,4 +211,49 @@ class WorldData:
         self.report.say(f"fits done ({time.perf_counter() - t0:.0f} s)")
 
 
-__all__ = ["Phases", "WorldData"]
+def prepare_draw_job(job, executor) -> tuple[dict, dict]:
+    """One draw of a fidelity run's real data, as an executor job (:meth:`SerialExecutor.jobs
+    <experiments.runtime.executors.SerialExecutor.jobs>`): its identification, grounding walks and fits,
+    cached in the run directory.
+
+    Args:
+        job: ``(cfg, run_dir, draw, theta0, calibration, verbose)``; executor: where its walks and fits
+            run; ``verbose`` False: no messages.
+
+    Returns:
+        ``(WorldData.prepare's result, seconds per phase)``.
+    """
+    cfg, run_dir, draw, theta0, calibration, verbose = job
+    phases = Phases(None)
+    reporter = Reporter(f"fidelity draw {draw}") if verbose else Reporter.quiet()
+    data = WorldData(cfg, cfg.validate(), run_dir, draw, executor, reporter, phases)
+    return data.prepare(theta0, calibration), phases.seconds
+
+
+def prepare_draws(cfg: FidelityConfig, specs: list[WorldSpec], run_dir: str, executor, reporter: Reporter,
+                  phases: Phases, theta0) -> dict:
+    """Every draw's identification, grounding walks and fits (:func:`prepare_draw_job`), the draws as
+    independent jobs after the engine-gap calibration they share.
+
+    Returns:
+        ``{world name: {draw: info}}`` (see :meth:`WorldData.prepare`).
+    """
+    calibration = None
+    if any(s.needs_identification for s in specs):
+        t0 = time.perf_counter()
+        # one constant of the testbed, whatever the run's seed; the package ships it for the pinned engines
+        calibration = calibrate_engines(os.path.join(run_dir, "identified", "calibration"), seed=ENGINE_GAP_SEED,
+                                        floating=cfg.identify_floating_logs > 0)
+        reporter.say(f"engine-gap calibration ready ({time.perf_counter() - t0:.0f} s)")
+    draws = list(range(cfg.data_seeds))
+    done = executor.jobs(prepare_draw_job, [(cfg, run_dir, d, list(theta0), calibration, reporter.stream is not None) for d in draws],
+                         [f"draw {d}" for d in draws], reporter)
+    out: dict = {s.name: {} for s in specs}
+    for d, (per_world, seconds) in zip(draws, done):
+        phases.add(seconds)
+        for name, info in per_world.items():
+            out[name][d] = info
+    return out
+
+
+__all__ = ["Phases", "WorldData", "prepare_draw_job", "prepare_draws"]

@@ -34,7 +34,7 @@ import numpy as np
 
 from common.files import WallClock, atomic_write_text, jsonable
 from experiments.fidelity.config import PANEL, REAL, REAL_WORLD, WORLD, FidelityConfig, param_gait_names
-from experiments.fidelity.prepare import Phases, WorldData
+from experiments.fidelity.prepare import Phases, prepare_draws
 from experiments.fidelity.report import format_table, plot, plot_episodes
 from experiments.fidelity.scoring import (draw_metrics, episode_counts, episodes_rows, group_rows, paired_rows,
                                           replay_summary, summary)
@@ -92,7 +92,6 @@ class Fidelity:
         self.report = reporter or Reporter.quiet()
         os.makedirs(run_dir, exist_ok=True)
         self.phase = Phases(run_dir)
-        self.data = WorldData(cfg, self.specs, run_dir, executor, self.report, self.phase)
 
     def phases(self) -> dict[str, float]:
         """Seconds spent in each phase so far, every invocation included, in run order."""
@@ -125,6 +124,7 @@ class Fidelity:
         n = 1 if spec.deterministic else cfg.episodes
         seeds = derive_seeds(cfg.seed, REAL_WORLD, draw, n=n) if spec.kind == "real" else derive_seeds(cfg.seed, WORLD, n=n)
         return [episode_task(spec, g["theta"], s, seconds=cfg.seconds, robot=cfg.robot, profile=cfg.profile,
+                             stochasticity=cfg.stochasticity,
                              transformer=info["transformer"], identified=info["identified"] or (),
                              key=f"w|{spec.key}|d{draw}|{g['name']}|e{e}")
                 for g in gaits for e, s in enumerate(seeds)]
@@ -140,9 +140,10 @@ class Fidelity:
         real_seeds = derive_seeds(cfg.seed, REAL, n=cfg.real_trials)
         with self.phase("real trials"):
             self._log.run(self.ex, [EpisodeTask("real", g["theta"], s, cfg.seconds, robot=cfg.robot, profile=cfg.profile,
+                                                stochasticity=cfg.stochasticity,
                                                 key=f"real|{g['name']}|t{j}")
                                     for g in gaits for j, s in enumerate(real_seeds)], "real trials")
-        prep = self.data.prepare(self.data_gait())
+        prep = prepare_draws(cfg, self.specs, self.run_dir, self.ex, self.report, self.phase, self.data_gait())
         tasks = [t for spec in self.specs for d in (range(cfg.data_seeds) if spec.per_draw else [0])
                  for t in self.world_tasks(spec, d, prep[spec.name][d], gaits)]
         with self.phase("world episodes"):

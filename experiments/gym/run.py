@@ -795,8 +795,8 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: boo
             t["init_policy"] = sim[t["run"]]
         if t["kind"] == "ane" and _policy_path(out, cfg, t).exists():
             t["trained_policy"] = load_policy(_policy_path(out, cfg, t))
-            if t["kind"] == "sim":
-                t["sim_return"] = sim_returns.get(t["run"], math.nan)
+        if t["kind"] == "sim":  # the sim policy's own return (unknown for a policy trained before a resume)
+            t["sim_return"] = sim_returns.get(t["run"], math.nan)
         tasks.append(t)
 
     _execute(executor, tasks, table, local, bar, keep)

@@ -51,6 +51,7 @@ class OptimizeConfig:
         seconds: episode length [s] (the paper: 7.5).
         eval_trials: real trials of each θ_{i+1} (0: none).
         profile: the real world's effect profile.
+        stochasticity: the real world's per-step randomness level (``envs.effects.Stochasticity``; 0: none).
         aggregate: fit each grounding step on the walks of every θ_j so far (the GARAT code) or on θ_i's only.
         seed: run seed; params: a θ0 file (None: the walk engine's θ0); robot: ``robots.get_robot`` name.
     """
@@ -66,6 +67,7 @@ class OptimizeConfig:
     seconds: float = EPISODE_SECONDS
     eval_trials: int = 10
     profile: str = "real"
+    stochasticity: float = 0.0
     aggregate: bool = True
     seed: int = 0
     params: str | None = None
@@ -104,6 +106,8 @@ class OptimizeConfig:
             raise ValueError(f"seconds must be positive, got {self.seconds}")
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if not (math.isfinite(self.stochasticity) and self.stochasticity >= 0):
+            raise ValueError(f"stochasticity must be a number >= 0, got {self.stochasticity}")
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)

@@ -86,14 +86,16 @@ def summarize(results: list) -> dict:
             "falls": int(sum(bool(r.fell) for r in results)), "fitness_mean": float(fit.mean())}
 
 
-def identify(root: str, *, seed: int, profile="real", reporter: Reporter | None = None) -> dict:
+def identify(root: str, *, seed: int, profile="real", stochasticity: float = 0.0,
+             reporter: Reporter | None = None) -> dict:
     """Identify the real world once for the worlds built on it: the testbed's engine-gap calibration,
     excitation logs in the air and stepping, two diagnoses (:func:`experiments.runtime.identify.identify_real`),
     all in ``root``; reused when there.
 
     Args:
         root: the folder (``RUN_DIR/identified``); seed: the run seed (the logs' seed is derived from it);
-        profile: the real world's effect profile; reporter: progress.
+        profile: the real world's effect profile; stochasticity: its per-step randomness level;
+        reporter: progress.
 
     Returns:
         :func:`experiments.runtime.identify.identify_real`'s result.
@@ -105,7 +107,7 @@ def identify(root: str, *, seed: int, profile="real", reporter: Reporter | None 
     # testbed: the package ships it for the pinned engines and a run copies it
     cal = calibrate_engines(os.path.join(root, "calibration"), seed=ENGINE_GAP_SEED)
     res = identify_real(root, seed=derive_seed(seed, IDENTIFICATION) % 1_000_000, profile=profile, calibration=cal,
-                        time_budget_s=IDENTIFY_BUDGET_S, rounds=IDENTIFY_ROUNDS)
+                        time_budget_s=IDENTIFY_BUDGET_S, rounds=IDENTIFY_ROUNDS, stochasticity=stochasticity)
     report.say(f"identify: {len(res['effects'])} terms, uneven ground Sq {1000 * res['terrain_rms_height']:.2f} mm "
                f"from {res['logs']} logs ({res['seconds']:.0f} s of recording; {time.perf_counter() - t0:.0f} s)"
                + "".join(f"; WARNING: the {k} diagnosis ran out of its {IDENTIFY_BUDGET_S:g} s budget, so the "
@@ -195,7 +197,7 @@ class Optimizer:
         spec = parse_world(method)
         model = os.path.join(self.run_dir, "models", f"{slug(method)}_step{step}") if spec.grounded else None
         return [episode_task(spec, theta, s, seconds=self.cfg.seconds, robot=self.cfg.robot, profile=self.cfg.profile,
-                             transformer=model, identified=self._reports() if spec.needs_identification else (), **kw)
+                             stochasticity=self.cfg.stochasticity, transformer=model, identified=self._reports() if spec.needs_identification else (), **kw)
                 for s in seeds]
 
     def _real_tasks(self, theta, seeds, **kw) -> list[EpisodeTask]:
@@ -212,6 +214,7 @@ class Optimizer:
         todo = [s for s, p in zip(seeds, paths) if not os.path.exists(p)]
         if todo:
             tasks = [EpisodeTask(world, tuple(theta), s, self.cfg.seconds, robot=self.cfg.robot, profile=self.cfg.profile,
+                                 stochasticity=self.cfg.stochasticity if world == "real" else 0.0,
                                  identified=tuple(identified), action_noise=action_noise, record=True) for s in todo]
             for s, r in zip(todo, self._map(tasks, f"{world} data")):
                 Recording(*r.recording).to_parquet(os.path.join(self.run_dir, "data", f"{tag}_{s}.parquet"))
@@ -415,7 +418,8 @@ class Optimizer:
             self._start()
         if any(s.needs_identification for s in self.cfg.specs) and not self.state.get("identification"):
             self.state["identification"] = self.identification or identify(
-                os.path.join(self.run_dir, "identified"), seed=self.cfg.seed, profile=self.cfg.profile, reporter=self.report)
+                os.path.join(self.run_dir, "identified"), seed=self.cfg.seed, profile=self.cfg.profile,
+                stochasticity=self.cfg.stochasticity, reporter=self.report)
             self._save()
         if not any(r["method"] == "theta0" for r in self.state["rows"]):
             self.state["rows"].append({"method": "theta0", "step": 0, **self._evaluate(self.state["theta0"], 0, "theta0")})

@@ -100,7 +100,8 @@ def walk_meta(params: GaitParams, command: WalkCommand | None = None) -> dict:
 
 def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0,
              seconds: float = EPISODE_SECONDS, profile="real", terrain: str | Heightfield | None = None,
-             command: WalkCommand | None = None, env=None, robot=None) -> tuple[Recording, WalkResult]:
+             command: WalkCommand | None = None, env=None, robot=None,
+             stochasticity: float = 0.0) -> tuple[Recording, WalkResult]:
     """One walking episode of the ZMP engine with ``params`` and its fitness.
 
     Args:
@@ -114,6 +115,7 @@ def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0
         command: walking command (default: forward at the gait's speed).
         env: an existing world (or wrapper, e.g. ``sgat.GroundedEnv``) to reuse.
         robot: the ``robots.RobotModel`` of a new world (default the NAO); params default to its θ0.
+        stochasticity: the real world's per-step randomness level (``envs.effects.Stochasticity``).
 
     Returns:
         (recording with ``meta["params"]`` and ``meta["command"]``, :class:`WalkResult`). A fall
@@ -131,8 +133,10 @@ def run_walk(params: GaitParams | None = None, world: str = "sim", seed: int = 0
     if own:
         kw = {} if robot is None else {"robot": robot}
         if world == "real":
-            kw.update(profile=profile, terrain="lumpy" if terrain is None else terrain)
-        elif world == "sim":
+            kw.update(profile=profile, terrain="lumpy" if terrain is None else terrain, stochasticity=stochasticity)
+        elif stochasticity:
+            raise ValueError("stochasticity is the real world's (use world 'real')")
+        if world == "sim":
             if terrain == "lumpy":
                 raise ValueError("terrain 'lumpy' (a fresh field per seed) is for the real world; pass a Heightfield")
             kw.update(terrain=terrain)

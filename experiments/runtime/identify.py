@@ -58,13 +58,13 @@ USE_GROUND_TRUTH = True
 
 
 def _record(out_dir: str, *, fixed_base: bool, profile, n_logs: int, seconds: float, seed: int,
-            lumpy: bool = False) -> list[str]:
+            lumpy: bool = False, stochasticity: float = 0.0) -> list[str]:
     from envs import RealWorld  # lazy: loads the engines
     from envs.effects import get_profile  # lazy: loads the engines
     from sysid.worlds import record_excitation  # lazy: loads the engines
 
     prof = get_profile(profile)
-    env = RealWorld(profile=prof, terrain="flat", fixed_base=fixed_base)
+    env = RealWorld(profile=prof, terrain="flat", fixed_base=fixed_base, stochasticity=stochasticity)
     ground = None
     if lumpy:
         lo, hi = prof.terrain_amplitude
@@ -200,10 +200,11 @@ def write_engine_gap(out_dir: str | os.PathLike = ENGINE_GAP_DIR, *, work_dir: s
     return written
 
 
-def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, seconds: float) -> list[dict]:
+def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, seconds: float,
+            stochasticity: float = 0.0) -> list[dict]:
     """The recording task of each stage of :func:`identify_real` that has logs (fixed base first), with
     its ``report`` path: ``{"kind", "report", "out_dir", "fixed_base", "profile", "n_logs", "seconds",
-    "seed", "lumpy"}``."""
+    "seed", "lumpy", "stochasticity"}``."""
     out = []
     for kind, n in (("fixed", n_fixed), ("floating", n_floating)):
         if n <= 0:
@@ -211,7 +212,8 @@ def _stages(out_dir: str, *, seed: int, profile, n_fixed: int, n_floating: int, 
         stage = os.path.join(out_dir, kind)
         out.append({"kind": kind, "report": os.path.join(stage, "report.json"), "out_dir": os.path.join(stage, "logs"),
                     "fixed_base": kind == "fixed", "profile": profile, "n_logs": n, "seconds": seconds,
-                    "seed": seed + (0 if kind == "fixed" else 50), "lumpy": kind == "floating"})
+                    "seed": seed + (0 if kind == "fixed" else 50), "lumpy": kind == "floating",
+                    "stochasticity": float(stochasticity)})
     return out
 
 
@@ -225,30 +227,31 @@ def record_excitation_task(task: dict) -> list[str]:
     """Record one stage's excitation logs (a picklable executor task; a task of :func:`excitation_tasks`).
     Returns the log paths."""
     return _record(task["out_dir"], fixed_base=task["fixed_base"], profile=task["profile"], n_logs=task["n_logs"],
-                   seconds=task["seconds"], seed=task["seed"], lumpy=task["lumpy"])
+                   seconds=task["seconds"], seed=task["seed"], lumpy=task["lumpy"],
+                   stochasticity=task.get("stochasticity", 0.0))
 
 
 def excitation_tasks(out_dir: str, *, seed: int, profile="real", n_fixed: int = 3, n_floating: int = 3,
-                     seconds: float = 6.0) -> list[dict]:
+                     seconds: float = 6.0, stochasticity: float = 0.0) -> list[dict]:
     """The excitation recordings that :func:`identify_real` with these arguments still has to make
     (stages without a report or a complete set of logs), as tasks of :func:`record_excitation_task`: a
     caller with a process pool records every identification's logs side by side before the diagnoses
     (each diagnosis keeps the cores busy itself; a recording runs on one). The logs are the same as
     when :func:`identify_real` records them."""
     return [st for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating,
-                                 seconds=seconds)
+                                 seconds=seconds, stochasticity=stochasticity)
             if not os.path.exists(st["report"]) and _recorded(st) is None]
 
 
 def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict | None = None, n_fixed: int = 3,
                   n_floating: int = 3, seconds: float = 6.0, time_budget_s: float = 60.0, rounds: int = 2,
-                  progress=None) -> dict:
+                  progress=None, stochasticity: float = 0.0) -> dict:
     """Excite the real world and diagnose it: the reports the identified sim is built from.
 
     Args:
         out_dir: folder for ``fixed/`` and ``floating/`` (logs and report each).
         seed: seed of the excitation trajectories and of the real world's draws.
-        profile: the real world's effect profile.
+        profile: the real world's effect profile; stochasticity: its per-step randomness level.
         calibration: :func:`calibrate_engines` output (None: no engine-gap calibration).
         n_fixed, n_floating: excitation logs in the air and stepping on the walking ground (0 skips
             the stage).
@@ -273,7 +276,8 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
     say = progress or (lambda s: None)
     reports, n_logs, secs, budget_hit = [], 0, 0.0, []
     base = None
-    for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating, seconds=seconds):
+    for st in _stages(out_dir, seed=seed, profile=profile, n_fixed=n_fixed, n_floating=n_floating, seconds=seconds,
+                      stochasticity=stochasticity):
         kind, rep_path, logs_dir = st["kind"], st["report"], st["out_dir"]
         if not os.path.exists(rep_path):
             paths = _recorded(st) or record_excitation_task(st)

@@ -130,4 +130,16 @@ class EpisodeLog:
         report.say(f"{desc}: done in {report.elapsed - t0:.0f} s")
 
 
-__all__ = ["EpisodeLog", "check_run_dir", "claim_run_dir", "distinct_suffixes"]
+def record_path(path: str, world: str, n_worlds: int) -> str:
+    """Where the recording of ``world`` goes: ``{world}`` in ``path`` replaced, or ``_sim``/``_real``
+    before the suffix when two worlds share one path."""
+    if "{world}" in path:
+        return path.format(world=world)
+    if n_worlds == 1:
+        return path
+    root, ext = os.path.splitext(path)
+    return f"{root}_{world}{ext or '.parquet'}"
+
+
+
+__all__ = ["record_path", "EpisodeLog", "check_run_dir", "claim_run_dir", "distinct_suffixes"]

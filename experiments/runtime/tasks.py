@@ -16,6 +16,7 @@ generation of CMA-ES builds each once; torch runs one thread in workers
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from dataclasses import dataclass, field
 from typing import Mapping
@@ -44,6 +45,7 @@ class EpisodeTask:
         profile: the real world's effect profile: a name (``envs.effects.PROFILES``), ``"NAME:mean"``
             (that profile with every effect at the middle of its range,
             :func:`experiments.runtime.worlds.mean_profile`) or a ``RealProfile`` dict (effect sweeps).
+        stochasticity: the real world's per-step randomness level (``envs.effects.Stochasticity``; 0: none).
         identified: ``report.json`` paths of ``sgatwalk diagnose`` (the identified world, or the base
             of a grounded one: hybrid grounding).
         transformer: directory of a saved ``sgat.ActionTransformer``: the world grounded by it.
@@ -57,7 +59,7 @@ class EpisodeTask:
 
     Raises:
         ValueError: an unknown world, an identified world without reports, or reports for a robot
-            other than the NAO.
+            other than the NAO; a negative stochasticity, or one outside the real world.
     """
 
     world: str
@@ -66,6 +68,7 @@ class EpisodeTask:
     seconds: float = EPISODE_SECONDS
     robot: str = "nao"
     profile: str | Mapping = "real"
+    stochasticity: float = 0.0
     identified: tuple = ()
     transformer: str | None = None
     action_noise: float = 0.0
@@ -79,6 +82,11 @@ class EpisodeTask:
             raise ValueError(f"unknown world {self.world!r}; choose from {', '.join(ENGINE_WORLDS)}")
         object.__setattr__(self, "theta", tuple(float(x) for x in self.theta))
         object.__setattr__(self, "identified", tuple(self.identified or ()))
+        object.__setattr__(self, "stochasticity", float(self.stochasticity))
+        if not (math.isfinite(self.stochasticity) and self.stochasticity >= 0):
+            raise ValueError(f"stochasticity must be a number >= 0, got {self.stochasticity!r}")
+        if self.stochasticity and self.world != "real":
+            raise ValueError(f"stochasticity is the real world's; the {self.world} world has none")
         if self.terrain is not None:
             kind, seed, level = self.terrain
             object.__setattr__(self, "terrain", (str(kind), int(seed), float(level)))

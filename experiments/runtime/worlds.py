@@ -370,7 +370,7 @@ def world_env(task):
     # a world that lays given heightfields down keeps the last one as its ground: its own instance, so
     # that the tasks on the world's own ground never walk on a stress test's field
     key = (task.world, json.dumps(task.profile, sort_keys=True) if task.world == "real" else None, task.identified,
-           task.robot, task.terrain is not None)
+           task.robot, task.terrain is not None, task.stochasticity)
     if key not in _ENVS:
         if len(_ENVS) >= WORLD_CACHE:
             for env in _ENVS.values():
@@ -380,7 +380,8 @@ def world_env(task):
         if task.world == "real":
             from envs import RealWorld  # lazy: loads the engines
 
-            _ENVS[key] = RealWorld(robot, profile=real_profile(task.profile, robot), terrain="lumpy")
+            _ENVS[key] = RealWorld(robot, profile=real_profile(task.profile, robot), terrain="lumpy",
+                                   stochasticity=task.stochasticity)
         elif task.world == "identified":
             from sysid.identified import IdentifiedSimEnv, load_identified  # lazy: loads the engines
 
@@ -456,13 +457,15 @@ def terrain_field(kind: str, seed: int, level: float):
 
 
 def episode_task(spec: WorldSpec, theta, seed: int, *, seconds: float, robot: str = "nao", profile="real",
-                 transformer: str | None = None, identified=(), record: bool = False, key: str = "", meta=None):
+                 stochasticity: float = 0.0, transformer: str | None = None, identified=(), record: bool = False,
+                 key: str = "", meta=None):
     """The :class:`experiments.runtime.tasks.EpisodeTask` of one episode in the training world ``spec``.
 
     Args:
         spec: the training world.
         theta: the gait (SI); seed: the episode seed; seconds: its length [s].
         profile: the real world's profile (the ``real`` world, ``real:mean=1`` its mean physics).
+        stochasticity: the real world's per-step randomness level (the ``real`` world only).
         transformer: the grounded worlds' fitted transformer (a directory).
         identified: the identified worlds' diagnosis reports.
 
@@ -477,7 +480,7 @@ def episode_task(spec: WorldSpec, theta, seed: int, *, seconds: float, robot: st
         raise ValueError(f"world {spec.name!r} needs the real world's identification (its reports)")
     kw: dict[str, Any] = {"robot": robot, "record": record, "key": key, "meta": dict(meta or {})}
     if spec.kind == "real":
-        kw.update(world="real", profile=f"{profile}:mean" if spec.get("mean") else profile)
+        kw.update(world="real", profile=f"{profile}:mean" if spec.get("mean") else profile, stochasticity=stochasticity)
     elif spec.needs_identification:
         kw.update(world="identified", identified=tuple(identified))
     else:

@@ -109,8 +109,13 @@ def parse_levels(spec: str | float | Sequence[float], what: str = "--amplitude")
     return parse_values(spec, what)
 
 
+#: The sweep axis of the real world's per-step randomness (``envs.effects.Stochasticity``), beside its effects.
+STOCHASTICITY = "stochasticity"
+
+
 def parse_sweep(spec: str) -> tuple[str, list[float]]:
-    """Parse ``--sweep EFFECT=lo:hi:n`` (or ``EFFECT=v1,v2,...``).
+    """Parse ``--sweep EFFECT=lo:hi:n`` (or ``EFFECT=v1,v2,...``); ``EFFECT`` is a real-world effect or
+    ``stochasticity`` (levels of per-step randomness).
 
     Raises:
         ValueError: no ``=``, an unknown effect (the message lists the known ones), bad values.
@@ -121,8 +126,8 @@ def parse_sweep(spec: str) -> tuple[str, list[float]]:
         raise ValueError(f"--sweep: expected EFFECT=lo:hi:n (e.g. latency_s=0:0.04:5), got {spec!r}")
     name, values = str(spec).split("=", 1)
     name = name.strip()
-    if name not in EFFECTS:
-        raise ValueError(f"--sweep: unknown effect {name!r}; known: {', '.join(EFFECTS)}")
+    if name not in EFFECTS and name != STOCHASTICITY:
+        raise ValueError(f"--sweep: unknown effect {name!r}; known: {', '.join(EFFECTS)}, {STOCHASTICITY}")
     return name, parse_levels(values, f"--sweep {name}")
 
 
@@ -191,6 +196,8 @@ class StressConfig:
         seed: run seed (terrain and episode seeds, :func:`trial_seeds`).
         profile: real-world effect profile (``RealProfile.to_dict()``); None in the sim.
         seconds: episode length [s].
+        stochasticity: the real world's per-step randomness level (``envs.effects.Stochasticity``) of
+            every level (a sweep over ``stochasticity`` sets it per level instead).
         robot: ``robots.get_robot`` name (default the NAO).
     """
 
@@ -206,11 +213,14 @@ class StressConfig:
     seconds: float = EPISODE_SECONDS
 
     robot: str = "nao"
+    stochasticity: float = 0.0
 
     def invariants(self) -> dict:
         d = {k: getattr(self, k) for k in _INVARIANTS}
-        if self.robot != "nao":  # runs from before --robot (the NAO) keep their invariants
+        if self.robot != "nao":  # runs saved without a robot (the NAO) keep their invariants
             d["robot"] = self.robot
+        if self.stochasticity:  # likewise runs without per-step randomness
+            d["stochasticity"] = self.stochasticity
         return d
 
     def to_dict(self) -> dict:
@@ -223,6 +233,8 @@ class StressConfig:
     @property
     def level_name(self) -> str:
         """Axis label with display unit, e.g. ``lumpy amplitude [cm]``."""
+        if self.axis == STOCHASTICITY:
+            return "per-step stochasticity [level]"
         if self.axis != "terrain":
             return f"{self.axis} [{EFFECT_UNITS.get(self.axis, '-')}]"
         return "slope grade [%]" if self.terrain == "slope" else f"{self.terrain} amplitude [cm]"
@@ -235,7 +247,7 @@ class StressConfig:
 def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, world: str = "real",
                 terrain: str | None = "lumpy", amplitude: str | float | Sequence[float] | None = None,
                 trials: int = 20, seed: int = 0, profile: str | dict | None = None, sweep: str | None = None,
-                seconds: float = EPISODE_SECONDS, robot: str = "nao") -> StressConfig:
+                seconds: float = EPISODE_SECONDS, robot: str = "nao", stochasticity: float = 0.0) -> StressConfig:
     """Validate the inputs of a stress run (bad input raises before any episode runs).
 
     Args:
@@ -250,6 +262,7 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
         sweep: ``EFFECT=lo:hi:n`` (:func:`parse_sweep`): sweep a real-world effect instead of terrain.
         seconds: episode length [s].
         robot: ``robots.get_robot`` name; its "real" profile is scaled to its actuators.
+        stochasticity: the real world's per-step randomness level (``envs.effects.Stochasticity``).
 
     Raises:
         ValueError or FileNotFoundError naming what is wrong: unknown world/terrain/profile/effect,
@@ -269,6 +282,10 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
         raise ValueError(f"--seconds must be a positive number, got {seconds}")
     if world == "sim" and profile is not None:
         raise ValueError("--profile applies to the real world only (use --world real)")
+    if not (math.isfinite(stochasticity) and stochasticity >= 0):
+        raise ValueError(f"--stochasticity must be a number >= 0, got {stochasticity}")
+    if world == "sim" and stochasticity:
+        raise ValueError("--stochasticity applies to the real world only (use --world real)")
     robot_model = get_robot(robot)
     prof = get_profile(profile or "real", robot_model) if world == "real" else None
 
@@ -284,8 +301,15 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
         if world != "real":
             raise ValueError("--sweep varies a real-world effect: use --world real")
         axis, levels = parse_sweep(sweep)
-        for v in levels:  # each value must be a valid fixed range of the effect
-            prof.with_effect(axis, v)
+        if axis == STOCHASTICITY:
+            if stochasticity:
+                raise ValueError("--stochasticity with --sweep stochasticity=...: give the levels once")
+            bad = [v for v in levels if v < 0]
+            if bad:
+                raise ValueError(f"--sweep stochasticity: levels must be >= 0, got {bad[0]:g}")
+        else:
+            for v in levels:  # each value must be a valid fixed range of the effect
+                prof.with_effect(axis, v)
         amp = None
         if terrain is None and amplitude is not None:
             raise ValueError("--amplitude with --sweep needs --terrain (without it the sweep walks on the profile's "
@@ -298,7 +322,8 @@ def make_config(params: Sequence[str | os.PathLike | None] | None = None, *, wor
     policies = load_policies(params, robot)
     return StressConfig(policies=policies, world=world, axis=axis, terrain=terrain, amplitude=amp,
                         levels=levels, trials=int(trials), seed=int(seed),
-                        profile=prof.to_dict() if prof is not None else None, seconds=float(seconds), robot=robot)
+                        profile=prof.to_dict() if prof is not None else None, seconds=float(seconds), robot=robot,
+                        stochasticity=float(stochasticity))
 
 
 @dataclass(frozen=True)
@@ -333,8 +358,11 @@ def plan_tasks(cfg: StressConfig) -> list[Trial]:
 
     out = []
     for level in cfg.levels:
+        stochastic = cfg.stochasticity
         if cfg.axis == "terrain":
             profile, amp = cfg.profile, level
+        elif cfg.axis == STOCHASTICITY:
+            profile, amp, stochastic = cfg.profile, cfg.amplitude, level
         else:
             profile = RealProfile.from_dict(cfg.profile).with_effect(cfg.axis, level).to_dict()
             amp = cfg.amplitude
@@ -343,7 +371,8 @@ def plan_tasks(cfg: StressConfig) -> list[Trial]:
             terr = None if cfg.terrain is None else (cfg.terrain, ts, float(amp))
             for p in cfg.policies:
                 task = EpisodeTask(cfg.world, p.theta, es, cfg.seconds, robot=cfg.robot,
-                                   profile=profile if profile is not None else "real", terrain=terr)
+                                   profile=profile if profile is not None else "real", terrain=terr,
+                                   stochasticity=stochastic)
                 out.append(Trial(p.label, p.theta_hash, level, j, ts, es, task))
     return out
 

@@ -80,8 +80,9 @@ def _identify_job(job, executor) -> dict:
     from experiments.optimize import identify  # lazy: loads the engines
     from experiments.runtime.progress import Reporter
 
-    root, seed, profile = job
-    return identify(root, seed=seed, profile=profile, reporter=Reporter(f"identify seed {seed}"))
+    root, seed, profile, stochasticity, verbose = job
+    return identify(root, seed=seed, profile=profile, stochasticity=stochasticity,
+                    reporter=Reporter(f"identify seed {seed}") if verbose else Reporter.quiet())
 
 
 def _optimize_job(job, executor):
@@ -90,9 +91,10 @@ def _optimize_job(job, executor):
     from experiments.optimize import OptimizeConfig, Optimizer  # lazy: loads the engines and torch
     from experiments.runtime.progress import Reporter
 
-    settings, run_dir, identification = job
+    settings, run_dir, identification, verbose = job
     cfg = OptimizeConfig(**settings)
-    opt = Optimizer(cfg, run_dir, executor, reporter=Reporter(f"{cfg.methods[0]} seed {cfg.seed}"),
+    reporter = Reporter(f"{cfg.methods[0]} seed {cfg.seed}") if verbose else Reporter.quiet()
+    opt = Optimizer(cfg, run_dir, executor, reporter=reporter,
                     identification=identification)
     return opt.run(resume=os.path.exists(opt.state_path))
 
@@ -130,17 +132,18 @@ class Table1:
 
         cfg = self.cfg
         seeds = list(range(cfg.seeds))
+        verbose = self.report.stream is not None
         ident = {}
         if any(parse_world(m).needs_identification for m in cfg.methods):
             self._say(f"identifying the real world for {len(seeds)} optimization seed(s)")
-            jobs = [(os.path.join(self.run_dir, f"opt_seed{s}", "identified"), s, cfg.optimize.get("profile", "real"))
-                    for s in seeds]
+            jobs = [(os.path.join(self.run_dir, f"opt_seed{s}", "identified"), s, cfg.optimize.get("profile", "real"),
+                     cfg.optimize.get("stochasticity", 0.0), verbose) for s in seeds]
             ident = dict(zip(seeds, self.ex.jobs(_identify_job, jobs, [f"identification seed {s}" for s in seeds],
                                                  self.report)))
         runs = [(m, s) for s in seeds for m in cfg.methods]
         jobs = [({**cfg.optimize, "methods": (m,), "seed": s, "eval_trials": 0},
                  os.path.join(self.run_dir, f"opt_seed{s}", _slug(m)), ident.get(s) if parse_world(m).needs_identification
-                 else None) for m, s in runs]
+                 else None, verbose) for m, s in runs]
         self._say(f"{len(jobs)} optimizations (methods x seeds)")
         results = self.ex.jobs(_optimize_job, jobs, [f"{m} seed {s}" for m, s in runs], self.report)
         return [(m, s, r) for (m, s), r in zip(runs, results)]
@@ -164,7 +167,8 @@ class Table1:
         prof = cfg.optimize.get("profile", "real")
         secs = cfg.optimize.get("seconds", EPISODE_SECONDS)
         robot = cfg.optimize.get("robot", "nao")
-        tasks = [EpisodeTask("real", th, sd, secs, robot=robot, profile=prof, key=f"{g}|t{j}")
+        level = cfg.optimize.get("stochasticity", 0.0)
+        tasks = [EpisodeTask("real", th, sd, secs, robot=robot, profile=prof, stochasticity=level, key=f"{g}|t{j}")
                  for g, th in gaits.items() for j, sd in enumerate(seeds)]
         self._say(f"real evaluation: {len(gaits)} gaits x {cfg.trials} paired trials")
         self._log.run(self.ex, tasks, "real evaluation", self.report)

@@ -15,7 +15,8 @@ class LiveConfig:
     """What to roll out: ``worlds`` (of :data:`LIVE_WORLDS`), ``robot``, ``params`` (a θ file; None: θ0)
     or ``pose`` (hold it instead of walking), ``seed``, ``seconds``, ``profile`` (the real world's),
     ``transformer`` (the grounded world's, a directory of ``sgatwalk optimize``'s ``models/``),
-    ``record`` (write the recordings as Parquet; ``{world}`` in it is replaced).
+    ``record`` (write the recordings as Parquet; ``{world}`` in it is replaced), ``stochasticity`` (the real
+    world's per-step randomness level, ``envs.effects.Stochasticity``).
 
     Raises:
         ValueError: no world, an unknown or repeated world, a grounded world without a transformer or
@@ -31,6 +32,7 @@ class LiveConfig:
     profile: str = "real"
     transformer: str | None = None
     record: str | None = None
+    stochasticity: float = 0.0
 
     def __post_init__(self) -> None:
         from robots import get_robot
@@ -45,6 +47,8 @@ class LiveConfig:
         if "grounded" in self.worlds and self.robot != "nao":
             raise ValueError(f"world 'grounded' is the NAO's only (its action transformers are fitted on the NAO); "
                              f"drop it from --world for --robot {self.robot}")
+        if self.stochasticity and "real" not in self.worlds:
+            raise ValueError("--stochasticity applies to the real world only (add real to --world)")
         if "grounded" in self.worlds and self.transformer is None:
             raise ValueError("world 'grounded' needs --transformer DIR (e.g. RUN_DIR/models/sgat_step1 of 'sgatwalk optimize')")
         robot = get_robot(self.robot)
@@ -78,7 +82,7 @@ def live_rollouts(cfg: LiveConfig, gait=None) -> tuple[dict, dict, list[str]]:
         (label -> ``envs.Recording``, label -> the terrain it walked, notes: one line per file written).
     """
     from envs import HoldPose, make_world, rollout  # lazy: loads the engines
-    from experiments.demos.stand import record_path
+    from experiments.runtime.rundir import record_path
     from experiments.runtime.worlds import load_transformer
     from experiments.viz import plan_from_engine
     from robots import get_robot
@@ -91,7 +95,7 @@ def live_rollouts(cfg: LiveConfig, gait=None) -> tuple[dict, dict, list[str]]:
     try:
         for w in cfg.worlds:
             if w == "real":
-                envs[w] = make_world("real", robot=robot, profile=cfg.profile)
+                envs[w] = make_world("real", robot=robot, profile=cfg.profile, stochasticity=cfg.stochasticity)
             elif w == "sim":
                 envs[w] = make_world("sim", robot=robot)
             else:

@@ -1,0 +1,311 @@
+"""Does SGAT pull ahead of GAT as the real world's per-step randomness grows? (``sgatwalk stochasticity``)
+
+The paper's hypothesis (Desai et al., IROS 2020, Sec. IV-V and Figs. 7-9) is that modelling the target's
+stochasticity improves transfer, and that SGAT's advantage over GAT grows with it. The humanoid's real
+world is random mostly per episode (every effect of the ``real`` profile is drawn at reset); the
+per-step randomness of ``envs.effects.Stochasticity`` (servo torque noise per control step, foot
+friction and contact softness per touchdown) is the axis the paper sweeps. At each level this runs:
+
+* ``sgatwalk fidelity`` of the training worlds (how well each ranks gaits by real fitness, its bias and
+  fall calibration, over independent draws of the real data), in ``fidelity-L<level>/``;
+* at the lowest and the highest level, ``sgatwalk table1`` of SGAT, GAT, the plain sim and ANE (optimization
+  seeds x paired real trials), in ``table1-L<level>/``, and CMA-ES in the real world itself (``--methods
+  real``, the bound of what the walk engine reaches there), in ``real-L<level>/``.
+
+Every part is an ordinary run directory, resumed where it stopped; the summary (``study.json``,
+``stochasticity.png``, ``table.txt``) is rewritten after each part, from the parts done so far.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from common.files import atomic_write_text, jsonable
+from experiments.runtime.progress import Reporter
+
+
+@dataclass
+class StudyConfig:
+    """Settings of a stochasticity study.
+
+    Attributes:
+        levels: per-step randomness levels of the fidelity runs (``envs.effects.Stochasticity``).
+        table1_levels: levels of the Table I runs (default: the lowest and the highest of ``levels``).
+        worlds: training worlds of the fidelity runs; gaits, real_trials, data_seeds, episodes: theirs
+            (``sgatwalk fidelity``).
+        methods: Table I methods; seeds: optimization seeds; trials: paired real trials per gait.
+        real_seeds: optimization seeds of CMA-ES in the real world (0: none).
+        optimize: ``sgatwalk optimize`` settings of every optimization (e.g. ``{"generations": 15}``).
+        seconds: episode length [s] of every part; seed: the run seed of every part.
+    """
+
+    levels: tuple = (0.0, 1.0, 2.0, 3.0)
+    table1_levels: tuple | None = None
+    worlds: tuple = ("sim", "ane", "gat", "sgat", "hybrid")
+    gaits: int = 8
+    real_trials: int = 10
+    data_seeds: int = 3
+    episodes: int = 4
+    methods: tuple = ("sgat", "gat", "sim", "ane")
+    seeds: int = 5
+    trials: int = 30
+    real_seeds: int = 3
+    optimize: dict = dataclasses.field(default_factory=dict)
+    seconds: float = 7.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self.levels = tuple(sorted({float(v) for v in self.levels}))
+        if self.table1_levels is None and self.levels:
+            self.table1_levels = (self.levels[0], self.levels[-1]) if len(self.levels) > 1 else self.levels
+        self.table1_levels = tuple(sorted({float(v) for v in self.table1_levels or ()}))
+
+    def validate(self) -> None:
+        """Raises ValueError naming the bad setting (every part's own checks included)."""
+        from experiments.table1.config import Table1Config
+
+        if not self.levels:
+            raise ValueError("no level given")
+        for v in (*self.levels, *self.table1_levels):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"levels must be numbers >= 0, got {v}")
+        if self.real_seeds < 0:
+            raise ValueError(f"real_seeds must be >= 0, got {self.real_seeds}")
+        self.fidelity(self.levels[0]).validate()
+        Table1Config(**self._table1(self.table1_levels[0] if self.table1_levels else 0.0)).validate()
+
+    def fidelity(self, level: float):
+        from experiments.fidelity.config import FidelityConfig
+
+        return FidelityConfig(worlds=tuple(self.worlds), gaits=self.gaits, real_trials=self.real_trials,
+                              data_seeds=self.data_seeds, episodes=self.episodes, stochasticity=level, seconds=self.seconds,
+                              seed=self.seed)
+
+    def _table1(self, level: float, methods=None, seeds=None) -> dict:
+        opt = {**self.optimize, "seconds": self.seconds, **({"stochasticity": level} if level else {})}
+        return {"methods": tuple(methods or self.methods), "seeds": seeds or self.seeds, "trials": self.trials,
+                "seed": self.seed, "optimize": opt}
+
+    def to_dict(self) -> dict:
+        return jsonable(dataclasses.asdict(self))
+
+
+def _tag(level: float) -> str:
+    return f"L{level:g}"
+
+
+class Study:
+    """Runs (or resumes) a stochasticity study in ``out`` with ``executor``; see the module docstring."""
+
+    def __init__(self, cfg: StudyConfig, out: str, executor, *, reporter: Reporter | None = None):
+        cfg.validate()
+        self.cfg, self.out, self.ex = cfg, out, executor
+        self.report = reporter or Reporter.quiet()
+        os.makedirs(out, exist_ok=True)
+        path = os.path.join(out, "study_config.json")
+        if os.path.exists(path):
+            with open(path) as f:
+                old = json.load(f)
+            fixed = {k: v for k, v in cfg.to_dict().items() if k not in ("levels", "table1_levels")}
+            changed = sorted(k for k, v in fixed.items() if old.get(k) != v)
+            if changed:
+                raise ValueError(f"{out} holds a study with other settings ({', '.join(changed)}); "
+                                 "use another --out (more levels may be added)")
+        atomic_write_text(path, json.dumps(cfg.to_dict(), indent=1))
+
+    def parts(self) -> list[tuple[str, str, float]]:
+        """``[(kind, run directory, level)]`` in run order: fidelity at every level, then Table I and the
+        real-world bound at the Table I levels."""
+        cfg = self.cfg
+        out = [("fidelity", os.path.join(self.out, f"fidelity-{_tag(v)}"), v) for v in cfg.levels]
+        for v in cfg.table1_levels:
+            out.append(("table1", os.path.join(self.out, f"table1-{_tag(v)}"), v))
+            if cfg.real_seeds:
+                out.append(("real", os.path.join(self.out, f"real-{_tag(v)}"), v))
+        return out
+
+    def run(self) -> dict:
+        """Run every part not finished yet, rewriting the summary after each; returns the summary."""
+        from experiments.fidelity.run import Fidelity
+        from experiments.table1.config import Table1Config
+        from experiments.table1.run import Table1
+
+        parts = self.parts()
+        for i, (kind, run_dir, level) in enumerate(parts):
+            done = os.path.join(run_dir, "fidelity.json" if kind == "fidelity" else "table1.json")
+            self.report.say(f"part {i + 1}/{len(parts)}: {kind} at level {level:g} ({run_dir})"
+                            + (" - done" if os.path.exists(done) else ""))
+            if os.path.exists(done):
+                continue
+            child = self.report.child(f"{kind} {_tag(level)}")
+            if kind == "fidelity":
+                Fidelity(self.cfg.fidelity(level), run_dir, self.ex, reporter=child).run()
+            else:
+                kw = self.cfg._table1(level, ("real",), self.cfg.real_seeds) if kind == "real" else self.cfg._table1(level)
+                Table1(Table1Config(**kw), run_dir, self.ex, reporter=child).run()
+            self.write(summarize(self.out, self.cfg))
+        res = summarize(self.out, self.cfg)
+        self.write(res)
+        return res
+
+    def write(self, res: dict) -> None:
+        atomic_write_text(os.path.join(self.out, "study.json"), json.dumps(jsonable(res), indent=1))
+        atomic_write_text(os.path.join(self.out, "table.txt"), format_table(res) + "\n")
+        plot(res, os.path.join(self.out, "stochasticity.png"))
+
+
+# ---------------------------------------------------------------- summary
+def _load(path: str) -> dict | None:
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except FileNotFoundError:
+        return None
+
+
+def _seed_interval(per_seed: list[float]) -> dict:
+    """Mean and 95 % t-interval over optimization seeds (``experiments.runtime.stats.seed_level_test``)."""
+    from experiments.runtime.stats import seed_level_test
+
+    t = seed_level_test(per_seed)
+    mean = float(np.mean(per_seed)) if per_seed else None
+    return {"mean": mean, "ci95": t["ci"] if t else None, "p_value": t["p_value"] if t else None, "seeds": len(per_seed)}
+
+
+def table1_contrast(res: dict, a: str = "sgat", b: str = "gat") -> list[dict]:
+    """``a`` - ``b`` per grounding step of a Table I result: real fitness and fall rate, each a mean over
+    optimization seeds of the paired trial means with its 95 % t-interval over seeds."""
+    trials = res["trials"]
+    seeds = res["config"]["seeds"]
+    steps = sorted({r["step"] for r in res["rows"] if r["method"] == a and r["step"] > 0})
+    out = []
+    for st in steps:
+        ka, kb = [f"{a}|{st}|{s}" for s in range(seeds)], [f"{b}|{st}|{s}" for s in range(seeds)]
+        if not all(k in trials for k in ka + kb):
+            continue
+        fit = [float(np.mean(np.subtract(trials[x]["fitness"], trials[y]["fitness"]))) for x, y in zip(ka, kb)]
+        fall = [float(np.mean(np.subtract(trials[x]["fell"], trials[y]["fell"]))) for x, y in zip(ka, kb)]
+        out.append({"step": st, "a": a, "b": b, "fitness": _seed_interval(fit), "fall_rate": _seed_interval(fall)})
+    return out
+
+
+def summarize(out: str, cfg: StudyConfig) -> dict:
+    """What the parts in ``out`` found so far: per level, every fidelity world's scores over the draws;
+    at the Table I levels, the rows, SGAT - GAT (fitness, falls) and the real-world bound."""
+    levels = []
+    for v in sorted(set(cfg.levels) | set(cfg.table1_levels)):
+        entry: dict = {"level": v}
+        fid = _load(os.path.join(out, f"fidelity-{_tag(v)}", "fidelity.json"))
+        if fid:
+            entry["real_fall_rate"] = float(np.mean(fid["real"]["fall_rate"]))
+            entry["fidelity"] = {w: {k: d["summary"][k] for k in ("rho", "bias", "brier")}
+                                 for w, d in fid["worlds"].items()}
+        t1 = _load(os.path.join(out, f"table1-{_tag(v)}", "table1.json"))
+        if t1:
+            entry["table1"] = [{k: r[k] for k in ("method", "step", "n", "fitness_mean", "fitness_se", "falls", "falls_ci95")}
+                               for r in t1["rows"]]
+            entry["sgat_minus_gat"] = table1_contrast(t1)
+        rb = _load(os.path.join(out, f"real-{_tag(v)}", "table1.json"))
+        if rb:
+            entry["real_bound"] = [{k: r[k] for k in ("method", "step", "n", "fitness_mean", "fitness_se", "falls", "falls_ci95")}
+                                   for r in rb["rows"] if r["method"] == "real"]
+        if len(entry) > 1:
+            levels.append(entry)
+    return {"config": cfg.to_dict(), "levels": levels, "verdict": verdict(levels)}
+
+
+def verdict(levels: list[dict]) -> list[str]:
+    """One sentence per Table I level on SGAT - GAT at the last grounding step, and one on the trend."""
+    lines, last = [], []
+    for e in levels:
+        c = (e.get("sgat_minus_gat") or [None])[-1]
+        if c is None:
+            continue
+        f, x = c["fitness"], c["fall_rate"]
+        ci = f["ci95"]
+        where = ("above" if ci and ci[0] > 0 else "below" if ci and ci[1] < 0 else "not apart from")
+        lines.append(f"level {e['level']:g}: SGAT's step-{c['step']} gaits are {where} GAT's in real fitness "
+                     f"({f['mean']:+.2f}" + (f", 95 % CI [{ci[0]:+.2f}, {ci[1]:+.2f}] over {f['seeds']} seeds)" if ci else ")")
+                     + f"; fall rate {100 * x['mean']:+.0f} points")
+        last.append((e["level"], f["mean"], ci))
+    if len(last) >= 2:
+        (l0, m0, c0), (l1, m1, c1) = last[0], last[-1]
+        overlap = c0 and c1 and not (c0[1] < c1[0] or c1[1] < c0[0])
+        lines.append(f"from level {l0:g} to {l1:g} SGAT - GAT moved {m1 - m0:+.2f} fitness points"
+                     + (" (the intervals overlap: no trend shown)" if overlap else ""))
+    return lines
+
+
+def format_table(res: dict) -> str:
+    """The summary as text: fidelity per world and level, then Table I's SGAT - GAT and the bound."""
+    lines = ["per-step stochasticity study", ""]
+    worlds = sorted({w for e in res["levels"] for w in e.get("fidelity", {})})
+    if worlds:
+        lines.append("fidelity: Spearman rho with real fitness, median [min, max] over draws")
+        lines.append(f"{'level':>5} {'real falls':>10} " + " ".join(f"{w:>20}" for w in worlds))
+        for e in res["levels"]:
+            if "fidelity" in e:
+                cells = []
+                for w in worlds:
+                    r = e["fidelity"].get(w, {}).get("rho")
+                    cells.append(f"{r['median']:+.2f} [{r['min']:+.2f}, {r['max']:+.2f}]" if r else "-")
+                lines.append(f"{e['level']:>5g} {100 * e['real_fall_rate']:>9.0f}% " + " ".join(f"{c:>20}" for c in cells))
+        lines.append("")
+    for e in res["levels"]:
+        for c in e.get("sgat_minus_gat", []):
+            f, x = c["fitness"], c["fall_rate"]
+            ci = f"[{f['ci95'][0]:+.2f}, {f['ci95'][1]:+.2f}]" if f["ci95"] else "-"
+            xci = f"[{100 * x['ci95'][0]:+.0f}, {100 * x['ci95'][1]:+.0f}]" if x["ci95"] else "-"
+            lines.append(f"level {e['level']:g} step {c['step']}: SGAT - GAT fitness {f['mean']:+.2f} {ci}, "
+                         f"fall rate {100 * x['mean']:+.0f} points {xci} (95 % over {f['seeds']} seeds)")
+        for r in e.get("real_bound", []):
+            lines.append(f"level {e['level']:g}: CMA-ES in the real world, step {r['step']}: fitness "
+                         f"{r['fitness_mean']:.2f} ± {r['fitness_se']:.2f}, falls {r['falls']}/{r['n']}")
+    lines += [""] + res["verdict"]
+    return "\n".join(lines)
+
+
+def plot(res: dict, path: str) -> None:
+    """Left: each fidelity world's ρ (median, min-max over draws) against the level; right: SGAT - GAT
+    real fitness and fall rate (percentage points) at the last step, 95 % intervals over seeds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    worlds = sorted({w for e in res["levels"] for w in e.get("fidelity", {})})
+    for k, w in enumerate(worlds):
+        pts = [(e["level"], e["fidelity"][w]["rho"]) for e in res["levels"] if w in e.get("fidelity", {})]
+        x = np.array([p[0] for p in pts]) + 0.04 * (k - len(worlds) / 2)
+        med = np.array([p[1]["median"] for p in pts])
+        err = np.array([[m - p[1]["min"], p[1]["max"] - m] for m, p in zip(med, pts)]).T
+        a1.errorbar(x, med, yerr=err, marker="o", capsize=3, label=w)
+    a1.set(xlabel="per-step stochasticity level", ylabel="Spearman ρ with real fitness", title="fidelity per world")
+    a1.axhline(0, color="0.7", lw=0.8)
+    if worlds:
+        a1.legend(fontsize=8)
+    pts = [(e["level"], e["sgat_minus_gat"][-1]) for e in res["levels"] if e.get("sgat_minus_gat")]
+    for key, scale, color, label in (("fitness", 1.0, "C0", "fitness"), ("fall_rate", 100.0, "C3", "fall rate [points]")):
+        xs = [p[0] for p in pts]
+        ms = [scale * p[1][key]["mean"] for p in pts]
+        lo = [scale * (p[1][key]["mean"] - p[1][key]["ci95"][0]) if p[1][key]["ci95"] else 0 for p in pts]
+        hi = [scale * (p[1][key]["ci95"][1] - p[1][key]["mean"]) if p[1][key]["ci95"] else 0 for p in pts]
+        a2.errorbar(np.array(xs) + (0.05 if key == "fall_rate" else 0), ms, yerr=[lo, hi], marker="o", capsize=4,
+                    color=color, label=label)
+    a2.axhline(0, color="0.5", lw=0.8)
+    a2.set(xlabel="per-step stochasticity level", ylabel="SGAT − GAT (95 % CI over seeds)", title="Table I, last step")
+    if pts:
+        a2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+__all__ = ["Study", "StudyConfig", "format_table", "plot", "summarize", "table1_contrast", "verdict"]

@@ -1,0 +1,74 @@
+"""sgatwalk stochasticity: the study's summary on constructed results, and a tiny study end to end."""
+
+import json
+
+import numpy as np
+import pytest
+
+from experiments.cli import main
+from experiments.stochasticity.run import StudyConfig, summarize, table1_contrast, verdict
+
+
+def _table1(diff_per_seed, falls_a, falls_b, trials=4):
+    """A Table I result whose SGAT gaits beat GAT's by ``diff_per_seed[s]`` on every trial of seed s."""
+    rng = np.random.default_rng(0)
+    out = {"config": {"seeds": len(diff_per_seed)}, "rows": [{"method": "sgat", "step": 1}], "trials": {}}
+    for s, d in enumerate(diff_per_seed):
+        base = rng.normal(0, 3, trials)
+        out["trials"][f"gat|1|{s}"] = {"fitness": base.tolist(), "fell": [falls_b] * trials}
+        out["trials"][f"sgat|1|{s}"] = {"fitness": (base + d).tolist(), "fell": [falls_a] * trials}
+    return out
+
+
+def test_contrast_is_the_mean_over_seeds_with_a_t_interval():
+    (c,) = table1_contrast(_table1([1.0, 2.0, 3.0], 0, 1))
+    assert c["fitness"]["mean"] == pytest.approx(2.0) and c["fitness"]["seeds"] == 3
+    lo, hi = c["fitness"]["ci95"]
+    assert lo == pytest.approx(2.0 - 4.303 * 1.0 / np.sqrt(3), abs=1e-3) and hi == pytest.approx(2 * 2.0 - lo)
+    assert c["fall_rate"]["mean"] == -1.0 and c["fall_rate"]["ci95"] is None  # no spread: no interval
+    assert table1_contrast(_table1([1.0], 0, 0))[0]["fitness"]["ci95"] is None  # one seed: no interval
+
+
+def test_verdict_says_where_sgat_stands_at_each_level_and_whether_it_moved():
+    levels = [{"level": 0.0, "sgat_minus_gat": table1_contrast(_table1([-1.0, 0.5, 0.2], 0, 0))},
+              {"level": 3.0, "sgat_minus_gat": table1_contrast(_table1([2.0, 2.5, 3.0], 0, 1))}]
+    v = verdict(levels)
+    assert "level 0: SGAT's step-1 gaits are not apart from GAT's" in v[0]
+    assert "level 3: SGAT's step-1 gaits are above GAT's" in v[1] and "fall rate -100 points" in v[1]
+    assert v[2].startswith("from level 0 to 3 SGAT - GAT moved +2.60")
+
+
+def test_summary_reads_the_parts_done_so_far(tmp_path):
+    cfg = StudyConfig(levels=(0, 2), real_seeds=0)
+    assert cfg.table1_levels == (0.0, 2.0)
+    (tmp_path / "table1-L2").mkdir()
+    t1 = _table1([1.0, 2.0], 0, 0)
+    t1["rows"] = [{"method": m, "step": 1, "n": 8, "fitness_mean": 0.0, "fitness_se": 1.0, "falls": 0,
+                   "falls_ci95": [0, 0.3]} for m in ("sgat", "gat")]
+    (tmp_path / "table1-L2" / "table1.json").write_text(json.dumps(t1))
+    res = summarize(str(tmp_path), cfg)
+    assert [e["level"] for e in res["levels"]] == [2.0] and res["levels"][0]["sgat_minus_gat"][0]["fitness"]["mean"] == 1.5
+
+
+def test_bad_settings_are_usage_errors(capsys):
+    assert main(["stochasticity", "--levels", "0,-1"]) == 2
+    assert "levels must be >= 0" in capsys.readouterr().err
+    assert main(["stochasticity", "--methods", "sgat,nope"]) == 2
+
+
+@pytest.mark.slow
+def test_a_tiny_study_runs_resumes_and_draws_its_figure(tmp_path, capsys):
+    args = ["stochasticity", "--levels", "0,1", "--worlds", "sim,gat", "--gaits", "2", "--real-trials", "2",
+            "--data-seeds", "1", "--episodes", "1", "--methods", "sgat,gat", "--seeds", "2", "--trials", "2",
+            "--real-seeds", "0", "--popsize", "3", "--generations", "1", "--seconds", "0.8", "--out", str(tmp_path / "s"),
+            "--json"]
+    assert main(args) == 0
+    res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [e["level"] for e in res["levels"]] == [0.0, 1.0]
+    assert {"sim", "gat"} <= set(res["levels"][1]["fidelity"]) and res["levels"][1]["sgat_minus_gat"]
+    assert (tmp_path / "s" / "stochasticity.png").read_bytes()[:4] == b"\x89PNG"
+    cfg = json.loads((tmp_path / "s" / "table1-L1" / "table1.json").read_text())["config"]
+    assert cfg["optimize"]["stochasticity"] == 1.0
+    assert main(args) == 0  # resumed: every part is done, the summary is the same
+    again = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert again["levels"] == res["levels"]
