@@ -62,12 +62,14 @@ def run(args):
     from experiments.runtime.progress import Reporter
     from experiments.runtime.rundir import check_run_dir
     from experiments.table1.config import Table1Config
-    from experiments.table1.run import Table1, format_table
+    from experiments.table1.run import Table1, format_table, load_baseline
 
     with A.user_input():
         cfg = Table1Config(methods=args.methods, seeds=args.seeds, trials=args.trials, seed=args.seed,
                            optimize=optimize_overrides(args), baseline=args.baseline)
         cfg.validate()
+        if cfg.baseline is not None:
+            load_baseline(cfg.baseline, cfg)
         check_run_dir(args.out, cfg.to_dict(), "Table I run", ignore=cfg.RESUMABLE)
     with make_executor(args.workers, args.ray_address) as ex:
         res = Table1(cfg, args.out, ex, reporter=Reporter("table1")).run()

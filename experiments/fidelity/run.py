@@ -42,8 +42,8 @@ from experiments.runtime.progress import Reporter
 from experiments.runtime.rundir import EpisodeLog
 from experiments.runtime.seeds import derive_seeds
 from experiments.runtime.stats import bootstrap_spearman, brier_score, split_half_reliability
-from experiments.runtime.tasks import EpisodeTask, ReplayTask, replay_walk_task
-from experiments.runtime.worlds import WorldSpec, episode_task
+from experiments.runtime.tasks import EpisodeTask, ReplayTask, episode_task, replay_walk_task
+from experiments.runtime.worlds import WorldSpec
 
 
 def drawn_panel(params_class, seed: int, gaits: int, box: float) -> list[dict]:
@@ -87,7 +87,8 @@ class Fidelity:
     """
 
     def __init__(self, cfg: FidelityConfig, run_dir: str, executor, *, reporter: Reporter | None = None):
-        self.cfg, self.run_dir, self.ex = cfg, run_dir, executor
+        # absolute: the tasks and draw jobs name its files, and a Ray worker may run elsewhere
+        self.cfg, self.run_dir, self.ex = cfg, os.path.abspath(run_dir), executor
         self.specs = cfg.validate()
         self.report = reporter or Reporter.quiet()
         os.makedirs(run_dir, exist_ok=True)

@@ -60,8 +60,8 @@ from experiments.runtime.grounding import (IDENTIFY_BUDGET_S, IDENTIFY_ROUNDS, f
 from experiments.runtime.identify import ENGINE_GAP_SEED, calibrate_engines, identify_real
 from experiments.runtime.progress import Reporter
 from experiments.runtime.seeds import derive_seed, derive_seeds
-from experiments.runtime.tasks import EpisodeTask
-from experiments.runtime.worlds import episode_task, parse_world
+from experiments.runtime.tasks import EpisodeTask, episode_task
+from experiments.runtime.worlds import parse_world
 from robots import get_robot
 from sgat.algorithm import grounding_loop, new_progress
 from walk_engine import params_for
@@ -134,7 +134,8 @@ class Optimizer:
 
     def __init__(self, cfg: OptimizeConfig, run_dir: str, executor, *, reporter: Reporter | None = None,
                  rerun: bool = False, identification: dict | None = None):
-        self.cfg, self.run_dir, self.ex, self.rerun = cfg, run_dir, executor, rerun
+        # absolute: the tasks name its models and recordings, and a Ray worker may run elsewhere
+        self.cfg, self.run_dir, self.ex, self.rerun = cfg, os.path.abspath(run_dir), executor, rerun
         self.identification = identification
         self.report = reporter or Reporter.quiet()
         os.makedirs(run_dir, exist_ok=True)

@@ -19,11 +19,12 @@ import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
 from common.defaults import EPISODE_SECONDS
+from experiments.runtime.worlds import WorldSpec
 from robots import get_robot
 
 #: The physical worlds an episode runs in (a training world of :mod:`experiments.runtime.worlds` is one
@@ -291,5 +292,38 @@ def replay_walk_task(task: ReplayTask) -> ReplayResult:
                         q_rms(forced), q_rms(plain))
 
 
+
+def episode_task(spec: WorldSpec, theta, seed: int, *, seconds: float, robot: str = "nao", profile="real",
+                 stochasticity: float = 0.0, transformer: str | None = None, identified=(), record: bool = False,
+                 key: str = "", meta=None):
+    """The :class:`experiments.runtime.tasks.EpisodeTask` of one episode in the training world ``spec``.
+
+    Args:
+        spec: the training world.
+        theta: the gait (SI); seed: the episode seed; seconds: its length [s].
+        profile: the real world's profile (the ``real`` world, ``real:mean=1`` its mean physics).
+        stochasticity: the real world's per-step randomness level (the ``real`` world only).
+        transformer: the grounded worlds' fitted transformer (a directory).
+        identified: the identified worlds' diagnosis reports.
+
+    Raises:
+        ValueError: a grounded world without ``transformer``, an identified one without ``identified``.
+    """
+    if spec.grounded and not transformer:
+        raise ValueError(f"world {spec.name!r} needs its fitted transformer")
+    if spec.needs_identification and not identified:
+        raise ValueError(f"world {spec.name!r} needs the real world's identification (its reports)")
+    kw: dict[str, Any] = {"robot": robot, "record": record, "key": key, "meta": dict(meta or {})}
+    if spec.kind == "real":
+        kw.update(world="real", profile=f"{profile}:mean" if spec.get("mean") else profile, stochasticity=stochasticity)
+    elif spec.needs_identification:
+        kw.update(world="identified", identified=tuple(identified))
+    else:
+        kw.update(world="sim")
+    if spec.grounded:
+        kw["transformer"] = transformer
+    return EpisodeTask(theta=tuple(theta), seed=int(seed), seconds=float(seconds), action_noise=spec.noise, **kw)
+
+
 __all__ = ["ENGINE_WORLDS", "EpisodeResult", "EpisodeTask", "FitResult", "FitTask", "ReplayResult", "ReplayTask",
-           "episode_result", "fit_grounding_task", "replay_walk_task", "run_episode"]
+           "episode_result", "episode_task", "fit_grounding_task", "replay_walk_task", "run_episode"]

@@ -29,7 +29,8 @@ class Table1Config:
         self.methods = tuple(s.name for s in parse_worlds(self.methods)) if self.methods else ()
 
     def validate(self) -> None:
-        """Raises ValueError naming the bad setting."""
+        """Raises ValueError naming the bad setting (the baseline's file is checked by
+        :func:`experiments.table1.run.load_baseline`)."""
         from experiments.optimize import OptimizeConfig  # the config imports no engine
 
         if not self.methods:
@@ -39,10 +40,6 @@ class Table1Config:
         if self.seed < 0:
             raise ValueError(f"seed must be >= 0, got {self.seed}")
         OptimizeConfig(**{**self.optimize, "methods": tuple(self.methods)}).validate()
-        if self.baseline is not None:
-            from experiments.table1.run import load_baseline
-
-            load_baseline(self.baseline, self)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)

@@ -104,7 +104,10 @@ class Table1:
 
     def __init__(self, cfg: Table1Config, run_dir: str, executor, *, reporter: Reporter | None = None):
         cfg.validate()
-        self.cfg, self.run_dir, self.ex = cfg, run_dir, executor
+        if cfg.baseline is not None:
+            load_baseline(cfg.baseline, cfg)
+        # absolute: the optimization jobs write under it, and a Ray worker may run elsewhere
+        self.cfg, self.run_dir, self.ex = cfg, os.path.abspath(run_dir), executor
         self.report = reporter or Reporter.quiet()
         self._episodes: dict[str, dict] = {}
 
