@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from experiments.cli import main
-from experiments.stochasticity.run import StudyConfig, summarize, table1_contrast, verdict
+from experiments.stochasticity.run import Study, StudyConfig, summarize, table1_contrast, trend_test, verdict
 
 
 def _table1(diff_per_seed, falls_a, falls_b, trials=4):
@@ -35,7 +35,30 @@ def test_verdict_says_where_sgat_stands_at_each_level_and_whether_it_moved():
     v = verdict(levels)
     assert "level 0: SGAT's step-1 gaits are not apart from GAT's" in v[0]
     assert "level 3: SGAT's step-1 gaits are above GAT's" in v[1] and "fall rate -100 points" in v[1]
-    assert v[2].startswith("from level 0 to 3 SGAT - GAT moved +2.60")
+    assert v[2].startswith("from level 0 to 3 SGAT - GAT moved +2.60 fitness points, 95 % CI")
+    assert v[2].endswith("SGAT pulls ahead as the randomness grows")
+    # the same per-seed contrasts at both levels: no trend
+    same = [{"level": lv, "sgat_minus_gat": table1_contrast(_table1([-1.0, 0.5, 0.2], 0, 0))} for lv in (0.0, 3.0)]
+    assert verdict(same)[2].endswith("no trend shown at these seeds")
+
+
+def test_trend_test_is_welch_on_the_per_seed_contrasts():
+    from scipy import stats
+
+    t = trend_test([0.0, 1.0, 2.0], [3.0, 5.0, 7.0])
+    ref = stats.ttest_ind([3.0, 5.0, 7.0], [0.0, 1.0, 2.0], equal_var=False)
+    assert t["diff"] == pytest.approx(4.0) and t["p_value"] == pytest.approx(ref.pvalue)
+    assert t["ci95"][0] < 4.0 < t["ci95"][1]
+    assert trend_test([1.0], [2.0, 3.0]) is None
+
+
+def test_a_study_of_table1_runs_only_has_no_fidelity_level():
+    cfg = StudyConfig(levels=(), table1_levels=(0, 3), real_seeds=0)
+    cfg.validate()
+    assert [k for k, _, _ in Study.parts(
+        type("S", (), {"cfg": cfg, "out": "x"})())] == ["table1", "table1"]
+    with pytest.raises(ValueError, match="no level given"):
+        StudyConfig(levels=()).validate()
 
 
 def test_summary_reads_the_parts_done_so_far(tmp_path):

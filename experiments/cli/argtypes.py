@@ -108,9 +108,12 @@ fraction = Number(float, 0.0, 1.0)
 
 
 def levels(text: str) -> tuple[float, ...]:
-    """Per-step stochasticity levels (``--levels``): a comma list or ``start:stop:count`` of numbers >= 0."""
+    """Per-step stochasticity levels (``--levels``): a comma list or ``start:stop:count`` of numbers >= 0,
+    or ``none`` (no level: e.g. a study of Table I runs only)."""
     from common.parse import parse_values
 
+    if text.strip().lower() == "none":
+        return ()
     try:
         vals = parse_values(text, "levels", hint="expected a comma list (e.g. 0,1,2,3) or start:stop:count")
     except ValueError as exc:
@@ -238,7 +241,7 @@ def add_executor(parser: argparse.ArgumentParser) -> None:
     """Add ``--workers`` and ``--ray-address``: where the episodes run (a local process pool by default)."""
     parser.add_argument("--workers", type=workers, help="worker processes (default: one per core; 1 = serial)")
     parser.add_argument("--ray-address", metavar="ADDRESS",
-                        help="run on a Ray cluster instead (auto, or host:port of its head; docs/commands/cluster.md)")
+                        help="run on a Ray cluster instead (auto, or host:port of its head; docs/cluster.md)")
 
 
 def add_robot(parser: argparse.ArgumentParser) -> None:

@@ -70,14 +70,14 @@ class StudyConfig:
         """Raises ValueError naming the bad setting (every part's own checks included)."""
         from experiments.table1.config import Table1Config
 
-        if not self.levels:
-            raise ValueError("no level given")
+        if not self.levels and not self.table1_levels:
+            raise ValueError("no level given (neither fidelity nor Table I levels)")
         for v in (*self.levels, *self.table1_levels):
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"levels must be numbers >= 0, got {v}")
         if self.real_seeds < 0:
             raise ValueError(f"real_seeds must be >= 0, got {self.real_seeds}")
-        self.fidelity(self.levels[0]).validate()
+        self.fidelity(self.levels[0] if self.levels else 0.0).validate()
         Table1Config(**self._table1(self.table1_levels[0] if self.table1_levels else 0.0)).validate()
 
     def fidelity(self, level: float):
@@ -120,14 +120,13 @@ class Study:
         atomic_write_text(path, json.dumps(cfg.to_dict(), indent=1))
 
     def parts(self) -> list[tuple[str, str, float]]:
-        """``[(kind, run directory, level)]`` in run order: fidelity at every level, then Table I and the
-        real-world bound at the Table I levels."""
+        """``[(kind, run directory, level)]`` in run order: Table I at the Table I levels (the study's
+        question), then fidelity at every level, then the real-world bound at the Table I levels."""
         cfg = self.cfg
-        out = [("fidelity", os.path.join(self.out, f"fidelity-{_tag(v)}"), v) for v in cfg.levels]
-        for v in cfg.table1_levels:
-            out.append(("table1", os.path.join(self.out, f"table1-{_tag(v)}"), v))
-            if cfg.real_seeds:
-                out.append(("real", os.path.join(self.out, f"real-{_tag(v)}"), v))
+        out = [("table1", os.path.join(self.out, f"table1-{_tag(v)}"), v) for v in cfg.table1_levels]
+        out += [("fidelity", os.path.join(self.out, f"fidelity-{_tag(v)}"), v) for v in cfg.levels]
+        if cfg.real_seeds:
+            out += [("real", os.path.join(self.out, f"real-{_tag(v)}"), v) for v in cfg.table1_levels]
         return out
 
     def run(self) -> dict:
@@ -175,7 +174,32 @@ def _seed_interval(per_seed: list[float]) -> dict:
 
     t = seed_level_test(per_seed)
     mean = float(np.mean(per_seed)) if per_seed else None
-    return {"mean": mean, "ci95": t["ci"] if t else None, "p_value": t["p_value"] if t else None, "seeds": len(per_seed)}
+    return {"mean": mean, "ci95": t["ci"] if t else None, "p_value": t["p_value"] if t else None, "seeds": len(per_seed),
+            "per_seed": [float(v) for v in per_seed]}
+
+
+def trend_test(low: list[float], high: list[float]) -> dict | None:
+    """Did ``a - b`` grow from one level to another? Welch's two-sample t-test of the per-seed contrasts
+    at the high level against those at the low one (``scipy.stats.ttest_ind(equal_var=False)``; Welch
+    1947), with the 95 % interval of the difference of means. The levels' optimization runs are
+    independent (other worlds), so the test is unpaired.
+
+    Args:
+        low, high: per-optimization-seed contrasts at the two levels, shape (k,) each.
+
+    Returns:
+        ``{"diff", "ci95": [lo, hi], "p_value", "df"}``, or None with fewer than 2 seeds at a level or no
+        spread at all.
+    """
+    from scipy import stats
+
+    lo, hi = np.asarray(low, float), np.asarray(high, float)
+    if len(lo) < 2 or len(hi) < 2 or (np.ptp(lo) == 0 and np.ptp(hi) == 0):
+        return None
+    r = stats.ttest_ind(hi, lo, equal_var=False)
+    ci = r.confidence_interval(0.95)
+    return {"diff": float(hi.mean() - lo.mean()), "ci95": [float(ci.low), float(ci.high)],
+            "p_value": float(r.pvalue), "df": float(r.df)}
 
 
 def table1_contrast(res: dict, a: str = "sgat", b: str = "gat") -> list[dict]:
@@ -233,12 +257,19 @@ def verdict(levels: list[dict]) -> list[str]:
         lines.append(f"level {e['level']:g}: SGAT's step-{c['step']} gaits are {where} GAT's in real fitness "
                      f"({f['mean']:+.2f}" + (f", 95 % CI [{ci[0]:+.2f}, {ci[1]:+.2f}] over {f['seeds']} seeds)" if ci else ")")
                      + f"; fall rate {100 * x['mean']:+.0f} points")
-        last.append((e["level"], f["mean"], ci))
+        last.append((e["level"], f))
     if len(last) >= 2:
-        (l0, m0, c0), (l1, m1, c1) = last[0], last[-1]
-        overlap = c0 and c1 and not (c0[1] < c1[0] or c1[1] < c0[0])
-        lines.append(f"from level {l0:g} to {l1:g} SGAT - GAT moved {m1 - m0:+.2f} fitness points"
-                     + (" (the intervals overlap: no trend shown)" if overlap else ""))
+        (l0, f0), (l1, f1) = last[0], last[-1]
+        t = trend_test(f0["per_seed"], f1["per_seed"])
+        if t is None:
+            lines.append(f"from level {l0:g} to {l1:g} SGAT - GAT moved {f1['mean'] - f0['mean']:+.2f} fitness points "
+                         "(too few seeds to test)")
+        else:
+            grew = t["p_value"] < 0.05
+            lines.append(f"from level {l0:g} to {l1:g} SGAT - GAT moved {t['diff']:+.2f} fitness points, 95 % CI "
+                         f"[{t['ci95'][0]:+.2f}, {t['ci95'][1]:+.2f}], Welch p = {t['p_value']:.2g}: "
+                         + (("SGAT pulls ahead as the randomness grows" if t["diff"] > 0 else "SGAT falls behind as the randomness grows")
+                            if grew else "no trend shown at these seeds"))
     return lines
 
 
