@@ -14,8 +14,9 @@ Three measurements on this machine, then a projection:
   fraction Amdahl's law says bounds the speed-up on any number of cores.
 
 **Projection** (with ``--table1-hours`` and ``--gym-hours``, the measured wall time of a run on this
-machine's ``--workers`` cores): T(N) = T1 (e + (1 - e) / N), T1 = T(p) S, and never below the longest
-single job (one optimization; one gym cell, its share ``1 / jobs`` of T1). Printed for 16, 64 and 256 cores.
+machine's ``--workers`` cores): the run's jobs (Table I's optimizations, gym's cells) run side by side,
+each by Amdahl's law with its serial fraction (Table I: the Karp-Flatt fraction above; a gym cell: 1,
+one process); see :func:`project`. Printed for 16, 64 and 256 cores.
 
 Prints a table or, with ``--json``, one JSON object (its ``"text"`` the table); progress goes to stderr.
 Exits 1 if the executors disagree. Defaults take about 10 minutes on 2 idle cores.
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shutil
 import statistics
@@ -55,12 +57,25 @@ def karp_flatt(speedup: float, p: int) -> float:
     return (1.0 / speedup - 1.0 / p) / (1.0 - 1.0 / p)
 
 
-def project(hours_p: float, speedup: float, p: int, jobs: int, cores=PROJECT_CORES) -> dict:
-    """Wall time [h] on ``cores`` from a run of ``hours_p`` on p workers with speed-up ``speedup`` there:
-    Amdahl's law with the Karp-Flatt serial fraction, never below one job's share of the serial time."""
-    e = min(max(karp_flatt(speedup, p), 0.0), 1.0)
+def project(hours_p: float, speedup: float, p: int, jobs: int, job_serial_fraction: float | None = None,
+            cores=PROJECT_CORES) -> dict:
+    """Wall time [h] on ``cores`` of a run made of ``jobs`` independent jobs that a cluster runs side by side.
+
+    The run took ``hours_p`` on ``p`` workers with speed-up ``speedup`` there, so T1 = hours_p x speedup
+    on one core and t = T1 / jobs per job. Within a job, Amdahl's law (Amdahl 1967) with the serial
+    fraction e (``job_serial_fraction``, default the Karp-Flatt fraction of the measured speed-up): on
+    N >= jobs cores each job has N / jobs cores, T(N) = t (e + (1 - e) jobs / N); on fewer cores the
+    jobs run in ceil(jobs / N) waves of one core each, T(N) = ceil(jobs / N) t.
+
+    Returns:
+        ``{"16": hours, "64": ..., "serial_fraction": e, "t1_hours": T1, "job_hours": t}``.
+    """
+    e = karp_flatt(speedup, p) if job_serial_fraction is None else job_serial_fraction
+    e = min(max(e, 0.0), 1.0)
     t1 = hours_p * speedup
-    return {str(n): max(t1 * (e + (1 - e) / n), t1 / jobs) for n in cores} | {"serial_fraction": e, "t1_hours": t1}
+    t = t1 / jobs
+    out = {str(n): (t * (e + (1 - e) * jobs / n) if n >= jobs else math.ceil(jobs / n) * t) for n in cores}
+    return out | {"serial_fraction": e, "t1_hours": t1, "job_hours": t}
 
 
 def _ray(cpus: int):
@@ -179,7 +194,8 @@ def format_text(res: dict) -> str:
         pr = res.get(key)
         if pr:
             lines.append(f"projected {label}: " + ", ".join(f"{n} cores {pr[str(n)]:.1f} h" for n in PROJECT_CORES)
-                         + f" (1 core {pr['t1_hours']:.1f} h, serial fraction {pr['serial_fraction']:.3f})")
+                         + f" (1 core {pr['t1_hours']:.1f} h; a job {pr['job_hours']:.2f} h, its serial fraction "
+                           f"{pr['serial_fraction']:.3f})")
     return "\n".join(lines)
 
 
@@ -214,8 +230,8 @@ def main(argv=None) -> int:
         if args.table1_hours:
             res["table1_projection"] = project(args.table1_hours, res["table1"]["speedup"], args.workers, args.table1_jobs)
     pool = next(r for r in rows if r["executor"] == "pool" and r["workers"] == args.workers)
-    if args.gym_hours:  # gym cells are independent episodes of training: the pool's episode speed-up
-        res["gym_projection"] = project(args.gym_hours, pool["speedup"], args.workers, args.gym_jobs)
+    if args.gym_hours:  # gym cells are whole training runs, each one process: serial within a cell
+        res["gym_projection"] = project(args.gym_hours, pool["speedup"], args.workers, args.gym_jobs, 1.0)
     res["text"] = format_text(res)
     print(json.dumps(res) if args.json else res["text"], flush=True)
     return 0 if same else 1

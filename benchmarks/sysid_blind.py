@@ -16,6 +16,16 @@ Worlds (the referee's injection is its own code, independent of the candidate mo
   ``frictionloss`` with hard stiction (2 ms constraint time constant), link mass / armature as model edits, sensor bias as an offset on the logged
   angle, joint compliance as a massless motor behind a spring (:class:`_SeriesSpring`, backward
   Euler; the candidate is a MuJoCo series hinge with joint stiffness and a light motor body).
+* ``strangers``: the strangers' PyBullet world (``benchmarks/strangers``: effect models written apart
+  from the candidate library, in physical forms of their own: a semi-closed-loop servo with gear play,
+  elasto-plastic Stribeck friction, a transport delay behind a first-order lag, a DC-motor torque-speed
+  envelope, inertial parameters beyond mass, a Perlin-noise ground, ...), used through its API and its
+  effects table only; one effect per trial, each kind of its table for the base (fixed: the in-air
+  kinds; ``--floating``: the torso's mass and centre of mass, foot friction, uneven ground, the
+  command lag and a servo torque-constant error), scored by ``benchmarks/blind/strangers.py``: a kind
+  is named right when the report names one of its families (``KIND_FAMILIES``) at a true target, or
+  an equivalence class that contains one (with the segment that would separate it); a finding that
+  is no true effect is a confident wrong Found.
 * ``real``: the PyBullet world of ``envs/bullet_world.py`` (its own effect code: explicit PD,
   velocity-motor Coulomb friction, dead-band backlash, mass scaling), plus a referee FIFO with
   jitter for latency, a logged-angle offset for sensor bias and the same massless-motor spring
@@ -32,9 +42,14 @@ Usage::
 
     python benchmarks/sysid_blind.py --world sim --seeds 5 --two-effect 20 --out runs/sysid_blind
     python benchmarks/sysid_blind.py --world real --seeds 5 --two-effect 20 --out runs/sysid_blind
+    python benchmarks/sysid_blind.py --world strangers --seeds 2 --seed0 7000 --out runs/sysid_blind
+    python benchmarks/sysid_blind.py --world strangers --floating --seeds 2 --seed0 7000 \
+        --diagnose-families +latency,command_lowpass --out runs/sysid_blind
 
 Trials already scored in ``OUT/WORLD/results.jsonl`` are skipped (resumable); ``summary.md`` is
-rewritten after every trial.
+rewritten after every trial. Prints the summary, or with ``--json`` one JSON object (settings,
+``metrics`` and ``text``, progress on stderr); a result is saved by ``python -m tools.results save
+NAME -- python benchmarks/sysid_blind.py ...``.
 """
 
 from __future__ import annotations
@@ -62,6 +77,8 @@ from benchmarks.blind.scorer import detectable, score  # noqa: E402
 from benchmarks.blind.worlds import RefereeRealWorld, RefereeSimWorld, make_world  # noqa: E402
 from robots import nao_h25  # noqa: E402
 
+import numpy as np  # noqa: E402
+
 __all__ = ["SOURCES", "ANGLE_NOISE", "CLASSES", "CLASSES_FLOATING", "FAMILIES", "GYRO_NOISE", "MIN_LINK_MASS", "NOISE",
            "NOMINAL", "SEED_ORDER", "RefereeRealWorld", "RefereeSimWorld", "draw_effect", "draw_trial",
            "explicit_damping_stable_joints", "explicit_spring_stable_joints", "main", "make_world", "opaque_id",
@@ -73,7 +90,10 @@ __all__ = ["SOURCES", "ANGLE_NOISE", "CLASSES", "CLASSES_FLOATING", "FAMILIES", 
 def main(argv=None) -> int:
     """Run (or resume) the blind benchmark for one world; see the module docstring. Returns 0."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--world", choices=("sim", "real"), default="sim")
+    ap.add_argument("--world", choices=("sim", "real", "strangers"), default="sim",
+                    help="sim: MuJoCo sim-as-real; real: the project's PyBullet world; strangers: the strangers' "
+                         "PyBullet world (benchmarks.strangers: effect forms written apart from the candidate "
+                         "library; one effect per trial, scored by benchmarks/blind/strangers.py)")
     ap.add_argument("--seeds", type=int, default=5, help="seeds per class (single-effect trials)")
     ap.add_argument("--two-effect", type=int, default=20, help="number of two-effect trials")
     ap.add_argument("--logs", type=int, default=3, help="logs per trial (one held out)")
@@ -85,7 +105,9 @@ def main(argv=None) -> int:
     ap.add_argument("--classes", help="comma list to restrict the single-effect classes")
     ap.add_argument("--floating", action="store_true", help="standing/stepping logs, contact families "
                     "(foot friction, ground compliance) instead of the fixed-base actuator families")
-    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (headline figures, for the README)")
+    ap.add_argument("--json", action="store_true",
+                    help="print one JSON object (the run's settings, \"metrics\" and \"text\": the summary); "
+                         "progress goes to stderr")
     ap.add_argument("--excitation", choices=SOURCES, default="protocol",
                     help="the logs' excitation: the project's protocol (sgatwalk excite) or the referee's own "
                          "random multisine + steps (fixed base only; benchmarks/blind/excitation.py)")
@@ -99,7 +121,6 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not args.noise > 0:
         ap.error(f"--noise must be positive, got {args.noise}")
-    load_before = os.getloadavg()[0]
     robot = nao_h25()
     if args.floating and args.excitation != "protocol":
         ap.error("--excitation referee is for a fixed base only")
@@ -114,6 +135,8 @@ def main(argv=None) -> int:
                         + (f"_fam{args.diagnose_families.replace(',', '_').replace('+', '')}"
                            if args.diagnose_families else ""))
     fixed = not args.floating
+    if args.world == "strangers":
+        return _run_strangers(args, root, robot)
     world_classes = (CLASSES_FLOATING if args.floating else CLASSES)[args.world] + extra
     os.makedirs(root, exist_ok=True)
     res_path = os.path.join(root, "results.jsonl")
@@ -134,7 +157,7 @@ def main(argv=None) -> int:
             record(args.world, [], logs_dir, args.calibration_logs or 2 * args.logs, args.seconds, args.seed0 - 1,
                    fixed, args.excitation)
         run_diagnose(["diagnose", "--real", logs_dir, "--out", cal_dir, "--calibrate"])
-        print(f"calibrated engine gap on {logs_dir}", flush=True)
+        _say(args, f"calibrated engine gap on {logs_dir}")
     classes = world_classes if not args.classes else args.classes.split(",")
     pair_fams = [c for c in world_classes if c != "none"]
     trials = plan_trials(classes, args.seeds, args.two_effect, args.seed0)
@@ -168,23 +191,100 @@ def main(argv=None) -> int:
         rows.append(row)
         with open(res_path, "a") as f:
             f.write(json.dumps(row) + "\n")
-        print(f"{tid}: truth {[(e['family'], e['targets'], [round(v, 4) for v in e['values']]) for e in hidden]} -> "
-              f"{rep['model']} | top1 {sc['pred_top1']} | after/floor {sc['rms_after_over_floor']:.2f} | "
-              f"{sc['runtime_s']:.0f} s", flush=True)
+        _say(args, f"{tid}: truth {[(e['family'], e['targets'], [round(v, 4) for v in e['values']]) for e in hidden]} "
+                   f"-> {rep['model']} | top1 {sc['pred_top1']} | after/floor {sc['rms_after_over_floor']:.2f} | "
+                   f"{sc['runtime_s']:.0f} s")
         with open(os.path.join(root, "summary.md"), "w") as f:
             f.write(summarize(rows, args.world, world_classes, args.noise))
+    text = summarize(rows, args.world, world_classes, args.noise)
     with open(os.path.join(root, "summary.md"), "w") as f:
-        f.write(summarize(rows, args.world, world_classes, args.noise))
-    print(summarize(rows, args.world, world_classes, args.noise))
-    if args.save:
-        from tools.readme import save_benchmark
+        f.write(text)
+    _emit(args, text, {"world": args.world, "floating": args.floating, "excitation": args.excitation,
+                       "seed0": args.seed0, "seeds": args.seeds, "two_effect": args.two_effect, "logs": args.logs,
+                       "seconds": args.seconds, "encoder_noise_mrad": args.noise,
+                       "calibration_noise_mrad": 1000 * NOISE, "extra_classes": extra,
+                       "diagnose_families": args.diagnose_families, "metrics": metrics(rows)})
+    return 0
 
-        res = {"world": args.world, "floating": args.floating, "excitation": args.excitation, "seed0": args.seed0,
-               "seeds": args.seeds, "two_effect": args.two_effect, "logs": args.logs, "seconds": args.seconds,
-               "encoder_noise_mrad": args.noise, "calibration_noise_mrad": 1000 * NOISE, "extra_classes": extra,
-               "diagnose_families": args.diagnose_families, "metrics": metrics(rows)}
-        print(save_benchmark(args.save, "benchmarks/sysid_blind.py", argv if argv is not None else sys.argv[1:], res,
-                             load_before))
+
+def _say(args, line: str) -> None:
+    """A progress line: to stderr with ``--json`` (stdout is then the one JSON object), else stdout."""
+    print(line, file=sys.stderr if args.json else sys.stdout, flush=True)
+
+
+def _emit(args, text: str, result: dict) -> None:
+    """The run's result: the summary ``text``, or with ``--json`` one JSON object (``result`` and
+    ``"text"``), which ``python -m tools.results save NAME -- python benchmarks/sysid_blind.py ...`` stores."""
+    print(json.dumps({**result, "text": text}, default=lambda o: o.item() if hasattr(o, "item") else str(o))
+          if args.json else text, flush=True)
+
+
+def _run_strangers(args, root: str, robot) -> int:
+    """The strangers' setting (``--world strangers``): single-effect trials of every kind of
+    ``benchmarks.strangers.effects`` for the base (and "none"), ``--seeds`` per kind, calibrated on
+    "none" logs of the strangers' world, scored by :func:`benchmarks.blind.strangers.score`. Resumable
+    like the other worlds (``results.jsonl``)."""
+    from benchmarks.blind import strangers as st
+
+    fixed = not args.floating
+    os.makedirs(root, exist_ok=True)
+    res_path = os.path.join(root, "results.jsonl")
+    done = {}
+    if os.path.exists(res_path):
+        for line in open(res_path):
+            r = json.loads(line)
+            done[r["trial"]] = r
+    cal_dir = os.path.join(root, "calibration")
+    cal_file = os.path.join(cal_dir, "calibration.json")
+    if not os.path.exists(cal_file):
+        logs_dir = os.path.join(root, "none_logs")
+        if not os.path.isdir(logs_dir):
+            record("strangers", [], logs_dir, args.calibration_logs or 2 * args.logs, args.seconds, args.seed0 - 1,
+                   fixed, args.excitation)
+        run_diagnose(["diagnose", "--real", logs_dir, "--out", cal_dir, "--calibrate"])
+        _say(args, f"calibrated engine gap on {logs_dir}")
+    kinds = st.kinds(fixed) if not args.classes else args.classes.split(",")
+    rows = list(done.values())
+    for s_i in range(args.seeds):
+        order = np.random.default_rng(args.seed0 + s_i).permutation(len(kinds))
+        for ci in order:
+            kind = kinds[ci]
+            tid = f"stranger_{s_i:02d}_{kind}"
+            if tid in done:
+                continue
+            seed, hidden = st.draw_trial(s_i, kind, args.seed0, robot)
+            tdir = os.path.join(root, "trials", opaque_id(tid, args.seed0))
+            truth_dir = os.path.join(root, "truth")
+            os.makedirs(truth_dir, exist_ok=True)
+            truth_text = json.dumps({"trial": tid, "effects": hidden}, indent=1)
+            with open(os.path.join(truth_dir, f"{tid}.json"), "w") as f:
+                f.write(truth_text)
+            logs_dir = os.path.join(tdir, "logs")
+            t_rec = record("strangers", hidden, logs_dir, args.logs, args.seconds, seed % 100000, fixed,
+                           args.excitation, noise=args.noise / 1000) if not os.path.isdir(logs_dir) else 0.0
+            rep = run_diagnose(["diagnose", "--real", logs_dir, "--out", os.path.join(tdir, "report"),
+                                "--calibration", cal_file, "--no-plots",
+                                *(["--families", args.diagnose_families] if args.diagnose_families else [])])
+            sc = st.score(hidden, rep, robot)
+            row = {"trial": tid, "kind": "single", "seed": s_i, "truth_class": kind, "truth": hidden,
+                   "truth_sha256": hashlib.sha256(truth_text.encode()).hexdigest(), "report_model": rep["model"],
+                   "verdict": rep["verdict"], "score": sc, "record_s": t_rec, "n_logs": args.logs,
+                   "seconds": args.seconds}
+            rows.append(row)
+            with open(res_path, "a") as f:
+                f.write(json.dumps(row) + "\n")
+            _say(args, f"{tid}: truth {[(e['family'], e['targets'], [round(v, 4) for v in e['values']]) for e in hidden]} "
+                       f"-> found {sc['found']} classes {sc['equivalent']} | right {sc['named_right']} | wrong "
+                       f"{sc['wrong_found']} | {sc['runtime_s']:.0f} s")
+            with open(os.path.join(root, "summary.md"), "w") as f:
+                f.write(st.summarize(rows, fixed, args.noise))
+    text = st.summarize(rows, fixed, args.noise)
+    with open(os.path.join(root, "summary.md"), "w") as f:
+        f.write(text)
+    _emit(args, text, {"world": "strangers", "floating": args.floating, "excitation": args.excitation,
+                       "seed0": args.seed0, "seeds": args.seeds, "logs": args.logs, "seconds": args.seconds,
+                       "encoder_noise_mrad": args.noise, "calibration_noise_mrad": 1000 * NOISE,
+                       "diagnose_families": args.diagnose_families, "kinds": kinds, "metrics": st.metrics(rows)})
     return 0
 
 

@@ -1,23 +1,25 @@
 """Which effect of the real world lengthens the in-air latency a diagnosis fits, and what takes it out.
 
 The identified world's in-air diagnosis puts the command latency at 16-27 ms where the real world
-draws 10-20 ms per episode (README, sixteenth fidelity round). This measures why, with the truth
+draws 10-20 ms per episode (docs/findings/grounding-variants.md). This measures why, with the truth
 known: for each condition, three in-air (fixed-base) excitation logs of 6 s are recorded in the
 PyBullet real world with a fixed 15 ms delay and one other effect of the ``"real"`` profile at its
 range (or all of them), and three fits are made on them (``sysid.diagnose.fit_terms``, the engine-gap
 calibration that ships with the package under every replay):
 
 * ``latency``: the latency alone (what a diagnosis that keeps no other term fits);
-* ``+ kp``: the latency with one kp scale common to every servo (``pd_gain_all``; the fifteenth round);
+* ``+ kp``: the latency with one kp scale common to every servo (``pd_gain_all``);
 * ``+ kp + friction``: also one dry and one viscous friction on every joint (``coulomb_friction_all``,
-  ``viscous_damping_all``; the sixteenth round's ``identified:servo=refit``).
+  ``viscous_damping_all``; what ``identified:servo=refit`` fitted).
 
 Every condition records the same excitation trajectories and real-world seeds, so the rows pair.
 The truth columns are the logs' own draws (mean over the logs and joints), read from the recordings'
 metadata: this is a benchmark with a known answer, not a blind diagnosis.
 
-Usage: ``python benchmarks/sysid_latency_bias.py [--seed 100] [--save benchlatency]`` (about 8 min on
-2 cores); ``--save NAME`` also writes ``docs/results/NAME.json`` for the README.
+Prints its lines, or one JSON object with ``--json`` (its ``"text"`` the lines); progress goes to
+stderr. Usage: ``python benchmarks/sysid_latency_bias.py [--seed 100] [--json]`` (about 8 min on
+2 cores); ``python -m tools.results save benchlatency -- python benchmarks/sysid_latency_bias.py``
+saves it under ``docs/results/``.
 """
 
 from __future__ import annotations
@@ -97,13 +99,12 @@ def format_rows(rows: list[dict]) -> list[str]:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=100, help="seed of the excitation trajectories and draws (default 100)")
-    ap.add_argument("--save", metavar="NAME", help="also write docs/results/NAME.json (for the README)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object (its \"text\": the lines)")
     args = ap.parse_args(argv)
-    from experiments.cli import limit_blas_threads
+    from experiments.runtime.executors import limit_blas_threads
     from experiments.runtime.identify import ENGINE_GAP_DIR
 
     limit_blas_threads()
-    load_before = os.getloadavg()[0]
     with open(ENGINE_GAP_DIR / "fixed.json") as f:
         cal = json.load(f)["calibration"]
     rows, t0 = [], time.perf_counter()
@@ -113,13 +114,8 @@ def main(argv=None) -> dict:
             print(f"[{time.perf_counter() - t0:5.0f} s] {format_rows(rows)[-1]}", file=sys.stderr, flush=True)
     lines = [f"in-air logs: 3 x 6 s per condition, seed {args.seed}; the delay is {1000 * DELAY_S:.0f} ms in every condition",
              *format_rows(rows)]
-    print("\n".join(lines))
     out = {"seed": args.seed, "delay_s": DELAY_S, "rows": rows, "text": "\n".join(lines)}
-    if args.save:
-        from tools.readme import save_benchmark
-
-        save_benchmark(args.save, "benchmarks/sysid_latency_bias.py", sys.argv[1:] if argv is None else list(argv), out,
-                       load_before)
+    print(json.dumps(out) if args.json else out["text"], flush=True)
     return out
 
 

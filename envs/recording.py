@@ -33,7 +33,7 @@ Joint names are NAO names (``LHipYawPitch`` ... ``RAnkleRoll``); the 23 actuated
 without ``gyro.y``) is an error. ``cmd``, ``app`` and ``q`` must be finite; ``gt.cop`` may be NaN.
 
 Metadata: a JSON object stored under the key ``sgatwalk`` of the Parquet schema metadata.
-Required keys: ``robot`` (``"nao_h25"``), ``control_dt`` [s]. Optional: ``schema_version`` (1),
+Required keys: ``robot`` (``"nao"``), ``control_dt`` [s]. Optional: ``schema_version`` (1),
 ``world`` (``sim``/``real``/``grounded``/any label), ``physics_dt``, ``seed``, ``terrain``,
 ``profile``, ``effects`` (the episode's drawn effect values), ``params`` (gait parameters),
 ``fixed_base``, ``fell`` (bool), ``fall_time`` [s], ``fall_reason``, ``source`` (free text).
@@ -99,16 +99,16 @@ class Recording:
 
     @property
     def robot(self) -> RobotModel:
-        """The robot named by ``meta["robot"]`` (``nao_h25``, ``g1``, ``talos``; ``robots.get_robot``).
+        """The robot named by ``meta["robot"]`` (``nao``, ``g1``, ``talos``; ``robots.get_robot``).
 
         Raises:
             RecordingError: an unknown robot name.
         """
         name = self.meta.get("robot")
-        if name == "nao_h25":
+        if name in ("nao", "nao_h25"):  # nao_h25: the name recordings made before carried
             return nao_h25()
         if name not in ROBOT_NAMES:
-            raise RecordingError(f"recording is of robot {name!r}; this package models nao_h25, "
+            raise RecordingError(f"recording is of robot {name!r}; this package models nao, "
                                  f"{', '.join(n for n in ROBOT_NAMES if n != 'nao')}")
         return get_robot(name)
 

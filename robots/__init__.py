@@ -9,8 +9,8 @@ ROBOT_NAMES = ("nao", "g1", "talos")
 
 
 def get_robot(name: str = "nao") -> RobotModel:
-    """The cached :class:`RobotModel` called ``name`` (one of :data:`ROBOT_NAMES`; ``nao_h25`` is an
-    alias of ``nao``).
+    """The cached :class:`RobotModel` called ``name`` (one of :data:`ROBOT_NAMES`; ``nao_h25``, the name
+    recordings made before carried, is an alias of ``nao``).
 
     Raises:
         KeyError: unknown name.

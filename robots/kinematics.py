@@ -20,7 +20,7 @@ class BodyModel:
     """Full-body forward kinematics and centre of mass of a :class:`robots.RobotModel` (NumPy).
 
     Args:
-        robot: the robot; its joints must be listed parents-first (URDF order, as ``nao_h25``).
+        robot: the robot; its joints must be listed parents-first (URDF order, as ``nao``).
 
     Used to place the torso so that the *whole-body* CoM (not only a point mass) sits where the
     LIPM plan wants it (stage 5 of :mod:`walk_engine.engine`).

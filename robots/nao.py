@@ -205,6 +205,6 @@ def nao_h25() -> RobotModel:
               "right_leg": tuple(n for n in legs if n.startswith("R")),
               "arms": tuple(n for n in names if any(k in n for k in ("Shoulder", "Elbow", "Wrist"))),
               "head": tuple(n for n in names if n.startswith("Head"))}
-    return RobotModel("nao_h25", joints, root="torso", root_inertial=TORSO, root_geoms=TORSO_GEOMS, group_names=groups,
+    return RobotModel("nao", joints, root="torso", root_inertial=TORSO, root_geoms=TORSO_GEOMS, group_names=groups,
                       fall_height=0.20, frames=frames, poses=POSES, source="robots.nao (ros-naoqi V50 URDF)",
                       leg_geometry=NAO_LEG, sole=NAO_SOLE)

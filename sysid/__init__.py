@@ -11,7 +11,10 @@ floating-base logs, terrain roughness as a fitted distribution of random surface
 plots and MJCF (:mod:`sysid.report`).
 
 Modules: ``data`` (loading/validating logs), ``model`` (replay models), ``candidates`` (the
-effect library), ``roughness`` (uneven ground, fitted by simulation), ``excitation`` (the
+effect library, each effect in its common physical forms), ``equivalence`` (classes of forms that
+logs can leave tied, and the held-out test that separates them), ``mjsysid`` (fits through
+``mujoco.sysid``'s parameterisations, optimizer and intervals), ``roughness`` (uneven ground, fitted
+by simulation), ``excitation`` (the
 protocol a user runs on a robot), ``worlds`` (recording it with one robot's frozen effects),
 ``estimate`` (floating-base state without ground truth), ``synthetic`` (self-consistent logs for
 tests).

@@ -8,19 +8,37 @@ MuJoCo handles (MuJoCo documentation: XML reference, ``mjModel`` fields; Modelin
 family                scope      unit      MuJoCo augmentation                          probe (Δ)
 ====================  =========  ========  ===========================================  ============
 latency               global     s         ``actuator_delay`` (history buffers, linear)  10, 30 ms
-backlash              joint      rad       series play hinge, range ±gap/2               0.02, 0.05
+command_lowpass       global     s         ``actuator_dynprm[0]`` (filterexact, actearly) 10 ms
+backlash              joint      rad       series play hinge, range ±gap/2; servo's      0.02, 0.05
+                                           damping on the output (dead band in its error)
+backlash_motor        joint      rad       the same hinge; PD and damping on the motor,  0.02, 0.05
+                                           the encoder on the output (motor-side play)
+backlash_link         joint      rad       the same; the encoder on the motor (the log   0.02, 0.05
+                                           reads the motor hinge: link-side play)
 coulomb_friction      joint      N m       ``dof_frictionloss`` (added)                  0.05, 0.2
 coulomb_friction_all  global     N m       the same, one value on every joint            0.05
+stribeck_friction     joint      N m       static excess over the Coulomb level:         0.05, 0.2
+                                           frictionloss + a Stribeck actuator
 viscous_damping       joint      N m s/rad ``dof_damping`` (added)                       0.05
 viscous_damping_all   global     N m s/rad the same, one value on every joint            0.01
 pd_gain               joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
+kd_gain               joint      x kd      ``actuator_biasprm[2]`` (servo damping)       x0.6
 pd_gain_all           global     x kp      the same, one scale for every joint          x0.9
-torque_constant       joint      x kp, kd  ``actuator_gainprm[0]``, ``biasprm[1:3]``      x0.85
+torque_constant       joint      x kp, kd  ``gainprm[0]``, ``biasprm[1:3]``,             x0.85
+                                 & ceiling ``forcerange``
 torque_limit          global     x effort  ``actuator_forcerange`` (all joints)          x0.75
+joint_torque_limit    joint      x effort  ``actuator_forcerange`` (one joint)           x0.6, x0.35
+back_emf              joint      N m s/rad b of the range [-tau - b qdot, tau - b qdot]   0.5, 1.5
+                                           (servo damping kd - b in the clip, b outside)
 link_mass             link       x mass    ``body_mass``, ``body_inertia`` + mj_setConst  x1.3
-                                 (every link, the root (torso) included)
+                                 (fixed base: links below flagged joints; floating base: the root)
+link_com              link, axis m         ``body_ipos`` (added) + mj_setConst           10 mm
+link_inertia          link       x inertia ``body_inertia`` + mj_setConst                x1.6
 armature              joint      kg m^2    ``dof_armature`` (added)                      0.002
-sensor_bias           joint      rad       measured angle offset (replay starts at q-b)  0.005
+sensor_bias           joint      rad       offset of the logged angle (replay starts     0.005
+                                           at q-b; the servo does not see it)
+encoder_offset        joint      rad       the same, seen by the servo too (targets      0.01
+                                           minus b)
 foot_friction         global     --        ``geom_friction[:, 0]`` of every geom          0.8 -> 0.4
 ground_compliance     global     s         ground ``geom_solref[0]`` (time constant)      0.01 -> 0.025
 joint_compliance      joint      rad/(N m) series spring hinge, ``jnt_stiffness`` = 1/c    0.18/kp
@@ -34,8 +52,9 @@ the servo's motor, whose PD loop closes on the motor angle, and the output the e
 Statically it softens the joint like a kp error (kp k / (kp + k)); dynamically it takes the servo
 damping off the output, so the two differ in the 1-4 Hz band of the chirp and in how fast a step
 settles. ``torque_constant`` is a servo whose torque per unit of PD output is off (a motor
-torque-constant or current-gain error): it scales kp and kd together, so the damping ratio of the
-servo changes as √(kp) would not (a kp-only error, ``pd_gain``, keeps kd). A compliance below 1 / :func:`sysid.model.spring_stiffness_max` (a spring stiffer than the
+torque-constant or current-gain error, tau = K_t i): it scales kp and kd together, so the damping
+ratio of the servo changes as √(kp) would not (a kp-only error, ``pd_gain``, keeps kd), and the
+servo's torque ceiling with them (its current limit gives K_t i_max). A compliance below 1 / :func:`sysid.model.spring_stiffness_max` (a spring stiffer than the
 1 ms step integrates) is modelled at that bound.
 
 ``pd_gain_all`` is a kp error common to every servo (one scale for all joints: a weaker supply
@@ -80,6 +99,22 @@ joint compliance by 1 / kp (its probe is per joint already: :func:`term_probe`),
 kp (its probe, bounds and smallest effect are per joint already). The others are
 dimensionless (x kp, x effort, x mass), angles or times, the same for any robot.
 
+Forms of one effect (BAM's nested comparison, M. Duclusaud et al., "Extended friction models for the
+physics simulation of servo actuators", ICRA 2025, arXiv:2410.08650, extended past friction): the
+servo's gains as kp only (``pd_gain``), kd only (``kd_gain``) or both together (``torque_constant``),
+screened as one (kp, kd) subspace per joint (:data:`sysid.identify.JOINT_BLOCKS`); gear play as a dead
+band in the servo's error (``backlash``), on the motor side of an output-shaft encoder
+(``backlash_motor``; with a motor inertia through an ``armature`` term on the same joint, which acts on
+the motor hinge) or on the link side of a motor-shaft encoder (``backlash_link``); torque saturation of
+every joint (``torque_limit``), of one (``joint_torque_limit``) or falling with speed (``back_emf``: a DC
+motor's torque-speed line, W. Leonhard, *Control of Electrical Drives*, Springer 2001, ch. 5); joint
+friction as Coulomb (BAM's M1 with ``viscous_damping``) or Stribeck (M2: ``stribeck_friction`` beside a
+Coulomb term, the static level falling to the Coulomb one over :data:`sysid.model.STRIBECK_VELOCITY`);
+link inertial parameters as mass, centre of mass and rotational inertia (R. Featherstone, *Rigid Body
+Dynamics Algorithms*, Springer 2008, ch. 2); an offset of the log alone (``sensor_bias``) or of the
+encoder the servo reads too (``encoder_offset``); a command delay (``latency``) or smoothing
+(``command_lowpass``). Which of them a set of logs can tell apart is :mod:`sysid.equivalence`'s question.
+
 ``terrain_roughness`` is *stochastic*: uneven ground is a random surface nobody measured, so it has
 no deterministic replay and no screening column. :mod:`sysid.roughness` fits the RMS height (Sq) of a
 distribution of random heightfields by matching the residual statistics of simulated logs on
@@ -100,9 +135,11 @@ from envs.mujoco_world import GROUND_TIMECONST
 from robots import RobotModel, get_robot
 
 #: Every family name the report may use (issue 8).
-FAMILY_NAMES = ("latency", "backlash", "coulomb_friction", "coulomb_friction_all", "viscous_damping", "viscous_damping_all",
-                "pd_gain", "pd_gain_all", "torque_constant", "torque_limit", "link_mass", "armature", "joint_compliance",
-                "parallel_spring", "foot_friction", "ground_compliance", "terrain_roughness", "sensor_bias")
+FAMILY_NAMES = ("latency", "command_lowpass", "backlash", "backlash_motor", "backlash_link", "coulomb_friction", "coulomb_friction_all", "stribeck_friction",
+                "viscous_damping", "viscous_damping_all", "pd_gain", "pd_gain_all", "kd_gain", "torque_constant",
+                "torque_limit", "joint_torque_limit", "back_emf", "link_mass", "link_com", "link_inertia", "armature",
+                "joint_compliance", "parallel_spring", "foot_friction", "ground_compliance", "terrain_roughness",
+                "sensor_bias", "encoder_offset")
 
 
 @dataclass(frozen=True)
@@ -163,6 +200,12 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            min_effect=0.001),
     Family("backlash", "gear backlash (dead band)", "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05,
            min_effect=0.002),
+    Family("backlash_motor", "gear backlash on the motor side of the encoder (the link swings free inside it)",
+           "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05, min_effect=0.002),
+    Family("backlash_link", "gear backlash on the link side of the encoder (the encoder reads the motor)",
+           "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05, min_effect=0.002),
+    Family("stribeck_friction", "Stribeck joint friction (static above kinetic, decaying with speed)", "joint",
+           "N m", 0.0, 0.0, 0.8, 0.05, smooth=False, probe2=0.2, min_effect=0.01, scale="effort"),
     Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
            probe2=0.2, min_effect=0.01, scale="effort"),
     Family("coulomb_friction_all", "common Coulomb (dry) joint friction", "global", "N m", 0.0, 0.0,
@@ -176,12 +219,24 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            min_effect=0.02),
     Family("torque_constant", "servo torque-constant error (kp and kd together)", "joint", "x kp, kd", 1.0, 0.3, 2.0,
            0.85, min_effect=0.03),
+    Family("kd_gain", "servo damping (kd) mismatch", "joint", "x kd", 1.0, 0.25, 4.0, 0.6, min_effect=0.05),
     Family("torque_limit", "actuator torque limit", "global", "x effort", 1.0, 0.2, 1.0, 0.75, smooth=False,
            min_effect=0.03),
+    Family("joint_torque_limit", "actuator torque limit (saturation) at one joint", "joint", "x effort", 1.0, 0.2,
+           1.0, 0.6, smooth=False, probe2=0.35, min_effect=0.03),
+    Family("back_emf", "motor torque-speed limit (back-EMF: the torque limit falls with speed)", "joint",
+           "N m s/rad", 0.0, 0.0, 3.0, 0.5, smooth=False, probe2=1.5, min_effect=0.05, scale="effort"),
     Family("link_mass", "link mass error", "link", "x mass", 1.0, 0.3, 3.0, 1.3, min_effect=0.03),
+    Family("link_com", "link centre-of-mass offset", "link", "m", 0.0, -0.05, 0.05, 0.01, min_effect=0.002),
+    Family("link_inertia", "link rotational inertia error", "link", "x inertia", 1.0, 0.3, 4.0, 1.6,
+           min_effect=0.1),
     Family("armature", "reflected rotor inertia (armature)", "joint", "kg m^2", 0.0, 0.0, 0.02, 0.002, min_effect=2e-4,
            scale="inertia"),
     Family("sensor_bias", "encoder offset (sensor bias)", "joint", "rad", 0.0, -0.1, 0.1, 0.005, min_effect=5e-4),
+    Family("encoder_offset", "encoder calibration offset (seen by the servo and the log)", "joint", "rad", 0.0, -0.1,
+           0.1, 0.01, min_effect=5e-4),
+    Family("command_lowpass", "servo command smoothing (first-order low-pass)", "global", "s", 0.0, 0.0, 0.05, 0.01,
+           smooth=False, min_effect=0.001),
     Family("foot_friction", "foot-ground friction", "global", "", NOMINAL_FOOT_FRICTION, 0.05, 1.5, 0.4,
            smooth=False, contact=True, min_effect=0.02),
     Family("ground_compliance", "ground compliance (contact time constant)", "global", "s", GROUND_TIMECONST, 0.002,
@@ -216,6 +271,9 @@ PARALLEL_SPRING_KP = {"probe": 0.03, "hi": 0.5, "min_effect": 0.005}
 #: without screening (``experiments.identify.fit_servo_gain``); the blind benchmark was not rerun with it
 #: screened, so the default stays as it was validated there. ``coulomb_friction_all``,
 #: ``viscous_damping_all``: added in the sixteenth round for the same world, on the same terms.
+#: ``torque_constant`` is also reached without being listed: screening moves a joint's kp and kd together
+#: (:data:`sysid.identify.JOINT_BLOCKS`) and the diagnosis names the form of the fitted pair, kp and kd
+#: together among them (:func:`sysid.diagnose.servo_forms`).
 OPTIONAL_FAMILIES = ("torque_constant", "parallel_spring", "pd_gain_all", "coulomb_friction_all", "viscous_damping_all")
 #: Families screened by default on fixed-base (in-air) logs; contact families need floating-base logs.
 FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact and n not in OPTIONAL_FAMILIES)
@@ -223,6 +281,10 @@ FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact and 
 #: (Bjelonic et al., arXiv:2509.06342) fixes actuator effects in the air first and passes them in as a
 #: base model.
 CONTACT_FAMILIES = tuple(n for n, f in FAMILIES.items() if f.contact)
+#: Families screened by default on floating-base logs: the contact families and the root's (the
+#: torso's) mass and centre of mass, which a stance phase identifies (the legs carry the torso's
+#: weight; on floating-base logs link terms are the root's only, :func:`sysid.identify.screen`).
+FLOATING_BASE_FAMILIES = CONTACT_FAMILIES + ("link_mass", "link_com")
 
 
 @dataclass(frozen=True, order=True)
@@ -244,7 +306,7 @@ class Term:
 
 
 #: The robot whose actuators the families' numbers were set for.
-REFERENCE_ROBOT = "nao_h25"
+REFERENCE_ROBOT = "nao"
 #: Family scalings (:attr:`Family.scale`) -> what is compared between a robot and the NAO (a median
 #: over the leg joints; all joints when a robot has no ``legs`` group).
 SCALES = {"effort": "effort limit [N m]", "kd": "servo damping kd [N m s/rad]",
@@ -430,8 +492,59 @@ def joints_above(robot: RobotModel, link: str) -> list[str]:
     return out
 
 
+#: Axes of a link's centre-of-mass offset (``link_com`` terms; body frame of the link).
+COM_AXES = ("x", "y", "z")
+
+
+def com_target(link: str, axis: str) -> str:
+    """The target of a ``link_com`` term: ``"LINK:AXIS"`` (axis one of :data:`COM_AXES`, the link's body frame).
+
+    Raises:
+        ValueError: an unknown axis.
+    """
+    if axis not in COM_AXES:
+        raise ValueError(f"unknown centre-of-mass axis {axis!r}; known: {', '.join(COM_AXES)}")
+    return f"{link}:{axis}"
+
+
+def term_link(term: Term) -> str | None:
+    """The link a link-scope term is on (``link_com``'s target without its axis), else None."""
+    if term.fam.scope != "link" or term.target is None:
+        return None
+    return term.target.split(":")[0]
+
+
+def link_targets(family: str, links) -> list[str]:
+    """The targets of a link-scope family over ``links``: the links themselves, or for ``link_com``
+    one target per link and axis (:func:`com_target`)."""
+    if family == "link_com":
+        return [com_target(ln, a) for ln in links for a in COM_AXES]
+    return list(links)
+
+
+#: Share of a play joint's servo damping that acts on its light motor side for each backlash form
+#: (the rest acts on the output angle through the tendon motor + play, :mod:`sysid.model`):
+#: ``backlash`` (a dead band in the servo's position error: its loop and damping see the output) keeps
+#: 10 % on the motor so it does not ring inside the gap; ``backlash_motor`` (play on the motor side of
+#: an output-shaft encoder: a light motor under the whole PD, the link free inside the gap, undamped
+#: until it engages) and ``backlash_link`` (play on the link side of a motor-shaft encoder: the same
+#: servo, the encoder and the loop reading the motor, the link lagging unseen inside the gap) all of
+#: it (G. Ellis, *Control System Design Guide*, 4th ed., 2012, ch. 16: semi-closed-loop servos).
+PLAY_MOTOR_DAMPING = {"backlash": 0.1, "backlash_motor": 1.0, "backlash_link": 1.0}
+#: Families of gear play (a series play hinge; at most one per joint).
+PLAY_FAMILIES = ("backlash", "backlash_motor", "backlash_link")
+
+
 def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
     """Write the model-side terms of ``values`` into ``m`` (a fresh copy of ``rm.model``).
+
+    Servo terms compose: the kp scale of a joint is the product of its ``pd_gain``, ``pd_gain_all``
+    and ``torque_constant`` values, its kd scale that of ``kd_gain`` and ``torque_constant``; its
+    torque limit is effort x ``torque_limit`` x ``joint_torque_limit``. A back-EMF slope b (the motor
+    torque-speed limit of a DC motor under voltage saturation: tau in [-tau_max - b qdot, tau_max - b
+    qdot], W. Leonhard, *Control of Electrical Drives*, Springer 2001, ch. 5) moves b of the servo damping
+    out of the clipped actuator force into the joint's own damping: clip(kp e - (kd - b) qdot, +-tau_max)
+    - b qdot, the same torque below the limit.
 
     Args:
         rm: the :class:`sysid.model.ReplayModel` whose copy ``m`` is.
@@ -441,54 +554,85 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
         (n,) measurement offsets [rad], n = the robot's joint count (sensor bias terms; zeros otherwise).
 
     Raises:
-        ValueError: a backlash (compliance) term on a joint without a play (spring) hinge in
-            ``rm``; unknown family.
+        ValueError: a backlash (compliance, Stribeck) term on a joint without a play hinge (spring
+            hinge, Stribeck element) in ``rm``; both backlash forms on one joint; unknown family.
     """
-    from sysid.model import spring_stiffness_max
+    from sysid.model import LOWPASS_MIN, STRIBECK_GAIN_SHARE, STRIBECK_VELOCITY, joint_inertia, spring_stiffness_max
 
     robot = rm.robot
-    jidx = {n: i for i, n in enumerate(robot.joint_names)}
-    bias = np.zeros(len(robot.joint_names))
+    n = len(robot.joint_names)
+    jidx = {nm: i for i, nm in enumerate(robot.joint_names)}
+    bias = np.zeros(n)
     mass_changed = False
+    kp_s, kd_s, tl_s = np.ones(n), np.ones(n), np.ones(n)
+    bemf = np.zeros(n)
+    play_form: dict[str, str] = {}
+    nominal = {"gain": m.actuator_gainprm[rm.act, 0].copy(), "bias": m.actuator_biasprm[rm.act, 1:3].copy(),
+               "damping": m.dof_damping[rm.dadr].copy()}  # m is fresh: the template's servo
     for term, v in values.items():
         f, tg = term.family, term.target
         v = float(v)
         if f == "latency":
-            m.actuator_delay[:] = v
+            m.actuator_delay[rm.act] = v
         elif f == "coulomb_friction":
             m.dof_frictionloss[rm.dadr[jidx[tg]]] += v
         elif f == "coulomb_friction_all":  # every joint, adding to per-joint terms
             m.dof_frictionloss[rm.dadr] += v
+        elif f == "stribeck_friction":
+            if tg not in rm.stribeck_act:
+                raise ValueError(f"Stribeck friction term on {tg} needs a replay model with a Stribeck element there")
+            i = jidx[tg]
+            m.dof_frictionloss[rm.dadr[i]] += v  # static level: + the excess v
+            inertia = joint_inertia(robot.name, rm.structure.fixed_base)[tg]
+            k = min(v / STRIBECK_VELOCITY, STRIBECK_GAIN_SHARE * inertia / rm.structure.physics_dt)
+            a = rm.stribeck_act[tg]
+            m.actuator_biasprm[a, 2] = k  # +k qdot: gives the excess back as the joint speeds up
+            m.actuator_forcerange[a] = [-max(v, 1e-9), max(v, 1e-9)]
         elif f == "viscous_damping":
             m.dof_damping[rm.dadr[jidx[tg]]] += v
         elif f == "viscous_damping_all":
             m.dof_damping[rm.dadr] += v
         elif f == "armature":
             m.dof_armature[rm.dadr[jidx[tg]]] += v
-        elif f == "pd_gain":  # relative to the copy's (nominal) gains, so it composes with torque_constant
-            a = rm.act[jidx[tg]]
-            m.actuator_gainprm[a, 0] *= v
-            m.actuator_biasprm[a, 1] *= v
+        elif f == "pd_gain":  # relative to the nominal gains, so it composes with torque_constant
+            kp_s[jidx[tg]] *= v
         elif f == "pd_gain_all":  # every servo, composing with per-joint pd_gain terms
-            m.actuator_gainprm[rm.act, 0] *= v
-            m.actuator_biasprm[rm.act, 1] *= v
-        elif f == "torque_constant":
-            a = rm.act[jidx[tg]]
-            m.actuator_gainprm[a, 0] *= v
-            m.actuator_biasprm[a, 1:3] *= v
+            kp_s *= v
+        elif f == "kd_gain":
+            kd_s[jidx[tg]] *= v
+        elif f == "torque_constant":  # every torque the servo gives, its ceiling included (tau = K_t i)
+            kp_s[jidx[tg]] *= v
+            kd_s[jidx[tg]] *= v
+            tl_s[jidx[tg]] *= v
         elif f == "torque_limit":
-            m.actuator_forcerange[rm.act, 0] = -robot.effort * v
-            m.actuator_forcerange[rm.act, 1] = robot.effort * v
+            tl_s *= v
+        elif f == "joint_torque_limit":
+            tl_s[jidx[tg]] *= v
+        elif f == "back_emf":
+            bemf[jidx[tg]] += v
         elif f == "link_mass":
             b = rm.body[tg]
             m.body_mass[b] *= v
             m.body_inertia[b] *= v
             mass_changed = True
-        elif f == "sensor_bias":
+        elif f == "link_com":
+            link, axis = tg.split(":")
+            m.body_ipos[rm.body[link], COM_AXES.index(axis)] += v
+            mass_changed = True
+        elif f == "link_inertia":
+            m.body_inertia[rm.body[tg]] *= v
+            mass_changed = True
+        elif f in ("sensor_bias", "encoder_offset"):  # both show in the log (the servo's side: readout())
             bias[jidx[tg]] += v
-        elif f == "backlash":
+        elif f == "command_lowpass":
+            if not rm.structure.command_filter:
+                raise ValueError("a command_lowpass term needs a replay model with command filters")
+            m.actuator_dynprm[rm.act, 0] = max(v, LOWPASS_MIN)
+        elif f in PLAY_FAMILIES:
             if tg not in rm.play_jnt:
-                raise ValueError(f"backlash term on {tg} needs a replay model with a play hinge there")
+                raise ValueError(f"{f} term on {tg} needs a replay model with a play hinge there")
+            if play_form.setdefault(tg, f) != f:
+                raise ValueError(f"two backlash forms on {tg}: {', '.join(PLAY_FAMILIES)} exclude each other")
             g = max(v, 2e-4)
             m.jnt_range[rm.play_jnt[tg]] = [-g / 2, g / 2]
         elif f == "joint_compliance":
@@ -513,15 +657,73 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
             m.geom_solref[:, 0] = v  # contacts mix both geoms' solref: set all
         else:
             raise ValueError(f"family {f!r} has no MuJoCo augmentation")
+    _write_servos(rm, m, nominal, kp_s, kd_s, tl_s, bemf, play_form)
     if mass_changed:
         mujoco.mj_setConst(m, mujoco.MjData(m))
     return bias
 
 
+def _write_servos(rm, m: mujoco.MjModel, nominal: dict, kp_s: np.ndarray, kd_s: np.ndarray, tl_s: np.ndarray,
+                  bemf: np.ndarray, play_form: dict) -> None:
+    """Write each joint's servo into ``m`` (a copy of ``rm.model``): kp and kd scaled by ``kp_s``,
+    ``kd_s`` (n,), the force range by ``tl_s`` (n,), the back-EMF slopes ``bemf`` (n,) [N m s/rad],
+    and on play joints the servo damping split between the motor and the output as the joint's
+    backlash form says (:data:`PLAY_MOTOR_DAMPING`; ``play_form``: joint -> family). ``nominal``: the
+    servo fields of the template before any term (``gain`` (n,), ``bias`` (n, 2), ``damping`` (n,))."""
+    robot = rm.robot
+    for i, name in enumerate(robot.joint_names):
+        a = rm.act[i]
+        if kp_s[i] != 1.0:
+            m.actuator_gainprm[a, 0] = nominal["gain"][i] * kp_s[i]
+            m.actuator_biasprm[a, 1] = nominal["bias"][i, 0] * kp_s[i]
+        kd = float(robot.kd[i]) * kd_s[i]
+        if name in rm.play_jnt and name not in rm.spring_jnt:
+            share = PLAY_MOTOR_DAMPING[play_form.get(name, "backlash")]
+            # the template's motor damping is the link-side form's share; viscous terms add to it
+            m.dof_damping[rm.dadr[i]] += share * kd - nominal["damping"][i]
+            m.tendon_damping[rm.play_tendon[name]] = (1.0 - share) * kd
+        elif kd_s[i] != 1.0:
+            m.actuator_biasprm[a, 2] = nominal["bias"][i, 1] * kd_s[i]
+        if bemf[i] != 0.0:
+            m.actuator_biasprm[a, 2] += bemf[i]
+            m.dof_damping[rm.dadr[i]] += bemf[i]
+        if tl_s[i] != 1.0:
+            m.actuator_forcerange[a] = [-robot.effort[i] * tl_s[i], robot.effort[i] * tl_s[i]]
+
+
+def readout(rm, values: dict[Term, float]) -> tuple[np.ndarray, np.ndarray]:
+    """How the log and the servo read the joints under ``values``: the (n, nsensordata) map from the
+    replay model's sensors to the n logged angles (``rm.meas``; for a ``backlash_link`` joint the
+    motor hinge alone: its encoder sits before the play) and the (n,) offsets [rad] the servos see
+    (``encoder_offset``: the servo drives the joint to the command minus the offset; the log's own
+    offsets are :func:`apply_terms`' return value).
+
+    Raises:
+        ValueError: a ``backlash_link`` term on a joint without a play hinge in ``rm``.
+    """
+    robot = rm.robot
+    jidx = {n: i for i, n in enumerate(robot.joint_names)}
+    meas = rm.meas
+    servo = np.zeros(len(robot.joint_names))
+    for t, v in values.items():
+        if t.family == "encoder_offset":
+            servo[jidx[t.target]] += float(v)
+        elif t.family == "backlash_link":
+            if t.target not in rm.play_jnt:
+                raise ValueError(f"backlash_link term on {t.target} needs a replay model with a play hinge there")
+            if meas is rm.meas:
+                meas = rm.meas.copy()
+            i = jidx[t.target]
+            meas[i] = 0.0
+            meas[i, rm.model.sensor_adr[rm.model.sensor(f"q:{t.target}").id]] = 1.0
+    return meas, servo
+
+
 def series_structure(structure, values: dict[Term, float]):
     """``structure`` (a :class:`sysid.model.Structure`) with the series hinges ``values`` need: a
-    play hinge per backlash term, a spring hinge per joint-compliance term (sorted, so structures
-    are cache keys)."""
+    play hinge per backlash term (either form), a spring hinge per joint-compliance term, a Stribeck
+    element per Stribeck friction term (sorted, so structures are cache keys)."""
     return dataclasses.replace(
-        structure, play_joints=tuple(sorted(t.target for t in values if t.family == "backlash")),
-        spring_joints=tuple(sorted(t.target for t in values if t.family == "joint_compliance")))
+        structure, play_joints=tuple(sorted({t.target for t in values if t.family in PLAY_FAMILIES})),
+        spring_joints=tuple(sorted(t.target for t in values if t.family == "joint_compliance")),
+        stribeck_joints=tuple(sorted(t.target for t in values if t.family == "stribeck_friction")))

@@ -45,7 +45,7 @@ class Log:
             (:data:`GT_GROUPS`, each (N, 3) or (N, 4) quaternions wxyz; SI units, world frame);
             empty for a real robot's recording and, unless asked, after :func:`load_logs`.
         meta: the recording's metadata (read-only use); ``meta["robot"]`` names the robot
-            (:attr:`robot`; ``"nao_h25"`` when absent).
+            (:attr:`robot`; ``"nao"`` when absent).
     """
 
     name: str
@@ -75,8 +75,9 @@ class Log:
 
     @property
     def robot_name(self) -> str:
-        """The robot's name, ``meta["robot"]`` (``"nao_h25"``, ``"g1"``, ``"talos"``; ``"nao_h25"`` when absent)."""
-        return str(self.meta.get("robot") or "nao_h25")
+        """The robot's name, ``meta["robot"]`` (``"nao"``, ``"g1"``, ``"talos"``; ``"nao"`` when absent)."""
+        name = str(self.meta.get("robot") or "nao")
+        return "nao" if name == "nao_h25" else name  # nao_h25: the name recordings made before carried
 
     @property
     def robot(self) -> RobotModel:
@@ -95,7 +96,7 @@ def from_recording(rec: Recording, name: str = "log", path: str | None = None, *
     groups in :attr:`Log.gt` (False: ``Log.gt`` is empty, as for a real robot's recording).
 
     Raises:
-        RecordingError: robot is not one of ``robots.ROBOT_NAMES`` (``nao_h25``, ``g1``, ``talos``);
+        RecordingError: robot is not one of ``robots.ROBOT_NAMES`` (``nao``, ``g1``, ``talos``);
             shorter than :data:`MIN_SECONDS`; sample times not on the ``control_dt`` grid;
             ``control_dt`` not a multiple of ``physics_dt``.
     """
@@ -128,7 +129,7 @@ def from_recording(rec: Recording, name: str = "log", path: str | None = None, *
     if fixed is None:  # infer: a hanging robot has no foot forces
         fixed = bool(rec.has("fsr") and np.all(rec.group("fsr") < 1e-6))
     meta = dict(rec.meta)
-    meta["robot"] = robot.name  # canonical ("nao" -> "nao_h25"): logs of one robot compare equal
+    meta["robot"] = robot.name  # canonical ("nao_h25" -> "nao"): logs of one robot compare equal
     return Log(name=name, t=t.copy(), cmd=cmd, q=q, dq=dq, control_dt=dt, physics_dt=pdt, fixed_base=bool(fixed),
                path=path, imu=imu, fsr=rec.group("fsr") if rec.has("fsr") else None, gt=gt, meta=meta)
 
@@ -166,7 +167,8 @@ def load_logs(inputs: list[str] | str, *, use_ground_truth: bool = False) -> lis
     Raises:
         FileNotFoundError: missing path or empty folder.
         RecordingError: a malformed recording (missing column, NaN, wrong robot, too short, ...),
-            named by file; or logs that disagree on robot, ``control_dt``, ``physics_dt`` or base mode.
+            named by file; or logs that disagree on robot, ``control_dt``, ``physics_dt`` or base mode;
+            or ``use_ground_truth`` with floating-base recordings that lack the ``gt.*`` columns.
     """
     paths = find_files(inputs)
     logs = []
@@ -179,6 +181,9 @@ def load_logs(inputs: list[str] | str, *, use_ground_truth: bool = False) -> lis
             msg = str(exc)
             raise RecordingError(msg if p in msg or name in msg else f"{p}: {msg}") from None
     check_consistent(logs)
+    if use_ground_truth and logs and not logs[0].fixed_base and not all(has_ground_truth(lg) for lg in logs):
+        raise RecordingError("--use-ground-truth: the recordings have no gt.base, gt.quat, gt.vel and gt.angvel "
+                             "columns (a real robot's recordings do not); diagnose without it")
     return logs
 
 

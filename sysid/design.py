@@ -142,7 +142,7 @@ def segment_information(robot: RobotModel, segments=SEGMENTS, *, seconds: float 
     joints = list(dict.fromkeys(robot.mimic.get(j, j) for j in joints))
     links = mass_links(robot, joints, False)
     cols = _columns_terms(robot, fams, {}, joints, links)
-    cols = [c for c in cols if not c.label.endswith("(-)")]
+    cols = [c for c in cols if c.negate_of is None and len(c.terms) == 1]  # one term each, no mirrors
     info, labels, fam_of = {}, [c.label for c in cols], [c.family for c in cols]
     for s in segments:
         if s not in SEGMENT_SHARES or s in ("slip", "stepping"):

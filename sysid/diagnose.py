@@ -15,7 +15,12 @@ windows (C = number of channels when every channel sits at its floor):
   raises the held-out cost by less than that same margin (backward elimination);
 * a selected term is reported as Found only if it survives held-out elimination, its 95 % interval
   excludes the sim's value, it is not at a bound of its family and it does not only compensate
-  another term; the others are reported as uncertain / compensating, with the reason (:func:`_vet`).
+  another term; the others are reported as uncertain / compensating, with the reason (:func:`_vet`);
+* and only if its family beats the best fit of every other family of its equivalence classes
+  (:mod:`sysid.equivalence`) in its place on the held-out logs, beyond the noise and by the margin
+  (:func:`_equivalence`); otherwise the report names the class, its candidates and the excitation
+  segment that would tell them apart (``report["equivalent"]``), and the identified model keeps the
+  best-fitting candidate.
 """
 
 from __future__ import annotations
@@ -27,12 +32,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import nnls
 
-from sysid.candidates import (CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES, Term, joints_above, term_allowed,
-                              term_bounds, term_min_effect, term_probe)
+from sysid.candidates import (FAMILIES, FIXED_BASE_FAMILIES, FLOATING_BASE_FAMILIES, PLAY_FAMILIES, Term, joints_above,
+                              term_allowed, term_bounds, term_link, term_min_effect, term_probe)
 from sysid.data import (BASE_ESTIMATED, Log, base_state_source, split_by_trajectory,
                          without_ground_truth)
-from sysid.identify import FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen
+from sysid.identify import (FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen,
+                            two_sided)
 from sysid.replay import IMU_CHANNELS, MUJOCO_WARNINGS, Window, predict, whole_logs, windows
 from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
 from sysid.stats import integrated_autocorr, localisation, noise_sigma
@@ -169,24 +176,34 @@ def _entry(t: Term, v: float, ci, robot) -> dict:
     elif fam.scope == "joint":
         joints, links = [t.target], []
     else:
-        joints, links = [], [t.target]
+        joints, links = [], [term_link(t)]
+    link = term_link(t)
+    axis = f", {t.target.split(':')[1]} axis" if t.family == "link_com" else ""
     where = ("all joints" if fam.scope == "global" and not fam.contact else "feet/ground" if fam.contact
-             else f"link {t.target} (the root: carried by the stance legs, shows on their joints and the IMU)"
-             if fam.scope == "link" and t.target == robot.root
-             else f"link {t.target} (shows on {', '.join(joints_above(robot, t.target)[:3])})" if fam.scope == "link"
+             else f"link {link}{axis} (the root: carried by the stance legs, shows on their joints and the IMU)"
+             if fam.scope == "link" and link == robot.root
+             else f"link {link}{axis} (shows on {', '.join(joints_above(robot, link)[:3])})" if fam.scope == "link"
              else t.target)
-    return {"family": t.family, "joints": joints, "links": links, "value": float(v), "unit": fam.unit,
+    return {"family": t.family, "term_label": t.label(), "joints": joints, "links": links, "value": float(v),
+            "unit": fam.unit,
             "ci95": [float(ci[0]), float(ci[1])] if ci is not None else [None, None], "nominal": fam.nominal,
             "words": fam.words, "where": where, "display": fam.fmt(v)}
+
+
+#: A joint family whose stage-A column explains at least this share of what the picked family's explains
+#: is fitted in its place (:func:`_compete`).
+COMPETE_SHARE = 0.7
 
 
 def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, robot) -> tuple[dict, list]:
     """Fit competing joint families on the same joints and keep the best on held-out data.
 
     For each joint-scope family picked this round, the other joint families whose stage-A column
-    explained at least half as much of the residual (at most 2) are fitted in its place on the
+    explained at least :data:`COMPETE_SHARE` as much of the residual (at most 2) are fitted in its place on the
     same joints (grid starts + least squares); the held-out costs decide (the
-    selection rules of this module: single-family fits ranked on held-out data).
+    selection rules of this module: single-family fits ranked on held-out data). Members of the
+    family's equivalence classes are left to the class test at the end (:func:`_equivalence`), and
+    a joint block (kp and kd of one servo) competes once, as a whole.
 
     A rival that fits the held-out data within the margin of the kept family (neither better nor
     clearly worse) is a near-equivalent explanation: it goes into the returned ties, which the report
@@ -196,8 +213,17 @@ def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, ro
         (the winning parameter set, [rejection records for the losers], [ties: (kept term label,
         rival term label, |cost difference|)]).
     """
+    from sysid.equivalence import rival_families as class_rivals
+    from sysid.identify import JOINT_BLOCKS
+
     new = {t: v for t, v in cand.items() if t not in model}
     fams = sorted({t.family for t in new if t.fam.scope == "joint"})
+    # a joint block (kp and kd of one servo) competes once, as its first family; its members are no rivals
+    block_of = {f: blk for blk in JOINT_BLOCKS for f in blk}
+    fams = [f for f in fams if f not in block_of or f == block_of[f][0] or block_of[f][0] not in fams]
+    # the strongest new family competes (the one screening explained most with), the others wait for
+    # the class test at the end
+    fams = sorted(fams, key=lambda f: -sr.family_score.get(f, 0.0))[:1]
     ties = []
     if not fams:
         return cand, [], ties
@@ -207,14 +233,17 @@ def _compete(problem: Problem, model: dict, cand: dict, sr, families, k: int, ro
         targets = [t.target for t in new if t.family == f]
         top = sr.family_score.get(f, 0.0)
         rivals = [g for g, sc in sorted(sr.family_score.items(), key=lambda kv: -kv[1])
-                  if g != f and g in families and FAMILIES[g].scope == "joint" and sc >= 0.5 * top][:2]
+                  if g != f and g in families and FAMILIES[g].scope == "joint" and sc >= COMPETE_SHARE * top
+                  and g not in block_of.get(f, ()) and g not in class_rivals(f)][:2]
         for g in rivals:
             if not all(term_allowed(Term(g, tg), robot) for tg in targets):
                 continue
             alt = {t: v for t, v in cand.items() if t.family != f or t.target not in targets}
+            if g in PLAY_FAMILIES and any(t.family in PLAY_FAMILIES and t.target in targets for t in alt):
+                continue  # one play hinge per joint
             for tg in targets:
                 alt[Term(g, tg)] = term_probe(Term(g, tg), robot)
-            fit = refit(problem, alt, free=[Term(g, tg) for tg in targets], max_nfev=8)
+            fit = refit(problem, alt, free=[Term(g, tg) for tg in targets], max_nfev=6)
             c_alt = float(problem.cost([fit.values], "heldout")[0])
             if c_alt < best_c - _margin(best_c, k):
                 records.append({"term": ",".join(Term(f, tg).label() for tg in targets), "family": f,
@@ -330,7 +359,7 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True, *, use_ground_
                    + ([info["sigma"].get("angle", 0)] * 2 + [info["sigma"].get("gyro", 0)] * 3 if with_imu else []))
     gap = np.sqrt(np.maximum(rms ** 2 - sig ** 2, 0.0))
     problem = Problem(logs, wins, wins, floor, with_imu)
-    fams = FIXED_BASE_FAMILIES if logs[0].fixed_base else CONTACT_FAMILIES
+    fams = FIXED_BASE_FAMILIES if logs[0].fixed_base else FLOATING_BASE_FAMILIES
     sr = screen(problem, robot, {}, fams, floating=not logs[0].fixed_base)
     return {"kind": "sgatwalk-sysid-calibration", "version": 2, "n_logs": len(logs),
             "fixed_base": logs[0].fixed_base, "base_state": source, "sigma": info["sigma"],
@@ -361,7 +390,8 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
             is replayed under everything, its gap widens the noise floor; the sensor noise always
             comes from ``logs``), or None.
         families: family names to consider (default: the actuator families for fixed-base logs,
-            the contact families for floating-base logs).
+            the contact families and the torso's mass and centre of mass for floating-base logs:
+            :data:`sysid.candidates.FLOATING_BASE_FAMILIES`).
         base_model: terms (Term -> value) kept fixed under every replay, e.g. the effects a
             fixed-base (in-air) diagnosis found, when stepping logs are diagnosed for contact
             (bottom-up staging, Bjelonic et al., arXiv:2509.06342). "Before" then means the sim with
@@ -385,7 +415,9 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         ``noise`` (``sigma``: the logs' sensor noise, ``calibration_sigma``: the calibration's,
         for reference), ``model`` (term label -> value), ``runtime_s``, ``rollouts``,
         ``mujoco_warnings`` (MuJoCo's own warnings during the replays, counted by message:
-        :data:`sysid.replay.MUJOCO_WARNINGS`).
+        :data:`sysid.replay.MUJOCO_WARNINGS`), ``equivalent`` (effects named only as their class:
+        :func:`_split_classes`; an effect in ``effects`` may carry ``not_excluded``, a nested excess
+        these logs could not show) and ``class_tests`` (every held-out test of :func:`_equivalence`).
 
     Raises:
         ValueError: a name in ``families`` is not a candidate family; ``robot`` is not the logs' robot;
@@ -404,17 +436,21 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     sel = _select(problem, setup, before, base.names, robot, max_rounds, clock, say)
     final = _drop_negligible(problem, sel.model, sel.cost, before.c0)
     rough = _roughness(problem, setup, before.nothing, clock, say)
-    iv = _intervals(problem, final.model, final.cost, base.floor, robot, len(logs))
+    eq = _equivalence(problem, final.model, final.cost, robot, clock, say)
+    iv = _intervals(problem, eq.model, eq.cost, base.floor, robot, len(logs))
     indist = _identifiability(sel.confusable, iv.indistinguishable, iv.model, sel.ties)
     found, uncertain = _vet(problem, iv, robot, clock, say)
+    found, equivalent = _split_classes(found, eq.decisions, robot)
     rough_rejected = _check_roughness(rough.fit, problem, iv.model, say)
     effects, indist = _roughness_effect(rough.fit, iv.model, found, indist)
     after = _after(logs, problem, setup, base, before, iv.model)
     verdict = _verdict(before, after, effects, uncertain, base, rough.fit, calibration, source,
-                       roughness_skipped=rough.budget_hit)
-    rejected = sel.rejected + final.rejected + rough.rejected + rough_rejected
+                       roughness_skipped=rough.budget_hit, equivalent=equivalent)
+    rejected = sel.rejected + final.rejected + rough.rejected + rough_rejected + eq.rejected
     report = _report(logs, setup, base, loc, problem, before, sel, iv, effects, uncertain, indist, rejected, rough,
                      after, verdict, calibration, robot, clock, source)
+    report["equivalent"] = equivalent
+    report["class_tests"] = eq.tests
     report["mujoco_warnings"] = {m: n - warned.get(m, 0) for m, n in MUJOCO_WARNINGS.items() if n > warned.get(m, 0)}
     return report
 
@@ -602,7 +638,7 @@ def _prepare(logs: list[Log], families, calibration: dict | None, base_model: di
     fixed = logs[0].fixed_base
     with_imu = (not fixed) and all("angle" in lg.imu and "gyro" in lg.imu for lg in logs)
     if families is None:
-        families = FIXED_BASE_FAMILIES if fixed else CONTACT_FAMILIES
+        families = FIXED_BASE_FAMILIES if fixed else FLOATING_BASE_FAMILIES
     else:
         for f in families:
             if f not in FAMILIES:
@@ -683,7 +719,10 @@ def _select(problem: Problem, setup: _Setup, before: _Before, names: list[str], 
             say("time budget reached: no further screening round")
             sel.budget_hit = True
             break
-        sr = screen(problem, robot, sel.model, setup.families, floating=not setup.fixed)
+        # later screenings look for what the first left: fewer, smaller effects (the joint refit costs a
+        # batched replay per term per iteration)
+        sr = screen(problem, robot, sel.model, setup.families, floating=not setup.fixed,
+                    max_terms=FIRST_SCREEN_TERMS if rnd == 0 else LATER_SCREEN_TERMS)
         say(f"round {rnd + 1}: flagged {', '.join(sr.flagged) or '-'}; screening picked "
             f"{', '.join(t.label() for t in sr.selected) or 'nothing'}")
         for lbl in sr.columns:
@@ -769,6 +808,13 @@ def _merge_link_masses(problem: Problem, model: dict, cost: float, robot, clock:
     return step
 
 
+#: Least-squares evaluations of the joint refit after each screening (:func:`_refit_round`; each one
+#: batched replay).
+REFIT_NFEV = 8
+#: Most terms the first screening may pick, and each later one (:func:`_select`).
+FIRST_SCREEN_TERMS, LATER_SCREEN_TERMS = 6, 3
+
+
 def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, families, bic0: float, rnd: int,
                  robot, clock: _Clock, say: Callable[[str], None]) -> _Round:
     """Refit the screening picks with the current model, let rival families compete on the same
@@ -781,13 +827,16 @@ def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, f
         sr: this round's screening.  bic0: training BIC of the empty model.  rnd: round number (1-based).
     """
     k = problem.k
-    fit = refit(problem, {**model, **sr.selected})
+    fit = refit(problem, {**model, **sr.selected}, max_nfev=REFIT_NFEV)
     cand = dict(fit.values)
     cand, swaps, ties = _compete(problem, model, cand, sr, families, k, robot) if not clock.over() else (cand, [], [])
     for sw in swaps:
         say(f"round {rnd}: {sw['reason']}")
     cand, pruned = _prune_terms(problem, model, cand)
-    rejected = list(swaps) + pruned
+    cand, merged = servo_forms(problem, cand)
+    for m in merged:
+        say(f"round {rnd}: {m['reason']}")
+    rejected = list(swaps) + pruned + merged
     c_new = float(problem.cost([cand], "heldout")[0]) if cand else cost
     bic_new = _bic(problem, cand, len(cand))
     bic_old = _bic(problem, model, len(model)) if model else bic0
@@ -801,6 +850,48 @@ def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, f
                 rejected.append({"term": t.label(), "family": t.family, "value": cand[t],
                                  "reason": "the round did not improve held-out trajectories enough"})
     return _Round(model=cand, cost=c_new, kept=kept, record=record, rejected=rejected, ties=ties)
+
+
+def servo_forms(problem: Problem, model: dict) -> tuple[dict, list[dict]]:
+    """Name the form of each servo whose kp and kd were both fitted (``pd_gain`` and ``kd_gain`` on one
+    joint, :data:`sysid.identify.JOINT_BLOCKS`): kp and kd scaled together (``torque_constant``, one
+    parameter: a motor torque-constant, current-gain or supply-voltage error; fitted through
+    ``mujoco.sysid``, :func:`sysid.mjsysid.fit`, where the joint has no series hinge) replaces the pair when
+    its refit fits the held-out logs within the selection margin of the pair; otherwise both stay (kp
+    and kd off by different factors). A kp-only or kd-only error needs nothing here: the term the
+    fit does not need is pruned before (:func:`_prune_terms`).
+
+    Returns:
+        (the model Term -> value, records of the pairs replaced).
+    """
+    k = problem.k
+    out = dict(model)
+    records = []
+    pairs = sorted({t.target for t in out if t.family == "pd_gain"} & {t.target for t in out if t.family == "kd_gain"})
+    if not pairs:
+        return out, records
+    c_pair = float(problem.cost([out], "heldout")[0])
+    for j in pairs:
+        kp, kd = Term("pd_gain", j), Term("kd_gain", j)
+        tc = Term("torque_constant", j)
+        if tc in out:
+            continue
+        rest = {u: v for u, v in out.items() if u not in (kp, kd)}
+        start = float(np.clip(math.sqrt(out[kp] * out[kd]), *term_bounds(tc, problem.robot)))
+        if any(u.family in PLAY_FAMILIES + ("joint_compliance",) and u.target == j for u in rest):
+            fit = refit(problem, {**rest, tc: start}, free=[tc], grid=False, max_nfev=8)
+        else:  # kp and kd as one mujoco.sysid parameter (apply_pdgain), its optimizer (mujoco.minimize)
+            from sysid.mjsysid import fit as mjsysid_fit
+
+            fit = mjsysid_fit(problem, {**rest, tc: start}, [tc], max_iters=8)
+        c_tc = float(problem.cost([fit.values], "heldout")[0])
+        if c_tc - c_pair < _margin(c_pair, k):
+            records.append({"term": f"{kp.label()},{kd.label()}", "family": "pd_gain", "value": out[kp],
+                            "reason": f"kp x{out[kp]:.3f} and kd x{out[kd]:.3f} at {j} are one torque-constant "
+                                      f"error x{fit.values[tc]:.3f} (kp and kd together): held-out cost {c_tc:.1f} "
+                                      f"vs {c_pair:.1f} with both free"})
+            out, c_pair = dict(fit.values), c_tc
+    return out, records
 
 
 def _prune_terms(problem: Problem, model: dict, cand: dict) -> tuple[dict, list[dict]]:
@@ -1041,6 +1132,265 @@ def _vet(problem: Problem, iv: _Intervals, robot, clock: _Clock,
     return found, uncertain
 
 
+@dataclass
+class _Equivalence:
+    """Outcome of :func:`_equivalence`."""
+
+    model: dict  # Term -> value: the model with each tested effect's winner in place
+    cost: float  # held-out cost C of ``model`` (dimensionless)
+    decisions: list[dict] = field(default_factory=list)  # one per tested effect (see _equivalence)
+    tests: list[dict] = field(default_factory=list)  # every held-out test made, for the report
+    rejected: list[dict] = field(default_factory=list)  # effects replaced by a rival that fits better
+
+
+def _effect_groups(terms: list[Term], robot) -> list[tuple[str, list[Term]]]:
+    """Found terms grouped into effects: a centre-of-mass offset's axes on one link are one effect,
+    every other term is its own. Returns [(family, terms)] in the order of ``terms``."""
+    out: list[tuple[str, list[Term]]] = []
+    for t in terms:
+        if t.family == "link_com":
+            g = next((grp for f, grp in out if f == "link_com" and term_link(grp[0]) == term_link(t)), None)
+            if g is not None:
+                g.append(t)
+                continue
+        out.append((t.family, [t]))
+    return out
+
+
+def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Clock,
+                 say: Callable[[str], None]) -> _Equivalence:
+    """The honest-equivalence rule: each selected effect against the best fit of every other family of
+    its classes (:mod:`sysid.equivalence`), at the same place, on the held-out logs.
+
+    For each effect of ``model`` whose removal raises the held-out cost by at least the selection
+    margin (strongest first; run whatever the time budget: naming depends on it), every rival family
+    (:func:`sysid.equivalence.rival_families`) is fitted in its place (the effect's terms removed, the
+    rival's terms fitted, grid starts for non-smooth families, the rest of the model kept; a Stribeck
+    friction is fitted beside the Coulomb term it rivals, whose static excess it is: BAM's nested
+    comparison). The candidate with the lowest held-out cost is the winner (one fitted at a bound of its
+    family only if no other comes within the margin of it), and the model keeps it. A candidate fitted
+    at a bound is otherwise no candidate (a distorted form), except a nested excess fitted to zero,
+    which is tested at its probe size beside the winner: could these logs show it? If not, the winner
+    (the excess's own restriction, i.e. the nested rival's best fit) stands and the excess is listed
+    as not excluded (``not_excluded``: [{family, terms at the probe size, segment, experiment}]). The winner is
+    named (status ``"found"``) only if it beats every other candidate beyond the noise
+    (:func:`sysid.equivalence.heldout_test`) and by at least the selection margin of this module (a
+    difference the noise cannot make but smaller than what selection counts is a model-form detail
+    both share, not evidence for one form); otherwise the effect is reported as its class
+    (status ``"class"``) with the candidates the test cannot separate from the winner and the
+    excitation segment that would.
+
+    Returns:
+        :class:`_Equivalence`: ``decisions`` are dicts with ``terms`` (the winner's Terms), ``status``,
+        ``family`` (the winner's), ``candidates`` ([{family, terms: {label: value}, heldout_cost,
+        z}] within the noise of the winner, the winner first), ``words`` (the class), ``segment`` and
+        ``experiment`` (what tells the first rival apart), ``joint`` (the place). A winner that is not
+        the tested family is tested against its own classes in turn (one level), and that decision
+        stands. ``clock`` is not consulted: naming depends on this test, whatever the time budget.
+    """
+    from sysid.equivalence import class_words, heldout_test, place_joint, rival_families, rival_terms, separating
+
+    out = _Equivalence(model=dict(model), cost=cost)
+    order = sorted(model, key=lambda u: (u.family, u.target or ""))
+    if not order:
+        return out
+    margin = _margin(cost, problem.k)
+    c_drop = problem.cost([{u: v for u, v in model.items() if u != t} for t in order], "heldout")
+    need = {t: float(c) - cost for t, c in zip(order, c_drop)}
+    tested = [t for t in sorted(order, key=lambda u: -need[u]) if need[t] >= margin]
+    queue = [(fam, grp, 0) for fam, grp in _effect_groups(tested, robot)]
+    while queue:
+        fam, grp, depth = queue.pop(0)
+        rivals = rival_families(fam)
+        if not rivals:
+            continue
+        if any(t not in out.model for t in grp):
+            continue
+        base_vals = dict(out.model)
+        rest = {u: v for u, v in base_vals.items() if u not in grp}
+        nested = {u for u in grp if u.family == "coulomb_friction"}  # Stribeck's excess is beside a Coulomb level
+        cands = [{"family": fam, "values": base_vals, "terms": list(grp)}]
+        plays = {v.target for v in rest if v.family in PLAY_FAMILIES}
+        rival_sets = {}
+        for g in rivals:
+            rts = [u for u in rival_terms(grp[0], g, robot) if u not in rest]
+            if rts and not any(u.family in PLAY_FAMILIES and u.target in plays for u in rts):
+                rival_sets[g] = rts
+        # a Stribeck excess rivals a Coulomb term beside it (nested): no linearised probe without the
+        # Coulomb level can show what it adds, so it is always fitted
+        plausible = _plausible_rivals(problem, base_vals, rest,
+                                      {g: r for g, r in rival_sets.items() if not (nested and g == "stribeck_friction")},
+                                      robot)
+        plausible += [g for g in rival_sets if nested and g == "stribeck_friction"]
+        for g in plausible:
+            rts = rival_sets[g]
+            keep = {u: base_vals[u] for u in nested} if g == "stribeck_friction" else {}
+            start = {**rest, **keep, **{u: float(term_probe(u, robot)) for u in rts}}
+            try:
+                fit = refit(problem, start, free=rts + list(keep), max_nfev=6)
+            except ValueError:  # a rival this robot's model cannot hold (e.g. a structure clash): not a candidate
+                continue
+            cands.append({"family": g, "values": dict(fit.values), "terms": rts + list(keep), "own": rts})
+        if len(cands) == 1:
+            continue
+        costs = problem.cost([c["values"] for c in cands], "heldout")
+        for c, cc in zip(cands, costs):
+            c["heldout_cost"] = float(cc)
+            c["at_bound"] = any(_at_bound(u, c["values"][u], robot) for u in c.get("own", c["terms"]))
+        win = int(np.argmin(costs))
+        gap = _margin(float(costs[win]), problem.k)
+        valid = [i for i, c in enumerate(cands) if not c["at_bound"]]
+        if valid:  # a form fitted at a bound of its family is a distorted one: a plausible form as good wins
+            best_valid = min(valid, key=lambda i: costs[i])
+            if costs[best_valid] - costs[win] < gap:
+                win = best_valid
+        w = cands[win]
+        tied, unresolved = [w], []
+        for i, c in enumerate(cands):
+            if i == win:
+                continue
+            vals = c["values"]
+            if c["at_bound"]:
+                own = c.get("own", c["terms"])
+                nested_zero = own != c["terms"] and all(
+                    abs(c["values"][u] - u.fam.nominal) <= BOUND_TOL * np.subtract(*term_bounds(u, robot)[::-1])
+                    for u in own)
+                if not nested_zero:
+                    continue  # at a bound of its family: a distorted form, no candidate
+                # fitted to nothing (a nested excess at zero: it reduces to the winner): could the logs show
+                # it at a typical size? Tested there, beside the winner's model
+                vals = {**w["values"], **{u: float(term_probe(u, robot)) for u in own}}
+                c["probed"] = True
+            ht = heldout_test(problem, w["values"], vals)
+            c["z"] = ht.z
+            apart = ht.a_better and ht.cost_b - ht.cost_a >= gap
+            out.tests.append({"effect": ",".join(t.label() for t in grp), "winner": w["family"], "rival": c["family"],
+                              "winner_cost": ht.cost_a, "rival_cost": ht.cost_b, "z": ht.z, "z_crit": ht.z_crit,
+                              "tau": ht.tau, "margin": gap, "apart": apart})
+            if not apart and c.get("probed"):
+                # a nested excess the fit put at zero that these logs could not show at its probe size:
+                # the winner is that form's own restriction (the rival's best fit is the winner), so it
+                # stands; the excess is reported as not excluded, with the segment that would show it
+                seg_n, text_n = separating(w["family"], c["family"])
+                own = c.get("own", c["terms"])
+                unresolved.append({"family": c["family"], "terms": {u.label(): float(vals[u]) for u in own},
+                                   "segment": seg_n, "experiment": text_n})
+            elif not apart:
+                tied.append(c)
+        joint = place_joint(grp[0], robot)
+        status = "found" if len(tied) == 1 else "class"
+        if win != 0:
+            out.model = dict(w["values"])
+            out.cost = w["heldout_cost"]
+            for t in grp:
+                out.rejected.append({"term": t.label(), "family": fam, "value": base_vals[t],
+                                     "reason": f"{w['family']} in its place fits the held-out logs better "
+                                               f"(cost {w['heldout_cost']:.1f} vs {cands[0]['heldout_cost']:.1f})"})
+        seg, text = separating(w["family"], tied[1]["family"]) if len(tied) > 1 else (None, None)
+        dec = {"terms": w["terms"], "status": status, "family": w["family"], "joint": joint,
+               "not_excluded": unresolved,
+               "words": class_words(w["family"], tied[1]["family"]) if len(tied) > 1 else None,
+               "segment": seg, "experiment": text,
+               "candidates": [{"family": c["family"], "terms": {u.label(): float(c["values"][u]) for u in c["terms"]},
+                               "heldout_cost": c["heldout_cost"], "z": c.get("z")} for c in tied]}
+        say(f"class test: {fam} at {joint or 'all joints'}: "
+            + ("; ".join(f"{c['family']} cost {c['heldout_cost']:.1f}" for c in cands))
+            + (f" -> {w['family']} named" if status == "found"
+               else f" -> cannot tell {', '.join(c['family'] for c in tied)} apart ({seg} would)"))
+        if win != 0 and depth < 1 and rival_families(w["family"]):
+            # the winner of another class has rivals of its own (a kp error that beat a centre of mass,
+            # against a torque-constant error): it is tested in turn, its decision replaces this one
+            queue.insert(0, (w["family"], list(w.get("own", w["terms"])), depth + 1))
+            continue
+        out.decisions.append(dec)
+    return out
+
+
+#: A rival family is fitted in the class test only if its linearised probes explain at least this share
+#: of what the tested effect explains on the training logs (:func:`_plausible_rivals`).
+RIVAL_SHARE = 0.3
+
+
+def _plausible_rivals(problem: Problem, model: dict, rest: dict, rival_sets: dict, robot) -> list[str]:
+    """The rival families worth a nonlinear fit: what the tested effect explains is the training
+    residual energy of ``rest`` (the model without it) minus that of ``model``; each rival's probe
+    columns around ``rest`` (its probe, and its large probe or its mirror) are fitted to the residual of
+    ``rest`` by least squares (non-negative weights for one-sided families), and the rival is kept
+    when that explains at least :data:`RIVAL_SHARE` of it (one batched replay of every probe)."""
+    if not rival_sets:
+        return []
+    sets, owners = [rest, model], []
+    for g, rts in rival_sets.items():
+        fam = FAMILIES[g]
+        sets.append({**rest, **{u: float(term_probe(u, robot)) for u in rts}})
+        owners.append((g, 1.0))
+        if fam.probe2 is not None:
+            sets.append({**rest, **{u: float(fam.probe2) for u in rts}})
+            owners.append((g, 1.0))
+    R = problem.residuals(problem.predict(sets, "train"), "train")
+    r0 = R[0]
+    e_rest, e_model = float(r0 @ r0), float(R[1] @ R[1])
+    need = e_rest - e_model
+    out = []
+    for g in rival_sets:
+        cols = np.stack([r0 - R[2 + i] for i, (o, _) in enumerate(owners) if o == g], axis=1)
+        if two_sided(g):
+            w, *_ = np.linalg.lstsq(cols, r0, rcond=None)
+        else:
+            w, _ = nnls(cols, r0, maxiter=50 * cols.shape[1])
+        left = r0 - cols @ w
+        if e_rest - float(left @ left) >= RIVAL_SHARE * need:
+            out.append(g)
+    return out
+
+
+def _at_bound(t: Term, v: float, robot) -> bool:
+    """Whether value ``v`` of term ``t`` is within :data:`BOUND_TOL` of its family's range from a bound."""
+    lo, hi = term_bounds(t, robot)
+    tol = BOUND_TOL * (hi - lo)
+    return v - lo <= tol or hi - v <= tol
+
+
+def _split_classes(found: list[dict], decisions: list[dict], robot) -> tuple[list[dict], list[dict]]:
+    """Found entries whose effect the class test could not separate from a rival leave ``found`` for the
+    returned equivalence entries: {``class``, ``words``, ``where``, ``joints``, ``links``,
+    ``family`` (the best-fitting candidate, kept in the model), ``candidates`` ([{family, words,
+    terms, display, heldout_cost, z}]), ``segment``, ``experiment``, ``heldout_cost_without``}.
+    A found entry whose decision lists a nested excess it could not exclude gains ``not_excluded``
+    (the decision's list). Returns (found, equivalent), new lists."""
+    from sysid.equivalence import CLASSES
+
+    found = list(found)
+    equivalent = []
+    for d in decisions:
+        if d["status"] != "class":
+            if d.get("not_excluded"):
+                labels = {t.label() for t in d["terms"]}
+                found = [{**e, "not_excluded": d["not_excluded"]} if e.get("term_label") in labels else e
+                         for e in found]
+            continue
+        labels = {t.label() for t in d["terms"]}
+        mine = [e for e in found if e.get("term_label") in labels]
+        if not mine:
+            continue
+        found = [e for e in found if e not in mine]
+        fams = [c["family"] for c in d["candidates"]]
+        cls = next((c.name for c in CLASSES.values() if all(f in c.families for f in fams)), None)
+        cands = []
+        for c in d["candidates"]:
+            fam = FAMILIES[c["family"]]
+            disp = ", ".join(f"{lbl} {fam.fmt(v)}" for lbl, v in c["terms"].items())
+            cands.append({"family": c["family"], "words": fam.words, "terms": c["terms"], "display": disp,
+                          "heldout_cost": c["heldout_cost"], "z": c["z"]})
+        e0 = mine[0]
+        equivalent.append({"class": cls, "words": d["words"], "where": e0["where"], "joints": e0["joints"],
+                           "links": e0["links"], "family": d["family"], "candidates": cands,
+                           "segment": d["segment"], "experiment": d["experiment"],
+                           "heldout_cost_without": float(sum(e["heldout_cost_without"] for e in mine)),
+                           "value": e0["value"], "ci95": e0["ci95"], "unit": e0["unit"], "display": e0["display"]})
+    return found, equivalent
+
+
 def _check_roughness(rough: RoughnessFit | None, problem: Problem, model: dict,
                      say: Callable[[str], None]) -> list[dict]:
     """Withdraw a declared roughness the deterministic model explains: if what ``model`` leaves
@@ -1115,25 +1465,38 @@ def _after(logs: list[Log], problem: Problem, setup: _Setup, base: _Baseline, be
                   unexplained=unexplained)
 
 
+def class_sentence(e: dict) -> str:
+    """One equivalence entry (:func:`_split_classes`) in words: the class at its place, its
+    candidates, and the excitation segment that would tell them apart."""
+    cands = " or ".join(f"{c['words']} ({c['display']})" for c in e["candidates"])
+    return (f"{e['words'] or 'effect'} at {e['where']}: {cands}; these logs cannot tell them apart "
+            f"(record the {e['segment']} segment, {e['experiment']}: sgatwalk excite --segments +{e['segment']}, "
+            "and diagnose again)")
+
+
 def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: list[dict], base: _Baseline,
              rough: RoughnessFit | None, calibration: dict | None, source: str, *,
-             roughness_skipped: bool = False) -> _Verdict:
-    """The one-paragraph verdict (nothing to explain / nothing explains it / what was found), the
+             roughness_skipped: bool = False, equivalent: list[dict] = ()) -> _Verdict:
+    """The one-paragraph verdict (nothing to explain / nothing explains it / what was found, and the
+    effects named only as a class: ``equivalent``, :func:`_split_classes`), the
     roughness note, the caution for noise-free recordings without an engine-gap calibration, the
     caution that the time budget ran out before uneven ground was tested (``roughness_skipped``), and
     a warning (not in the verdict) when the calibration replayed its base state differently
     (``source``: this diagnosis's :func:`sysid.data.base_state_source`)."""
     noise_floor = base.noise_floor
     rms_before, rms_after = before.rms, after.rms
-    words = "; ".join(f"{e['words']} {e['display']} at {e['where']}" for e in effects)
+    words = "; ".join(f"{e['words']} {e['display']} at {e['where']}" + "".join(
+        f" ({FAMILIES[n['family']].words} of {', '.join(f'{v:.3g}' for v in n['terms'].values())} "
+        f"{FAMILIES[n['family']].unit} not excluded: the {n['segment']} segment would show it)"
+        for n in e.get("not_excluded", ())) for e in effects)
     if before.nothing:
         verdict = (f"no missing physics: held-out RMS {1000 * rms_before:.2f} mrad is at the noise floor "
                    f"({1000 * noise_floor:.2f} mrad); no joint's residual energy exceeds 1.5x its floor's")
-    elif not effects and uncertain:
+    elif not effects and not equivalent and uncertain:
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
                    f"{1000 * noise_floor:.2f} mrad) with {len(uncertain)} fitted term(s), but none passes the tests "
                    f"for a finding (uncertain: {'; '.join(e['words'] + ' at ' + e['where'] for e in uncertain)})")
-    elif not effects:
+    elif not effects and not equivalent:
         worst = (flagged_joints(before.energy_heldout, base.names)[:3]
                  or flagged_joints(before.energy_train, base.names)[:3])
         verdict = (f"no candidate effect explains the residual: held-out RMS {1000 * rms_before:.2f} mrad vs noise "
@@ -1142,7 +1505,9 @@ def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: lis
     else:
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
                    f"{1000 * noise_floor:.2f} mrad), {100 * (after.gap_closed or 0):.0f} % of the gap closed. "
-                   f"Found: {words}")
+                   + (f"Found: {words}" if effects else "Found: nothing named beyond its class"))
+        if equivalent:
+            verdict += ". Named as a class only: " + "; ".join(class_sentence(e) for e in equivalent)
         if uncertain:
             verdict += (f". Uncertain or compensating (kept in the model, not claimed): "
                         f"{'; '.join(e['words'] + ' at ' + e['where'] for e in uncertain)}")

@@ -20,7 +20,7 @@ from sysid.data import Log
 
 
 @functools.lru_cache(maxsize=4)
-def _kin_model(physics_dt: float, robot_name: str = "nao_h25"):
+def _kin_model(physics_dt: float, robot_name: str = "nao"):
     from sysid.model import Structure, replay_model
 
     rm = replay_model(Structure(fixed_base=False, physics_dt=physics_dt, robot=robot_name))

@@ -23,6 +23,12 @@ stepping        weight shift side to side with small knee     ground compliance,
 saturation      steps of 1.5x the error at which the servo    torque limit (the PD torque is
                 saturates (effort / kp), alternating signs,    clipped at every rise), kp vs
                 0.3 s each (fixed base only; opt-in)          limit (saturated vs linear rise)
+velocity_sweep  constant-speed legs at three speeds (0.1,     kp vs kp and kd together (lag
+                0.5, 1.5 rad/s for a 0.2 rad joint),          kd v / kp), Coulomb vs Stribeck
+                alternating direction (fixed base; opt-in)    friction (slow vs fast legs)
+load_reversal   slow sweeps to both ends of 1.5x the          backlash vs encoder offset vs a
+                amplitude with 0.3 s holds (fixed base;       centre-of-mass offset (the
+                opt-in)                                       gravity load changes sign)
 slip            feet pushed apart and pulled together in      foot friction (the feet slide
                 double support at 2-3.5 Hz, growing           on a slippery floor, stick on a
                 amplitude (hip and ankle roll in opposition,  grippy one; the amplitude at
@@ -51,9 +57,22 @@ from robots import RobotModel
 SEGMENTS = ("holds", "ramps", "steps", "reversals", "gait", "chirp")
 #: Share of the log each segment takes (fixed base), after 0.4 s of holding the start pose.
 SEGMENT_SHARES = {"holds": 0.17, "ramps": 0.13, "steps": 0.12, "reversals": 0.1, "gait": 0.16, "chirp": 0.32,
-          "stepping": 0.5, "slip": 0.25, "saturation": 0.12}
-#: Segments outside the default protocol, added on request (``sgatwalk excite --segments``).
-OPTIONAL_SEGMENTS = ("saturation",)
+          "stepping": 0.5, "slip": 0.25, "saturation": 0.12, "velocity_sweep": 0.25, "load_reversal": 0.25}
+#: Segments outside the default protocol, added on request (``sgatwalk excite --segments``): each separates
+#: members of a class of effects the default protocol can leave tied (:mod:`sysid.equivalence`, whose
+#: report names the segment to record): ``saturation`` (torque limits: a limit common to all joints, one
+#: joint's, a back-EMF limit; servo damping against viscous friction), ``velocity_sweep`` (kp against
+#: kp and kd together, a series spring; Coulomb against Stribeck friction), ``load_reversal`` (backlash
+#: against an encoder offset or a centre of mass off the joint axis). Fixed base only.
+OPTIONAL_SEGMENTS = ("saturation", "velocity_sweep", "load_reversal")
+#: Speeds of the three phases of ``velocity_sweep`` [rad/s] for a joint of amplitude 0.2 rad (scaled with
+#: the joint's amplitude), and the number of constant-speed legs in each phase.
+SWEEP_SPEEDS = (0.1, 0.5, 1.5)
+SWEEP_LEGS = (1, 2, 4)
+#: ``load_reversal``: the sweep's amplitude as a multiple of the joint's motion amplitude (within
+#: :data:`SATURATION_RANGE_SHARE` of its range) and the hold at each end [s].
+REVERSAL_AMPLITUDE = 1.5
+REVERSAL_HOLD = 0.3
 #: Every segment name :func:`protocol` knows.
 KNOWN_SEGMENTS = tuple(SEGMENT_SHARES)
 #: Saturation steps: the step is this multiple of the error at which the PD torque reaches the effort
@@ -225,8 +244,9 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
     if not scale > 0:
         raise ValueError(f"scale must be positive, got {scale}")
     segments = list(segments)
-    if not fixed_base and "saturation" in segments:
-        raise ValueError("the saturation segment is for a fixed base only (a standing robot would fall)")
+    for seg in ("saturation", "velocity_sweep", "load_reversal"):
+        if not fixed_base and seg in segments:
+            raise ValueError(f"the {seg} segment is for a fixed base only (a standing robot would fall)")
     if not fixed_base and "stepping" not in segments:
         segments = list(_FLOATING) + [s for s in segments if s in ("holds", "gait")]
     for s in segments:
@@ -293,6 +313,38 @@ def protocol(robot: RobotModel, seconds: float = 8.0, seed: int = 0, *, control_
             levels = np.where((np.arange(k.max() + 1) % 2 == 0)[:, None], 1.0, -1.0) * sign[None] * size[None]
             levels[-1] = 0.0  # back to the pose before the next segment
             d = levels[k]
+        elif seg == "velocity_sweep":
+            # constant-speed legs at three speeds (slow, medium, fast; phases of 45, 30, 25 % of the
+            # segment), each phase's legs alternating direction: a servo's lag behind a ramp is
+            # kd qdot / kp, so a kp-only error changes it with speed and a kp-and-kd error does not;
+            # dry friction breaks away on the slow legs, Stribeck friction falls away on the fast ones
+            d = np.zeros((L, na))
+            bounds = np.cumsum([0.0, 0.45, 0.30, 0.25]) * L
+            sign = rng.choice([-1.0, 1.0], na)
+            for (a, b), v0, legs in zip(zip(bounds[:-1], bounds[1:]), SWEEP_SPEEDS, SWEEP_LEGS):
+                i0, i1 = int(a), max(int(a) + 1, int(b))
+                tt = (np.arange(i1 - i0) + 0.5) * control_dt
+                leg = max((i1 - i0) * control_dt / legs, control_dt)
+                k = np.minimum((tt // leg).astype(int), legs - 1)
+                x = tt - k * leg  # time into the current leg
+                direction = np.where(k % 2 == 0, 1.0, -1.0)
+                v = v0 * amp / DEFAULT_AMPLITUDE  # per joint [rad/s]
+                pos = np.where(direction[:, None] > 0, 0.0, 1.0) * (v * leg)[None] + direction[:, None] * v[None] * x[:, None]
+                d[i0:i1] = sign[None] * (np.minimum(pos, 2 * amp[None]) - np.minimum(v * leg, 2 * amp)[None] / 2)
+            d *= env[:, None]
+        elif seg == "load_reversal":
+            # slow sweeps to both ends of a wide range with holds: the gravity load of a hanging link
+            # changes sign across its balance angle, where backlash flips its offset (an encoder offset
+            # does not) and a centre-of-mass offset turns its torque (a mass error scales it)
+            idx = robot.actuated_index
+            big = np.minimum(REVERSAL_AMPLITUDE * amp, SATURATION_RANGE_SHARE * (robot.upper[idx] - robot.lower[idx]))
+            hold = min(REVERSAL_HOLD, T / 8)
+            move = max((T - 2 * hold) / 3, control_dt)
+            sign = rng.choice([-1.0, 1.0], na)
+            knots_t = np.array([0.0, 0.5 * move, 0.5 * move + hold, 1.5 * move + hold, 1.5 * move + 2 * hold, T])
+            knots_x = np.array([0.0, 1.0, 1.0, -1.0, -1.0, 0.0])
+            prof = np.interp(t, knots_t, knots_x)
+            d = (sign * big)[None] * prof[:, None]
         elif seg == "reversals":
             f = rng.uniform(1.2, 1.8)
             d = 0.4 * amp[None] * np.sin(2 * np.pi * f * t[:, None] + rng.uniform(0, 2 * np.pi, na)[None]) * env[:, None]

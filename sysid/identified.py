@@ -9,9 +9,14 @@ spring hinges for backlash and joint compliance, ``dof_frictionloss``, gains, ef
 stiffness for parallel springs, link masses, contact friction and time constant), so that what was
 fitted is what is walked on:
 
-* encoder offsets (``sensor_bias``) are added to the measured angles and subtracted from the
-  targets (the servo reads the same encoder), like the real world's calibration offsets;
-* the measured angle of a joint with a play or spring hinge is the sum of its hinges (the output);
+* offsets of the logged angle (``sensor_bias``) are added to the measured angles; encoder calibration
+  offsets (``encoder_offset``) are added to them and subtracted from the targets too (the servo reads
+  the same encoder), as the diagnosis replayed them (:func:`sysid.candidates.readout`);
+* the measured angle of a joint with a play or spring hinge is the sum of its hinges (the output),
+  except behind a motor-shaft encoder (``backlash_link``: the motor hinge alone);
+* a Stribeck friction (``stribeck_friction``, an extra actuator in the diagnosis's replays) is walked
+  as Coulomb friction at the mean of its static and sliding levels (the walking world drives the
+  robot's own actuators only);
 * uneven ground (``terrain_roughness``) is a fresh Gaussian random surface of the fitted RMS height
   at every episode, drawn from the episode seed (:func:`terrain.gaussian`, the diagnosis's surface
   model with its 8 cm correlation radius), with the walking terrains' flat start pad;
@@ -31,7 +36,7 @@ import mujoco
 import numpy as np
 
 from envs.mujoco_world import NaoSimEnv
-from sysid.candidates import FAMILIES, Term, apply_terms, series_structure
+from sysid.candidates import FAMILIES, Term, apply_terms, readout, series_structure
 from sysid.model import ReplayModel, Structure
 from sysid.report import terms_from_labels
 from sysid.roughness import CORRELATION_RADIUS
@@ -166,17 +171,33 @@ class IdentifiedSimEnv(NaoSimEnv):
         return {**{t.label(): v for t, v in sorted(self.terms.items())}, "terrain_rms_height": self.rms_height}
 
     # ---------------------------------------------------------------- model
+    def _walked_terms(self) -> dict:
+        """The terms as walked: a Stribeck friction as Coulomb friction at the mean of its static and
+        sliding levels (half its excess added to the joint's Coulomb term)."""
+        out = {}
+        for t, v in self.terms.items():
+            if t.family == "stribeck_friction":
+                c = Term("coulomb_friction", t.target)
+                out[c] = out.get(c, 0.0) + 0.5 * v
+            else:
+                out[t] = out.get(t, 0.0) + v if t.family == "coulomb_friction" else v
+        return out
+
     def _compile(self) -> mujoco.MjModel:
+        terms = self._walked_terms()
         st = series_structure(Structure(fixed_base=self.fixed_base, physics_dt=self.physics_dt,
-                                        hang_height=self.hang_height, friction=self.friction, robot=self.robot.name),
-                              self.terms)
+                                        hang_height=self.hang_height, friction=self.friction, robot=self.robot.name,
+                                        command_filter=any(t.family == "command_lowpass" for t in terms)),
+                              terms)
         self._rm = rm = ReplayModel(self.robot, st, ground=self._terrain)
         m = rm.model  # freshly compiled for this world: ours to edit
-        self._bias = apply_terms(rm, m, self.terms)
+        self._bias = apply_terms(rm, m, terms)
+        _, self._servo = readout(rm, terms)
         if self._terrain is not None:
             m.opt.jacobian = GROUND_JACOBIAN
         idx = {n: i for i, n in enumerate(self.robot.joint_names)}
-        self._series = [(idx[n], int(rm.play_qadr[n]), int(rm.play_dadr[n])) for n in rm.play_jnt]
+        behind = {t.target for t in terms if t.family == "backlash_link"}  # the encoder reads the motor
+        self._series = [(idx[n], int(rm.play_qadr[n]), int(rm.play_dadr[n])) for n in rm.play_jnt if n not in behind]
         self._series += [(idx[n], int(rm.spring_qadr[n]), int(rm.spring_dadr[n])) for n in rm.spring_jnt]
         return m
 
@@ -189,14 +210,14 @@ class IdentifiedSimEnv(NaoSimEnv):
                 options["terrain"] = model_ground(seed, self.rms_height)
         super()._reset_world(seed, options)
         m, d = self.model, self.data
-        for i, (a, q) in enumerate(zip(self._rm.act, self.q0 - self._bias)):
+        for i, (a, q) in enumerate(zip(self._rm.act, self.q0 - self._servo)):
             d.ctrl[a] = q
             if m.actuator_history[a, 0] > 0:  # delay buffers hold the start pose, not zeros
                 mujoco.mj_initCtrlHistory(m, d, int(a), None, np.full((int(m.actuator_history[a, 0]), 1), q))
         mujoco.mj_forward(m, d)
 
     def _advance(self, targets: np.ndarray) -> None:
-        super()._advance(targets - self._bias)
+        super()._advance(targets - self._servo)
 
     def _joint_state(self) -> tuple[np.ndarray, np.ndarray]:
         q, dq = super()._joint_state()
@@ -211,6 +232,7 @@ class IdentifiedSimEnv(NaoSimEnv):
 
     def batch_hooks(self) -> dict:
         """What this world changes in the sim's step, for lock-step batches (:class:`envs.batch.SimBatch`):
-        the encoder offsets (subtracted from the servo targets, added to the measured angles) and the
-        series hinges whose angles add to the measured joint angles."""
-        return {"ctrl_offset": self._bias.copy(), "q_offset": self._bias.copy(), "series": list(self._series)}
+        the offsets the servos see (``encoder_offset``, subtracted from the servo targets), those the
+        log sees (``sensor_bias`` and ``encoder_offset``, added to the measured angles) and the series
+        hinges whose angles add to the measured joint angles."""
+        return {"ctrl_offset": self._servo.copy(), "q_offset": self._bias.copy(), "series": list(self._series)}

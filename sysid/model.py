@@ -68,6 +68,21 @@ def spring_motor_armature(kp: float, kd: float, physics_dt: float) -> float:
 
 
 _SPRING_SUFFIX = "__spring"
+#: Name suffix of the actuator that makes a joint's dry friction a Stribeck friction: a velocity feedback
+#: force ``clip(k qdot, +-delta)`` beside a frictionloss raised by ``delta`` (see :func:`replay_spec`).
+STRIBECK_SUFFIX = "__stribeck"
+#: Stribeck velocity [rad/s] of the Stribeck friction candidate: the speed over which the static excess
+#: has fallen away. BAM's fitted Stribeck velocities of small geared servos are 0.05-0.3 rad/s
+#: (Duclusaud et al., arXiv:2410.08650, Table II); 0.1 rad/s is this library's choice.
+STRIBECK_VELOCITY = 0.1
+#: Time constant [s] of the command filter every replay actuator has (``dyntype`` filterexact with
+#: ``actearly``: the force uses the filtered command of the same step): this small it passes the
+#: command through unchanged (1 - exp(-dt / tau) = 1 at any physics step of 1e-4 s or more); the
+#: ``command_lowpass`` candidate raises it.
+LOWPASS_MIN = 1e-6
+#: Share of a joint's effective inertia the Stribeck element's velocity gain k may reach per physics step
+#: (``k dt / I_eff <= 0.5``): the element is an explicit negative damping below the Stribeck velocity.
+STRIBECK_GAIN_SHARE = 0.5
 #: Time constant of the dry-friction constraint in physics steps: MuJoCo's default (20 ms) lets a
 #: joint creep under a load below the friction torque; geared servos (and PyBullet's velocity-motor
 #: friction) stick hard, which 2 steps reproduces (measured: PyBullet knee friction 0.2 N m is
@@ -84,13 +99,18 @@ class Structure:
         physics_dt: physics step [s] (the recording's ``physics_dt``; default 1 ms).
         play_joints: robot joints that get a series backlash hinge.
         spring_joints: robot joints that get a series compliance (spring) hinge.
+        stribeck_joints: robot joints that get a Stribeck friction element (an extra actuator,
+            :data:`STRIBECK_SUFFIX`).
+        command_filter: every actuator has a first-order command filter (:data:`LOWPASS_MIN`, the
+            ``command_lowpass`` candidate's handle); False: the plain sim's actuators (no activation
+            state), for a world without that term that must step like the sim bit for bit.
         friction: sliding friction of all contacts (foot friction candidate edits the field).
         hang_height: root height of a fixed-base model [m]; None: the robot's
             ``RobotModel.hang_height`` (where the worlds hang it; 0.6 m for the NAO).
         terrain: the ground is a :data:`TERRAIN_SIZE` heightfield (``ground_hfield``) whose
             heights a caller writes with :func:`set_terrain` (uneven-ground simulations of
             :mod:`sysid.roughness`) instead of a plane.
-        robot: the robot's name (``RobotModel.name``: ``"nao_h25"``, ``"g1"``, ``"talos"``; a
+        robot: the robot's name (``RobotModel.name``: ``"nao"``, ``"g1"``, ``"talos"``; a
             recording's ``meta["robot"]``); :func:`replay_model` builds that robot.
     """
 
@@ -101,12 +121,20 @@ class Structure:
     hang_height: float | None = None
     terrain: bool = False
     spring_joints: tuple[str, ...] = ()
-    robot: str = "nao_h25"
+    robot: str = "nao"
+    stribeck_joints: tuple[str, ...] = ()
+    command_filter: bool = True
 
     @property
     def n_series(self) -> int:
-        """Number of extra series hinges (models with the same count batch together)."""
+        """Number of extra series hinges."""
         return len(self.play_joints) + len(self.spring_joints)
+
+    @property
+    def size_key(self) -> tuple[int, int]:
+        """(extra series hinges, extra Stribeck actuators): models with the same key have the same sizes
+        and batch together in one ``mujoco.rollout`` call."""
+        return self.n_series, len(self.stribeck_joints)
 
 
 #: Heightfield of a ``terrain`` structure: (half x, half y) [m], cell [m], elevation range [m]
@@ -161,6 +189,10 @@ def replay_spec(robot: RobotModel, structure: Structure, ground: Heightfield | N
         a.nsample = nsample
         a.interp = 1  # linear
         a.delay = 0.0
+        if s.command_filter:  # a first-order command filter, a pass-through until a candidate sets it
+            a.dyntype = mujoco.mjtDyn.mjDYN_FILTEREXACT
+            a.dynprm[0] = LOWPASS_MIN
+            a.actearly = True
     kd = dict(zip(robot.joint_names, robot.kd))
     for name in s.play_joints:
         if name not in kd:
@@ -200,6 +232,22 @@ def replay_spec(robot: RobotModel, structure: Structure, ground: Heightfield | N
                                                float(kd[name]), s.physics_dt)
         motor.damping = [0.0, 0.0, 0.0]
         spec.actuator(name).biasprm[2] = -float(kd[name])
+    for name in s.stribeck_joints:
+        if name not in kd:
+            raise KeyError(f"unknown joint {name!r} for a Stribeck friction element")
+        # Stribeck friction (static level tau_c + delta falling to tau_c above the Stribeck velocity):
+        # the joint's frictionloss carries tau_c + delta (stiction, implicit constraint) and this
+        # actuator gives back up to delta as the joint speeds up, force clip(k qdot, +-delta), a
+        # piecewise-linear Stribeck curve (Armstrong-Helouvry et al., Automatica 30(7), 1994). Gain 0: the
+        # control has no effect; the candidate writes k (biasprm[2]) and delta (forcerange).
+        a = spec.add_actuator(name=name + STRIBECK_SUFFIX, target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+        a.gainprm[0] = 0.0
+        a.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+        a.biasprm[0:3] = [0.0, 0.0, 0.0]
+        a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        a.forcerange = [-1e-9, 1e-9]
+        a.ctrllimited = mujoco.mjtLimited.mjLIMITED_FALSE
     for name in robot.joint_names:
         spec.add_sensor(name=f"q:{name}", type=mujoco.mjtSensor.mjSENS_JOINTPOS, objtype=mujoco.mjtObj.mjOBJ_JOINT,
                         objname=name)
@@ -224,6 +272,9 @@ class ReplayModel:
         robot, structure, spec, model (template ``MjModel``; copy before editing).
         qadr, dadr: (n,) qpos / dof address of each of the robot's n joints' (motor) hinge.
         play_qadr, play_dadr, play_jnt: dict joint name -> address / joint id of its play hinge.
+        play_tendon: dict joint name -> id of the fixed tendon (motor + play: the output angle) that
+            carries 90 % of the servo damping of a play joint without a series spring.
+        stribeck_act: dict joint name -> actuator id of its Stribeck friction element.
         spring_qadr, spring_dadr, spring_jnt: the same for series-spring hinges.
         act: (n,) actuator id per robot joint.  body: dict link name -> body id.
         meas: (n, nsensordata) matrix mapping sensor data to the n measured joint angles.
@@ -244,6 +295,9 @@ class ReplayModel:
         self.play_jnt = {n: m.joint(n + _PLAY_SUFFIX).id for n in structure.play_joints}
         self.play_qadr = {n: int(m.jnt_qposadr[j]) for n, j in self.play_jnt.items()}
         self.play_dadr = {n: int(m.jnt_dofadr[j]) for n, j in self.play_jnt.items()}
+        self.play_tendon = {n: m.tendon(n + "__out").id for n in structure.play_joints
+                            if n not in structure.spring_joints}
+        self.stribeck_act = {n: m.actuator(n + STRIBECK_SUFFIX).id for n in structure.stribeck_joints}
         self.spring_jnt = {n: m.joint(n + _SPRING_SUFFIX).id for n in structure.spring_joints}
         self.spring_qadr = {n: int(m.jnt_qposadr[j]) for n, j in self.spring_jnt.items()}
         self.spring_dadr = {n: int(m.jnt_dofadr[j]) for n, j in self.spring_jnt.items()}
@@ -296,6 +350,8 @@ class ReplayModel:
                     d.qpos[self.spring_qadr[n]] = s
                     d.qpos[self.qadr[i]] = q[i] - s
         d.ctrl[self.act] = cmd_hist[-1]
+        if m.na:
+            d.act[m.actuator_actadr[self.act]] = cmd_hist[-1]  # the command filters hold the last command
         for i, a in enumerate(self.act):
             mujoco.mj_initCtrlHistory(m, d, int(a), None, np.ascontiguousarray(cmd_hist[:, i:i + 1]))
         st = np.empty(self.nstate)
@@ -322,7 +378,7 @@ def set_terrain(m: mujoco.MjModel, heights: np.ndarray) -> None:
 
 
 @functools.lru_cache(maxsize=8)
-def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT, robot_name: str = "nao_h25") -> dict:
+def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT, robot_name: str = "nao") -> dict:
     """Stiffest series spring [N m/rad] per robot joint that the Euler step integrates stably.
 
     The spring force is explicit: the output side needs ``k dt^2 / I_out < 2`` (I_out: the joint's
@@ -331,7 +387,7 @@ def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT
     a factor 2 margin on both.
 
     Args:
-        robot_name: the robot (``RobotModel.name``, e.g. ``"nao_h25"``, ``"g1"``).
+        robot_name: the robot (``RobotModel.name``, e.g. ``"nao"``, ``"g1"``).
 
     Returns:
         dict joint name -> k_max [N m/rad] (the smallest compliance a candidate can represent is
@@ -357,7 +413,7 @@ def spring_stiffness_max(fixed_base: bool = True, physics_dt: float = PHYSICS_DT
 
 
 @functools.lru_cache(maxsize=8)
-def joint_inertia(robot_name: str = "nao_h25", fixed_base: bool = True) -> dict:
+def joint_inertia(robot_name: str = "nao", fixed_base: bool = True) -> dict:
     """Effective inertia [kg m^2] of each joint of the robot ``robot_name``: 1 / (M^-1)_ii of the
     sim's mass matrix at the zero pose (hanging robot for ``fixed_base``).
 
@@ -388,5 +444,5 @@ def replay_model(structure: Structure, robot_name: str | None = None) -> ReplayM
         robot = get_robot(structure.robot)
     except KeyError:
         raise ValueError(f"no replay model for robot {structure.robot!r}; this package models the robots of "
-                         "robots.get_robot (nao_h25, g1, talos)") from None
+                         "robots.get_robot (nao, g1, talos)") from None
     return ReplayModel(robot, structure)

@@ -28,9 +28,9 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from common.spatial import quat_roll_pitch
-from sysid.candidates import Term, apply_terms, series_structure
+from sysid.candidates import Term, apply_terms, readout, series_structure
 from sysid.data import Log, has_ground_truth
-from sysid.model import ReplayModel, Structure, replay_model
+from sysid.model import Structure, replay_model
 
 #: (parameter set, window) pairs per batched ``rollout`` call (bounds memory).
 _CHUNK = 24
@@ -152,16 +152,29 @@ def _base_state(log: Log, k: int) -> dict | None:
     return base_state(log, k)
 
 
-def build_models(values_list: list[dict[Term, float]], structure: Structure) -> list[tuple[ReplayModel, mujoco.MjModel, np.ndarray]]:
-    """Compile/copy one model per parameter set: (replay model, edited MjModel copy, (n,) bias) for the
-    robot ``structure.robot`` (n joints)."""
+def build_models(values_list: list[dict[Term, float]], structure: Structure) -> list[tuple]:
+    """Compile/copy one model per parameter set for the robot ``structure.robot`` (n joints): (replay
+    model, edited MjModel copy, (n,) log offsets [rad], (meas, servo offsets)) with ``meas`` the
+    (n, nsensordata) sensor-to-log map and the (n,) offsets [rad] the servos see
+    (:func:`sysid.candidates.readout`)."""
     out = []
     for vals in values_list:
         rm = replay_model(series_structure(structure, vals))
         m = copy.copy(rm.model)
         bias = apply_terms(rm, m, vals)
-        out.append((rm, m, bias))
+        out.append((rm, m, bias, readout(rm, vals)))
     return out
+
+
+def _unpack(model_entry) -> tuple:
+    """(rm, m, log offsets, meas, servo offsets) of a :func:`build_models` entry (a 3-tuple without
+    its readout reads with ``rm.meas`` and no servo offset)."""
+    rm, m, bias = model_entry[:3]
+    if len(model_entry) > 3:
+        meas, servo = model_entry[3]
+    else:
+        meas, servo = rm.meas, np.zeros(len(bias))
+    return rm, m, bias, meas, servo
 
 
 def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, float]], *,
@@ -188,9 +201,10 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
     out = [np.empty((len(values_list), w.length, ny)) for w in wins]
     # group (set, window) pairs by model size signature and window length
     groups: dict = {}
-    for s, (rm, _, _) in enumerate(models):
+    for s, entry in enumerate(models):
+        rm = entry[0]
         for wi, w in enumerate(wins):
-            key = (rm.structure.n_series, w.length)
+            key = (rm.structure.size_key, w.length)
             groups.setdefault(key, []).append((s, wi))
     pool, nt = _pool()
     for (_, L), pairs in groups.items():
@@ -200,16 +214,16 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
             nstep = (L - 1) * sub + 1
             mlist, states, ctrls = [], [], []
             for s, wi in chunk:
-                rm, m, bias = models[s]
+                rm, m, bias, _, servo = _unpack(models[s])
                 w = wins[wi]
                 lg = logs[w.log]
                 q0 = lg.q[w.k0] - bias
                 base = None if lg.fixed_base else _base_state(lg, w.k0)
-                states.append(rm.initial_state(m, q0, _start_velocity(lg, w.k0), _cmd_history(lg, w.k0, rm.nsample),
-                                               base))
+                states.append(rm.initial_state(m, q0, _start_velocity(lg, w.k0),
+                                               _cmd_history(lg, w.k0, rm.nsample) - servo, base))
                 rows = w.k0 + np.arange(nstep) // sub
                 c = np.zeros((nstep, m.nu))
-                c[:, rm.act] = lg.cmd[rows]
+                c[:, rm.act] = lg.cmd[rows] - servo
                 ctrls.append(c)
                 mlist.append(m)
             rm0 = models[chunk[0][0]][0]
@@ -221,8 +235,8 @@ def predict(logs: list[Log], wins: list[Window], values_list: list[dict[Term, fl
                              initial_warmstart=None, chunk_size=max(1, len(chunk) // (nt * 2)))
             sens = sens[:, ::sub]  # (n, L, nsens)
             for j, (s, wi) in enumerate(chunk):
-                rm, m, bias = models[s]
-                y = sens[j] @ rm.meas.T + bias
+                rm, m, bias, meas, _ = _unpack(models[s])
+                y = sens[j] @ meas.T + bias
                 if with_imu:
                     qa, ga = rm.quat_adr, rm.gyro_adr
                     y = np.concatenate([y, quat_roll_pitch(sens[j][:, qa:qa + 4]), sens[j][:, ga:ga + 3]], axis=1)

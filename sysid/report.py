@@ -4,8 +4,10 @@
 
 * ``report.json``: the dict of :func:`sysid.diagnose.diagnose` (keys ``verdict``, ``noise_floor``,
   ``heldout_rms_before``, ``heldout_rms_after`` [rad], ``effects`` [{family, joints, links, value,
-  unit, ci95, ...}] (the findings), ``uncertain`` (fitted terms not claimed as physics, each with its
-  ``reasons``), ``rejected``, ``indistinguishable``, ``residual``, ``localisation``,
+  unit, ci95, ...}] (the findings), ``equivalent`` (effects named only as their class: the candidates
+  the held-out test cannot separate and the excitation segment that would), ``class_tests`` (every
+  held-out test of a finding against its class's rivals), ``uncertain`` (fitted terms not claimed as
+  physics, each with its ``reasons``), ``rejected``, ``indistinguishable``, ``residual``, ``localisation``,
   ``base_state`` (where the floating base's replay state came from), ``noise`` (the logs' sensor σ,
   the calibration's for reference, the floor per channel), ...);
 * ``report.txt``: the printed report;
@@ -76,6 +78,18 @@ def format_report(rep: dict) -> str:
     lines.append("EFFECTS FOUND" + ("" if rep["effects"] else ": none"))
     for e in rep["effects"]:
         lines.append(f"  - {e['words']} at {e['where']}: {e['display']}  ({_ci_text(e)}; the sim had {_nominal_text(e)})")
+    if rep.get("equivalent"):
+        lines.append("")
+        lines.append("NAMED AS A CLASS (the best fit is in the identified model; these logs cannot tell the candidates "
+                     "apart)")
+        for e in rep["equivalent"]:
+            lines.append(f"  - {e['words'] or 'effect'} at {e['where']}:")
+            for c in e["candidates"]:
+                z = c.get("z")
+                lines.append(f"      {c['words']}: {c['display']} (held-out cost {c['heldout_cost']:.2f}"
+                             + ("" if z is None else f", held-out test z {z:+.2f} against the best") + ")")
+            lines.append(f"      to tell them apart: record the {e['segment']} segment ({e['experiment']}): "
+                         f"sgatwalk excite --segments +{e['segment']}, then diagnose again")
     if rep.get("uncertain"):
         lines.append("")
         lines.append("UNCERTAIN / COMPENSATING (in the identified model, not claimed as physics)")
@@ -89,6 +103,7 @@ def format_report(rep: dict) -> str:
         for r in rep["rejected"]:
             lines.append(f"  - {r['term']} ({r['value']:.4g}): {r['reason']}")
     fam_found = ({e["family"] for e in rep["effects"] + rep.get("uncertain", [])}
+                 | {c["family"] for e in rep.get("equivalent", []) for c in e["candidates"]}
                  | {r["family"] for r in rep["rejected"]})
     not_picked = [f for f in rep["families_considered"] if f not in fam_found]
     if not_picked:
@@ -142,7 +157,7 @@ def format_report(rep: dict) -> str:
     return "\n".join(lines)
 
 
-def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_name: str = "nao_h25") -> str:
+def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_name: str = "nao") -> str:
     """MJCF text of the sim of the robot ``robot_name`` (``RobotModel.name``; a recording's
     ``meta["robot"]``) with ``model_terms`` (Term -> value) applied.
 

@@ -52,7 +52,7 @@ import mujoco
 import numpy as np
 
 from common.spatial import quat_roll_pitch, quat_to_mat
-from sysid.candidates import FAMILIES, apply_terms, series_structure
+from sysid.candidates import FAMILIES, apply_terms, readout, series_structure
 from sysid.data import Log, has_ground_truth, without_ground_truth
 from sysid.model import TERRAIN_CELL, TERRAIN_SIZE, Structure, replay_model, set_terrain
 from sysid.replay import (Window, _CountedMujocoWarnings, _base_state, _cmd_history, _pool, _start_velocity, build_models,
@@ -167,8 +167,9 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 lg = logs[i]
                 m = copy.copy(rm.model)
                 bias = apply_terms(rm, m, values)
+                meas, servo = readout(rm, values)
                 set_terrain(m, surfaces[s])
-                x0 = rm.initial_state(m, lg.q[0] - bias, _start_velocity(lg, 0), _cmd_history(lg, 0, rm.nsample),
+                x0 = rm.initial_state(m, lg.q[0] - bias, _start_velocity(lg, 0), _cmd_history(lg, 0, rm.nsample) - servo,
                                       _base_state(lg, 0))
                 d = mujoco.MjData(m)
                 mujoco.mj_setState(m, d, x0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
@@ -179,11 +180,11 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 mujoco.mj_getState(m, d, x0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
                 rows = np.arange(nstep) // sub
                 c = np.zeros((nstep, m.nu))
-                c[:, rm.act] = lg.cmd[rows]
+                c[:, rm.act] = lg.cmd[rows] - servo
                 mlist.append(m)
                 states.append(x0)
                 ctrls.append(c)
-                biases.append(bias)
+                biases.append((bias, meas))
             datas = [mujoco.MjData(mlist[0]) for _ in range(nt)]
             state = np.empty((len(chunk), nstep, rm.nstate))
             sens = np.empty((len(chunk), nstep, mlist[0].nsensordata))
@@ -198,7 +199,7 @@ def simulate_on_surfaces(logs: list[Log], values: dict, surfaces: list[np.ndarra
                 xs = np.concatenate([np.asarray(states[j])[None], state[j, sub - 1::sub]])[:L]
                 ys = sens[j, ::sub][:L]
                 qpos, qvel = xs[:, 1:1 + nq], xs[:, 1 + nq:1 + nq + nv]
-                q = ys @ rm.meas.T + biases[j]
+                q = ys @ biases[j][1].T + biases[j][0]
                 dq = qvel[:, rm.dadr].copy()  # measured velocity: motor + play hinge
                 for n, a in rm.play_dadr.items():
                     dq[:, names.index(n)] += qvel[:, a]

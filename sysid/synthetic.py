@@ -17,7 +17,7 @@ from sysid.replay import predict, whole_logs
 
 
 def synthetic_logs(values: dict, *, n_logs: int = 3, seconds: float = 6.0, noise: float = 1e-3, seed: int = 0,
-                   traj_seed: int = 100, segments=None, robot: RobotModel | str = "nao_h25") -> list[Log]:
+                   traj_seed: int = 100, segments=None, robot: RobotModel | str = "nao") -> list[Log]:
     """Fixed-base excitation logs replayed under ``values`` (Term -> value) plus white encoder noise.
 
     Args:

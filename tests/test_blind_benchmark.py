@@ -41,7 +41,7 @@ def test_the_blind_folder_holds_only_a_robots_own_logs(tmp_path):
         from envs.recording import Recording
 
         meta = Recording.from_parquet(folder / f).meta
-        assert set(meta) <= set(META_KEYS) and meta["robot"] == "nao_h25" and meta["fixed_base"] is True
+        assert set(meta) <= set(META_KEYS) and meta["robot"] == "nao" and meta["fixed_base"] is True
         raw = (folder / f).read_bytes()
         assert b"latency" not in raw and b"0.02" not in raw  # no trace of the hidden value anywhere
 
@@ -93,6 +93,7 @@ def test_the_referees_excitation_is_its_own_and_stays_inside_the_limits():
     assert not np.allclose(cmd, referee_commands(robot, 6.0, seed=4))
 
 
+@pytest.mark.slow  # about a minute on a loaded 2-core machine
 def test_a_latency_is_found_in_logs_of_the_referees_excitation(tmp_path):
     """The diagnosis on logs it was not designed for: a 20 ms latency in the sim-as-real world."""
     from benchmarks.blind.referee import run_diagnose
@@ -180,3 +181,83 @@ def test_summary_names_the_trials_encoder_noise():
            "score": score(lat, _report(_eff("latency", value=0.02, ci=(0.019, 0.021), cost=9.0)))}
     assert "encoder noise 3 mrad" in summarize([row], "real", ["latency"], 3.0)
     assert "encoder noise 1 mrad" in summarize([row], "real", ["latency"])
+
+
+# ------------------------------------------------------------------------------------------ the strangers' setting
+def _sreport(effects=(), equivalent=(), peak=5.0):
+    rep = _report(*effects, peak=peak)
+    rep["equivalent"] = list(equivalent)
+    return rep
+
+
+def test_every_stranger_kind_maps_to_library_families():
+    from benchmarks.blind.strangers import KIND_FAMILIES, PARTIAL
+    from benchmarks.strangers.effects import KINDS
+    from sysid.candidates import FAMILIES
+
+    assert set(KIND_FAMILIES) == set(KINDS)
+    assert all(f in FAMILIES for fams in KIND_FAMILIES.values() for f in fams)
+    assert all(set(p) <= set(KIND_FAMILIES[k]) for k, p in PARTIAL.items())
+
+
+def test_stranger_truth_in_the_library_units():
+    from benchmarks.blind.strangers import truth_values
+    from robots import nao_h25
+
+    r = nao_h25()
+    eff = dict(zip(r.joint_names, r.effort))
+    e = {"family": "torque_speed", "targets": ["LKneePitch"], "values": [6.0], "params": [{}]}
+    assert truth_values(e, r) == [("back_emf", "LKneePitch", pytest.approx(eff["LKneePitch"] / 6.0))]
+    e = {"family": "friction_stribeck", "targets": ["LKneePitch"], "values": [0.1], "params": [{"stiction_ratio": 1.5}]}
+    assert truth_values(e, r) == [("stribeck_friction", "LKneePitch", pytest.approx(0.05)),
+                                  ("coulomb_friction", "LKneePitch", 0.1)]
+    e = {"family": "com_offset", "targets": ["LTibia"], "values": [0.02], "params": [{"direction": [0.0, 0.6, 0.8]}]}
+    assert [(f, t, round(v, 4)) for f, t, v in truth_values(e, r)] == [
+        ("link_com", "LTibia:x", 0.0), ("link_com", "LTibia:y", 0.012), ("link_com", "LTibia:z", 0.016)]
+
+
+def test_a_stranger_is_named_right_by_its_family_or_its_class_and_a_wrong_finding_is_counted():
+    from benchmarks.blind.strangers import score
+    from robots import nao_h25
+
+    r = nao_h25()
+    truth = [{"family": "backlash_motor", "targets": ["LKneePitch"], "values": [0.01], "params": [{}]}]
+    right = score(truth, _sreport([_eff("backlash_motor", joints=["LKneePitch"], value=0.0102, ci=(0.009, 0.011))]), r)
+    assert right["named_right"] and not right["by_class"] and not right["wrong_found"] and right["ci_cover"] == [True]
+    cls = {"words": "static angle offset", "joints": ["LKneePitch"], "links": [], "family": "sensor_bias",
+           "candidates": [{"family": "sensor_bias"}, {"family": "backlash_motor"}]}
+    by_class = score(truth, _sreport(equivalent=[cls]), r)
+    assert by_class["named_right"] and by_class["by_class"] and not by_class["wrong_found"]
+    wrong = score(truth, _sreport([_eff("sensor_bias", joints=["LKneePitch"], value=-0.005, ci=(-0.006, -0.004))]), r)
+    assert not wrong["named_right"] and wrong["wrong_found"] == ["sensor_bias[LKneePitch]"]
+    assert wrong["wrong_at_truth"] == ["sensor_bias[LKneePitch]"]
+    # a finding elsewhere beside the right one is a confident wrong Found too
+    extra = score(truth, _sreport([_eff("backlash_motor", joints=["LKneePitch"], value=0.01),
+                                   _eff("coulomb_friction", joints=["RHipRoll"], value=0.05)]), r)
+    assert extra["named_right"] and extra["wrong_found"] == ["coulomb_friction[RHipRoll]"] and not extra["wrong_at_truth"]
+
+
+def test_a_stribeck_stranger_named_as_coulomb_with_its_excess_not_excluded_is_named_by_its_class():
+    from benchmarks.blind.strangers import score
+    from robots import nao_h25
+
+    r = nao_h25()
+    truth = [{"family": "friction_stribeck", "targets": ["LHipPitch"], "values": [0.1],
+              "params": [{"stiction_ratio": 1.5}]}]
+    plain = _eff("coulomb_friction", joints=["LHipPitch"], value=0.1, ci=(0.09, 0.11))
+    s = score(truth, _sreport([plain]), r)
+    assert not s["named_right"] and s["partly_right"] and not s["wrong_found"]
+    caveat = {**plain, "not_excluded": [{"family": "stribeck_friction", "terms": {"stribeck_friction[LHipPitch]": 0.03},
+                                         "segment": "velocity_sweep", "experiment": "..."}]}
+    s = score(truth, _sreport([caveat]), r)
+    assert s["named_right"] and s["by_class"] and not s["wrong_found"]
+
+
+def test_own_benchmark_counts_a_class_that_holds_the_truth_as_named_right():
+    truth = [{"family": "pd_gain", "targets": ["LElbowRoll"], "values": [0.7]}]
+    cls = {"words": "actuator stiffness", "joints": ["LElbowRoll"], "links": [], "family": "joint_compliance",
+           "candidates": [{"family": "joint_compliance"}, {"family": "pd_gain"}]}
+    rep = _report()
+    rep["equivalent"] = [cls]
+    s = score(truth, rep)
+    assert s["named_right"] and s["by_class"] and not s["wrong_found"] and s["pred_top1"] == "none"

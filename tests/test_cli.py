@@ -61,7 +61,7 @@ def test_json_output_is_reproducible_and_timings_are_opt_in(capsys):
 
 def test_the_command_runs_numpy_blas_with_omp_num_threads(monkeypatch):
     """``sgatwalk`` limits the BLAS already loaded (numpy imported before ``main``, as
-    ``python -m tools.readme run`` does) to ``OMP_NUM_THREADS`` (1 unless set): the rounding of
+    ``python -m tools.results save`` does) to ``OMP_NUM_THREADS`` (1 unless set): the rounding of
     threaded reductions, and so the engine-gap calibration, depends on the thread count."""
     import numpy as np
     from threadpoolctl import threadpool_info

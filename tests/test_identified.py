@@ -53,8 +53,10 @@ def test_an_injected_latency_is_identified_and_walked_with(tmp_path):
 
 
 def test_sensor_bias_and_backlash_act_like_the_real_world():
+    """An encoder offset the servo reads too (``encoder_offset``, the real world's calibration offsets):
+    the log reads the offset off the physical angle and the servo closes on it; gear play adds a hinge."""
     bias = 0.01
-    env = IdentifiedSimEnv({Term("sensor_bias", "LKneePitch"): bias, Term("backlash", "RKneePitch"): 0.004},
+    env = IdentifiedSimEnv({Term("encoder_offset", "LKneePitch"): bias, Term("backlash", "RKneePitch"): 0.004},
                            fixed_base=True)
     r = env.robot
     plain = SimWorld(fixed_base=True)
@@ -73,6 +75,22 @@ def test_sensor_bias_and_backlash_act_like_the_real_world():
     obs = ident_obs
     k = r.joint_names.index("RKneePitch")
     assert abs(obs[env.layout["q"]][k] - env.data.qpos[env._qadr[k]]) > 0  # output = motor + play hinge
+
+
+def test_an_offset_of_the_log_alone_leaves_the_servo_on_the_command():
+    """``sensor_bias`` as the diagnosis replays it: the log reads the offset, the servo does not see it."""
+    bias = 0.01
+    env = IdentifiedSimEnv({Term("sensor_bias", "LKneePitch"): bias}, fixed_base=True)
+    plain = SimWorld(fixed_base=True)
+    a = env.robot.pose("crouch", actuated=True)
+    obs = {}
+    for e in (env, plain):
+        e.reset(seed=0)
+        for _ in range(50):
+            obs[e] = e.step(a)[0]
+    j = env.robot.joint_names.index("LKneePitch")
+    assert obs[env][env.layout["q"]][j] - obs[plain][plain.layout["q"]][j] == pytest.approx(bias, abs=5e-4)
+    assert env.data.qpos[env._qadr[j]] == pytest.approx(plain.data.qpos[plain._qadr[j]], abs=5e-4)
 
 
 def test_identified_ground_is_random_per_episode_with_the_fitted_rms_height():

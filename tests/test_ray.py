@@ -8,8 +8,10 @@ error naming it and leaves the run directory as it was. The cluster is stopped w
 
 from __future__ import annotations
 
+import csv
 import json
 import os
+import secrets
 import shutil
 import signal
 import socket
@@ -31,6 +33,12 @@ VOLATILE = {"wall_s", "elapsed_s", "realtime_factor", "job_wall_s", "cpu_s", "ph
             "table", "ran", "resumed", "new_rows"}
 
 
+def _trials(run_dir: Path) -> list[dict]:
+    """A stress run's ``trials.csv`` rows (as text), without their wall times."""
+    with open(run_dir / "trials.csv", newline="") as f:
+        return [{k: v for k, v in row.items() if k not in VOLATILE} for row in csv.DictReader(f)]
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -40,11 +48,19 @@ def _free_port() -> int:
 @pytest.fixture(scope="module")
 def cluster():
     """A Ray head on 127.0.0.1 with 2 CPUs, its address; stopped (``ray stop --force``) at the end."""
-    pytest.importorskip("ray")  # the dev install has it; this only names the cause where it is missing
     temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's socket paths are limited to 107 bytes
     port = _free_port()
-    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    # Token authentication (Ray >= 2.52; on by default where ~/.ray/auth_token exists): a fresh token for
+    # this cluster, given to the head and, through the environment, to every command the tests run.
+    # Ray replaces a node address of 127.0.0.1 by the machine's outward IP unless clusters of several
+    # machines are off (RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0, as on macOS): then every address is loopback.
+    auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32), "RAY_USAGE_STATS_ENABLED": "0",
+            "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+    saved = {k: os.environ.get(k) for k in auth}
+    os.environ.update(auth)
+    env = dict(os.environ)
     try:
+        pytest.importorskip("ray")  # the dev install has it; this only names the cause where it is missing
         subprocess.run([RAY, "start", "--head", "--node-ip-address", "127.0.0.1", "--port", str(port),
                         "--num-cpus", "2", "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={temp}"],
                        check=True, env=env, timeout=300, capture_output=True)
@@ -52,6 +68,11 @@ def cluster():
     finally:
         subprocess.run([RAY, "stop", "--force"], env=env, timeout=300, capture_output=True)
         shutil.rmtree(temp, ignore_errors=True)
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def _strip(doc):
@@ -109,7 +130,7 @@ def test_stress_on_ray_equals_the_pool(tmp_path, cluster):
         "stress", "--trials", "2", "--amplitude", "0,0.02", "--seconds", "1"], "stress.json")
     for name in ("pool", "ray"):
         assert (tmp_path / name / "trials.csv").exists()
-    assert (tmp_path / "pool" / "trials.csv").read_text() == (tmp_path / "ray" / "trials.csv").read_text()
+    assert len(_trials(tmp_path / "pool")) == 4 and _trials(tmp_path / "pool") == _trials(tmp_path / "ray")
     assert doc
 
 
@@ -169,7 +190,7 @@ def test_a_killed_ray_worker_is_replaced_and_its_task_rerun(tmp_path, cluster):
     assert proc.returncode == 0, err[-3000:]
     ref = _cli([*args, "--out", str(tmp_path / "undisturbed")])
     assert ref.returncode == 0, ref.stderr[-3000:]
-    assert (tmp_path / "killed" / "trials.csv").read_text() == (tmp_path / "undisturbed" / "trials.csv").read_text()
+    assert _trials(tmp_path / "killed") == _trials(tmp_path / "undisturbed")
 
 
 def test_a_killed_driver_resumes_without_redoing_what_was_saved(tmp_path, cluster):
@@ -204,24 +225,28 @@ def test_a_killed_driver_resumes_without_redoing_what_was_saved(tmp_path, cluste
 
 def test_a_job_that_raises_names_itself_and_leaves_the_run_directory(tmp_path, cluster):
     """A coarse job that raises fails the run with TaskFailed naming the job; the files the jobs
-    wrote stay (a resume starts from them)."""
-    import ray.cloudpickle
+    wrote stay (a resume starts from them). Run as its own driver process, as a command would be (Ray
+    reads its authentication settings when it is first imported)."""
+    script = f"""
+import sys
+sys.path.insert(0, {str(Path(__file__).parent)!r})
+import ray.cloudpickle
+import _executor_tasks
+from experiments.runtime.executors import RayExecutor, TaskFailed
 
-    sys.path.insert(0, str(Path(__file__).parent))
-    try:
-        import _executor_tasks
-    finally:
-        sys.path.pop(0)
-    from experiments.runtime.executors import RayExecutor, TaskFailed
-
-    ray.cloudpickle.register_pickle_by_value(_executor_tasks)  # the workers cannot import the tests' helpers
-    write_then_fail = _executor_tasks.write_then_fail
-
-    jobs = [(str(tmp_path / f"job{i}.txt"), i == 1) for i in range(3)]
-    ex = RayExecutor(cluster)
-    try:
-        with pytest.raises(TaskFailed, match="job seed 1 failed: ValueError: bad input in job 1"):
-            ex.jobs(write_then_fail, jobs, [f"seed {i}" for i in range(3)])
-    finally:
-        ex.close()
+ray.cloudpickle.register_pickle_by_value(_executor_tasks)  # the workers cannot import the tests' helpers
+jobs = [({str(tmp_path)!r} + f"/job{{i}}.txt", i == 1) for i in range(3)]
+ex = RayExecutor({cluster!r})
+try:
+    ex.jobs(_executor_tasks.write_then_fail, jobs, [f"seed {{i}}" for i in range(3)])
+    print("no error")
+except TaskFailed as exc:
+    print(f"TaskFailed: {{exc}}")
+finally:
+    ex.close()
+"""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
+    r = subprocess.run([sys.executable, "-c", script], cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "TaskFailed: job seed 1 failed: ValueError: bad input in job 1" in r.stdout, r.stdout + r.stderr[-2000:]
     assert (tmp_path / "job1.txt").read_text() == "started"  # what it wrote before it raised is still there

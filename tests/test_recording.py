@@ -49,7 +49,7 @@ def test_minimal_user_written_log(tmp_path):
     cols = {"t": np.arange(n) * 0.012}
     cols.update({f"cmd.{j}": np.zeros(n) for j in robot.actuated_joint_names})
     cols.update({f"q.{j}": np.zeros(n) for j in robot.joint_names})
-    table = pa.table(cols).replace_schema_metadata({b"sgatwalk": json.dumps({"robot": "nao_h25", "control_dt": 0.012})})
+    table = pa.table(cols).replace_schema_metadata({b"sgatwalk": json.dumps({"robot": "nao", "control_dt": 0.012})})
     pq.write_table(table, tmp_path / "mine.parquet")
     r = Recording.from_parquet(tmp_path / "mine.parquet")
     assert len(r) == n and not r.has("dq") and r.group("app").shape == (n, 23)
@@ -89,7 +89,7 @@ def test_malformed_values_are_named(rec, tmp_path):
 
 def test_bad_metadata_and_files(rec, tmp_path):
     with pytest.raises(RecordingError, match="control_dt"):
-        Recording.from_parquet(_write(tmp_path, rec, meta={"robot": "nao_h25"}))
+        Recording.from_parquet(_write(tmp_path, rec, meta={"robot": "nao"}))
     with pytest.raises(RecordingError, match="robot 'atlas'"):
         Recording.from_parquet(_write(tmp_path, rec, meta={"robot": "atlas", "control_dt": 0.01}))
     junk = tmp_path / "junk.parquet"
@@ -104,7 +104,7 @@ def test_bad_metadata_and_files(rec, tmp_path):
     empty = {k: v[:0] for k, v in rec.columns.items()}
     with pytest.raises(RecordingError, match="empty"):
         Recording(empty, rec.meta).validate()
-    str_table = pa.table({"t": ["a"]}).replace_schema_metadata({b"sgatwalk": b'{"robot":"nao_h25","control_dt":0.01}'})
+    str_table = pa.table({"t": ["a"]}).replace_schema_metadata({b"sgatwalk": b'{"robot":"nao","control_dt":0.01}'})
     pq.write_table(str_table, tmp_path / "str.parquet")
     with pytest.raises(RecordingError, match="column 't' has type string"):
         Recording.from_parquet(tmp_path / "str.parquet")

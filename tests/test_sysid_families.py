@@ -10,6 +10,7 @@ import pytest
 
 from robots import nao_h25
 from sysid.candidates import FIXED_BASE_FAMILIES, Term
+from sysid.equivalence import rival_families, rival_terms
 from sysid.identify import Problem, refit, screen
 from sysid.replay import whole_logs
 from sysid.synthetic import synthetic_logs
@@ -40,8 +41,12 @@ def test_family_injection_and_recovery(truth, tol):
     (t_true, v_true), = truth.items()
     # the default library, plus the truth's family where it is opt-in (sysid.candidates.OPTIONAL_FAMILIES)
     sr = screen(problem, robot, {}, tuple(dict.fromkeys(FIXED_BASE_FAMILIES + (t_true.family,))))
-    assert t_true in sr.selected, f"screening picked {[t.label() for t in sr.selected]}"
-    fit = refit(problem, {t_true: sr.selected[t_true]})
+    # screening picks the truth or a member of its equivalence class in its place (a viscous damping on the
+    # hanging robot is a servo kd error, a latency a command low-pass at first sight): the class test at
+    # the end of a diagnosis, not screening, tells them apart (tests/test_sysid_equivalence.py)
+    same = {t_true} | {u for g in rival_families(t_true.family) for u in rival_terms(t_true, g, robot)}
+    assert same & set(sr.selected), f"screening picked {[t.label() for t in sr.selected]}"
+    fit = refit(problem, {t_true: sr.selected.get(t_true, t_true.fam.probe)})
     v = fit.values[t_true]
     err = abs(v - v_true) if t_true.family == "latency" else abs(v - v_true) / abs(v_true - t_true.fam.nominal)
     assert err < tol, f"{t_true.label()}: fitted {v:.5g}, truth {v_true:.5g}"
@@ -200,7 +205,7 @@ def test_a_common_kp_scale_scales_every_servo_in_the_replay_and_in_the_exported_
     from sysid.model import Structure, replay_model
     from sysid.report import export_mjcf
 
-    rm = replay_model(Structure(fixed_base=True, physics_dt=0.001, robot="nao_h25"))
+    rm = replay_model(Structure(fixed_base=True, physics_dt=0.001, robot="nao"))
     m = copy.copy(rm.model)
     apply_terms(rm, m, {Term("pd_gain_all"): 0.9})
     np.testing.assert_allclose(m.actuator_gainprm[rm.act, 0], 0.9 * rm.model.actuator_gainprm[rm.act, 0])
@@ -248,7 +253,7 @@ def test_common_friction_adds_to_every_joint_in_the_replay_and_in_the_exported_m
     from sysid.model import Structure, replay_model
     from sysid.report import export_mjcf
 
-    rm = replay_model(Structure(fixed_base=True, physics_dt=0.001, robot="nao_h25"))
+    rm = replay_model(Structure(fixed_base=True, physics_dt=0.001, robot="nao"))
     m = copy.copy(rm.model)
     knee = rm.robot.joint_names.index("LKneePitch")
     apply_terms(rm, m, {Term("coulomb_friction_all"): 0.03, Term("coulomb_friction", "LKneePitch"): 0.05,

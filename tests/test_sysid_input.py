@@ -14,10 +14,10 @@ from sysid.data import load_logs
 from sysid.excitation import SEGMENTS, protocol
 
 
-def _rec(n=300, robot="nao_h25", control_dt=0.01) -> Recording:
+def _rec(n=300, robot="nao", control_dt=0.01) -> Recording:
     r = nao_h25()
     q = np.tile(r.pose("crouch"), (n, 1))
-    return Recording.from_arrays({"robot": "nao_h25", "control_dt": control_dt, "fixed_base": True},
+    return Recording.from_arrays({"robot": "nao", "control_dt": control_dt, "fixed_base": True},
                                  np.arange(n) * control_dt, cmd=q[:, r.actuated_index], q=q)
 
 
@@ -74,10 +74,14 @@ def test_inconsistent_logs_and_missing_paths(tmp_path, capsys):
         load_logs([a, b])
 
 
-def test_bad_calibration_and_family(tmp_path, capsys):
+def test_bad_calibration(tmp_path, capsys):
     a = _rec().to_parquet(tmp_path / "a.parquet")
     (tmp_path / "cal.json").write_text(json.dumps({"hello": 1}))
     assert "calibration" in _diagnose_error(capsys, a, "--calibration", str(tmp_path / "cal.json"))
+
+
+def test_bad_family(tmp_path, capsys):
+    a = _rec().to_parquet(tmp_path / "a.parquet")
     assert "warp_drive" in _diagnose_error(capsys, a, "--families", "latency,warp_drive")
 
 
@@ -111,9 +115,10 @@ def test_excite_cli_records_logs(tmp_path, capsys):
     assert main(["excite", "--world", "real", "--effect", "warp=1", "--out", str(tmp_path)]) == 2
 
 
-def test_excite_cli_design_and_segments(tmp_path, capfd):
+@pytest.mark.slow
+def test_excite_cli_design(capfd):
     """``--design d-optimal --design-only`` prints the shares and the families' identifiability and
-    records nothing; ``--segments +saturation`` records the extra segment; bad combinations exit 2.
+    records nothing (slow: a probe replay per family and segment).
     The design's probe replays make MuJoCo warn (solver line searches, unstable probes): the
     warnings are counted (``sysid.replay.MUJOCO_WARNINGS``), so stdout, file descriptor included,
     holds only the JSON."""
@@ -127,6 +132,10 @@ def test_excite_cli_design_and_segments(tmp_path, capfd):
     assert sum(MUJOCO_WARNINGS.values()) > before
     assert set(d["shares"]) == {"holds", "saturation"} and abs(sum(d["shares"].values()) - 1) < 1e-9
     assert {f["family"] for f in d["families"]} >= {"torque_limit", "pd_gain", "joint_compliance"}
+
+
+def test_excite_cli_segments(tmp_path, capfd):
+    """``--segments +saturation`` records the extra segment; bad combinations exit 2."""
     out = tmp_path / "sat"
     assert main(["excite", "--world", "sim", "--fixed-base", "--segments", "+saturation", "--logs", "1",
                  "--seconds", "4", "--out", str(out), "--json"]) == 0

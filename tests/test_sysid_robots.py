@@ -80,7 +80,7 @@ def test_no_joint_count_literal_or_nao_call_left_in_sysid():
             if isinstance(node, ast.Constant) and type(node.value) is int and node.value == 24 \
                     and id(node) not in allowed:
                 found.append(f"{path.name}:{node.lineno}")
-            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "nao_h25":
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "nao":
                 found.append(f"{path.name}:{node.lineno} nao_h25()")
     assert found == []
 
@@ -115,7 +115,7 @@ def test_families_scale_to_the_robot():
     actuators (exactly x1 for the NAO); the dimensionless and angle families are not."""
     nao, g1 = nao_h25(), get_robot("g1")
     for kind in ("effort", "kd", "inertia", "1/kp", "kp"):
-        assert robot_scale("nao_h25", kind) == 1.0
+        assert robot_scale("nao", kind) == 1.0
     for name, fam in FAMILIES.items():
         assert family_for(name, nao) is fam
     assert family_for("coulomb_friction", g1).hi == pytest.approx(FAMILIES["coulomb_friction"].hi * 88.0 / 3.1855)

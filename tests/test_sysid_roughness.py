@@ -105,6 +105,7 @@ def test_simulated_log_replays_exactly_on_its_own_ground():
     assert ex.sum(axis=1).mean() > 100 * same.sum(axis=1).mean()
 
 
+@pytest.mark.slow  # about a minute on a loaded 2-core machine
 def test_terrain_roughness_injection_and_recovery():
     """Stepping on sparse bumps of 12 mm peak (the referee's generator; RMS height ~3 mm) is named as
     uneven ground with an RMS height of the right size; the same protocol on flat ground is not."""
@@ -129,6 +130,7 @@ def test_terrain_roughness_injection_and_recovery():
     assert flat.rms_height < MIN_RMS_HEIGHT
 
 
+@pytest.mark.slow  # about a minute on a loaded 2-core machine
 def test_the_adaptive_grid_gives_the_whole_grids_fit_from_fewer_heights():
     """Simulating the RMS-height grid bottom-up only as far as the fit needs it gives the very fit
     the whole grid gives (the height, its bootstrap interval, the decision and its evidence), and
@@ -153,6 +155,7 @@ def test_the_adaptive_grid_gives_the_whole_grids_fit_from_fewer_heights():
         fit_roughness(problem, {}, grid=(0.0, 0.002, 0.001))
 
 
+@pytest.mark.slow  # about a minute on a loaded 2-core machine
 def test_a_deterministic_contact_effect_is_not_left_to_uneven_ground():
     """Low foot friction (0.2) on flat ground leaves an excess over the nominal replay that a
     roughness fit alone would name as uneven ground; with the friction term in the model, what is

@@ -282,7 +282,7 @@ def test_recording_without_ground_truth_or_app(recs, tmp_path):
     """A real robot's log: no gt.*, no app.*: drawn upright at the origin, soles on z = 0."""
     rec = recs["sim"]
     cols = {k: v for k, v in rec.columns.items() if not k.startswith(("gt.", "app."))}
-    bare = Recording(cols, {"robot": "nao_h25", "control_dt": 0.01})
+    bare = Recording(cols, {"robot": "nao", "control_dt": 0.01})
     path = tmp_path / "bare.rrd"
     res = viz.log_rollouts_to_rrd({"robot log": bare}, path)
     assert res["labels"] == ["robot_log"]

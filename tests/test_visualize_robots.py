@@ -146,8 +146,8 @@ def test_nao_has_no_meshes(tmp_path):
 # ---------------------------------------------------------------------------- refusals
 def test_robot_mismatch_and_mixed_robots_are_refused(recs, tmp_path):
     g1 = recs["g1"]
-    nao_cols = Recording(dict(g1.columns), dict(g1.meta, robot="nao_h25"))  # G1 columns labelled NAO
-    with pytest.raises(RecordingError, match="recording is of robot 'nao_h25' but has none of its joint"):
+    nao_cols = Recording(dict(g1.columns), dict(g1.meta, robot="nao"))  # G1 columns labelled NAO
+    with pytest.raises(RecordingError, match="recording is of robot 'nao' but has none of its joint"):
         viz.log_rollouts_to_rrd({"sim": nao_cols}, tmp_path / "x.rrd")
     with pytest.raises(RecordingError, match="robot 'atlas'"):
         viz.log_rollouts_to_rrd({"sim": Recording(dict(g1.columns), dict(g1.meta, robot="atlas"))}, tmp_path / "x.rrd")

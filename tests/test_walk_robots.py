@@ -55,7 +55,7 @@ def test_gait_parameters_are_scaled_per_robot():
         assert P.from_vector(th.to_vector()).to_dict() == pytest.approx(th.to_dict())
         with pytest.raises(ValueError, match="step_length"):
             th.replace(step_length=10.0)
-    with pytest.raises(ValueError, match="robot 'nao_h25' given for robot 'g1'"):
+    with pytest.raises(ValueError, match="robot 'nao' given for robot 'g1'"):
         WalkEngine(get_robot("g1"), GaitParams())
 
 

@@ -82,13 +82,25 @@ def run_command(argv: list[str]) -> dict:
     return out
 
 
+def finite(value):
+    """``value`` with every NaN or infinite float replaced by None (JSON null), recursively: a command's
+    JSON may hold NaN (e.g. a correlation over constant data), which strict JSON cannot."""
+    if isinstance(value, float):
+        return value if value == value and value not in (float("inf"), float("-inf")) else None
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite(v) for v in value]
+    return value
+
+
 def save(name: str, argv: list[str]) -> Path:
     """Run the command and write ``docs/results/<name>.json`` atomically; return its path."""
     if not name.replace("-", "").replace("_", "").isalnum():
         raise SystemExit(f"tools.results: a result name is letters, digits, - and _, got {name!r}")
     before = stamp()
     result = run_command(argv)
-    doc = {"command": " ".join(map(shlex.quote, argv)), "result": result,
+    doc = {"command": " ".join(map(shlex.quote, argv)), "result": finite(result),
            "stamp": {**before, "load_after": round(os.getloadavg()[0], 2)}}
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"

@@ -1,4 +1,4 @@
-"""The ZMP walk engine vectorized over a batch of gaits (issue: population-batched evaluation).
+"""The ZMP walk engine vectorized over a batch of gaits, for population-batched evaluation.
 
 :class:`BatchWalkEngine` steps B gaits at once: the per-tick stages of
 :class:`walk_engine.engine.WalkEngine` (gyro low-pass, Kajita preview control, swing foot, torso

@@ -155,7 +155,7 @@ class GaitParams:
         ValueError: naming each non-finite, non-numeric or out-of-bounds parameter.
     """
 
-    robot: ClassVar[str] = "nao_h25"
+    robot: ClassVar[str] = "nao"
     specs: ClassVar[tuple[ParamSpec, ...]] = SPECS
     #: leg length of the robot / the NAO's (the footstep planner scales its step limits by it)
     length_scale: ClassVar[float] = 1.0
@@ -266,7 +266,7 @@ class GaitParams:
         """Write ``{"params": {name: value}, "units": {...}}`` as JSON atomically; returns the path."""
         path = os.fspath(path)
         doc = {"params": self.to_dict(), "units": {s.name: s.unit for s in self.specs}}
-        if self.robot != "nao_h25":
+        if self.robot != "nao":
             doc["robot"] = self.robot
         atomic_write_text(path, json.dumps(doc, indent=2) + "\n")
         return path
@@ -388,7 +388,7 @@ def params_for(robot) -> type[GaitParams]:
     """The :class:`GaitParams` class of ``robot`` (a ``robots.RobotModel``): :class:`GaitParams` itself
     for the NAO, else a subclass whose θ0 and bounds come from :func:`scaled_specs` with the robot's
     geometry (leg length, hip width and CoM heights measured on its model; ``walk_engine.legs``)."""
-    if robot.name == "nao_h25":
+    if robot.name == "nao":
         return GaitParams
     from walk_engine.legs import robot_geometry  # lazy: legs imports the robot kinematics
 

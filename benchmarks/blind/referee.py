@@ -5,7 +5,8 @@
 each one's hidden effects from its own seed; :func:`roughness_truth` turns a drawn bump height into
 the value the tool is scored on; :func:`record` records excitation logs in a referee world
 (:mod:`.worlds`) and strips them to a robot's own log (:func:`blind`: no ``gt.*`` columns, metadata
-whitelisted), so only the recordings reach the tool; :func:`run_diagnose` runs ``sgatwalk diagnose`` in-process on such a folder.
+whitelisted), so only the recordings reach the tool; :func:`run_diagnose` runs what ``sgatwalk diagnose``
+runs, in-process, on such a folder.
 """
 
 from __future__ import annotations
@@ -186,7 +187,7 @@ def record(world: str, hidden: list[dict], out_dir: str, n_logs: int, seconds: f
     if source == "referee":
         paths = record_referee(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed)
     else:
-        amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e["peak"])
+        amp = sum(v for e in hidden if e["family"] == "terrain_roughness" for v in e.get("peak", ()))
         paths = record_excitation(env, tmp, n_logs=n_logs, seconds=seconds, seed=seed, prefix="log",
                                   terrain=rough_ground(amp, seed) if amp > 0 else None)
     env.close()
@@ -214,15 +215,58 @@ def roughness_truth(hidden: list[dict], seed: int, n_logs: int) -> list[dict]:
 
 
 def run_diagnose(args_list: list[str]) -> dict:
-    """``sgatwalk diagnose`` in-process (the CLI path); returns its JSON result."""
-    from experiments.cli import main
+    """What ``sgatwalk diagnose`` does with these arguments, in-process, through the ``sysid`` API it
+    calls (:func:`sysid.data.load_logs`, :func:`sysid.diagnose.calibrate` / :func:`sysid.diagnose.diagnose`,
+    :func:`sysid.report.write_report`): ``["diagnose", "--real", DIR, "--out", OUT]`` plus ``--calibrate``,
+    ``--calibration FILE``, ``--families LIST`` (``+NAME`` adds to the default), ``--no-plots``.
+    Returns the report as the command's ``--json`` prints it (``calibration.json``'s content with
+    ``--calibrate``).
 
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
-        rc = main(args_list + ["--json"])
-    if rc != 0:
-        raise RuntimeError(f"diagnose failed with status {rc}")
-    return json.loads(buf.getvalue().strip().splitlines()[-1])
+    Raises:
+        ValueError: an argument this runner does not know.
+    """
+    from sysid.candidates import FAMILIES, FIXED_BASE_FAMILIES, FLOATING_BASE_FAMILIES
+    from sysid.data import load_logs
+    from sysid.diagnose import calibrate, diagnose
+    from sysid.report import public_json, write_report
+
+    a = list(args_list)
+    if a and a[0] == "diagnose":
+        a = a[1:]
+    opts, flags = {}, set()
+    i = 0
+    while i < len(a):
+        if a[i] in ("--calibrate", "--no-plots"):
+            flags.add(a[i])
+            i += 1
+        elif a[i] in ("--real", "--out", "--calibration", "--families"):
+            opts[a[i]] = a[i + 1]
+            i += 2
+        else:
+            raise ValueError(f"run_diagnose: unknown argument {a[i]!r}")
+    logs = load_logs(opts["--real"])
+    os.makedirs(opts["--out"], exist_ok=True)
+    with contextlib.redirect_stdout(io.StringIO()):
+        if "--calibrate" in flags:
+            cal = calibrate(logs)
+            with open(os.path.join(opts["--out"], "calibration.json"), "w") as f:
+                json.dump(public_json(cal), f, indent=1)
+            return public_json(cal)
+        cal = None
+        if "--calibration" in opts:
+            with open(opts["--calibration"]) as f:
+                cal = json.load(f)
+        fams = None
+        if "--families" in opts:
+            text = opts["--families"]
+            names = [x.strip() for x in text.lstrip("+").split(",") if x.strip()]
+            if text.startswith("+"):
+                default = FIXED_BASE_FAMILIES if logs[0].fixed_base else FLOATING_BASE_FAMILIES
+                names = [f for f in FAMILIES if f in default or f in names]
+            fams = names
+        rep = diagnose(logs, calibration=cal, families=fams)
+        write_report(rep, logs, opts["--out"], plots="--no-plots" not in flags)
+    return json.loads(json.dumps(public_json(rep)))
 
 
 # ------------------------------------------------------------------------------------------ trials

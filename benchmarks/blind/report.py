@@ -27,7 +27,9 @@ def metrics(rows: list[dict]) -> dict:
     ``uncertain`` (terms reported as uncertain / compensating: how many of them are true terms),
     ``per_class`` (single-effect class -> top-1 and median parameter error of its true terms found),
     ``top1_detectable`` (top-1 over the single-effect trials whose effect is detectable:
-    :data:`.scorer.DETECTABLE_RMS`).
+    :data:`.scorer.DETECTABLE_RMS`), ``named_right_detectable`` (those whose every effect is a finding
+    of its family or among the candidates of an equivalence entry at its target), ``wrong_found``
+    (effect trials with a finding that is no true term).
     Findings are the report's ``effects``; uncertain terms count only in ``coverage``."""
     single = [r for r in rows if r["kind"] == "single"]
     eff = [r for r in single if r["truth_class"] != "none"]
@@ -42,6 +44,8 @@ def metrics(rows: list[dict]) -> dict:
         "trials": len(rows), "single": len(single), "two": len(two),
         "top1": _frac(sum(r["score"]["pred_top1"] == r["truth_class"] for r in eff), len(eff)),
         "top1_detectable": _frac(sum(r["score"]["pred_top1"] == r["truth_class"] for r in det), len(det)),
+        "named_right_detectable": _frac(sum(bool(r["score"].get("named_right")) for r in det), len(det)),
+        "wrong_found": _frac(sum(bool(r["score"].get("wrong_found")) for r in eff), len(eff)),
         "none_fp": _frac(sum(bool(r["score"]["pred_families"]) for r in none), len(none)),
         "spurious": _frac(sum(bool(s.get("spurious")) for s in sc), len(sc)),
         "coverage": _frac(sum(cov), len(cov)),
@@ -54,6 +58,9 @@ def metrics(rows: list[dict]) -> dict:
         "runtime_s": float(np.median([s["runtime_s"] for s in sc])) if sc else None,
         "uncertain": _frac(sum(s.get("uncertain_true", 0) for s in sc), sum(s.get("uncertain", 0) for s in sc)),
         "per_class": {c: {"top1": _frac(sum(r["score"]["pred_top1"] == c for r in rs), len(rs)),
+                          "named_right": _frac(sum(bool(r["score"].get("named_right")) for r in rs
+                                                   if r["score"]["detectable"]),
+                                               sum(bool(r["score"]["detectable"]) for r in rs)),
                           "param_err_median": (float(np.median(pe)) if (pe := [p["rel"] for r in rs
                                                                               for p in r["score"]["param_err"]
                                                                               if "rel" in p]) else None)}

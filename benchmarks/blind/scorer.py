@@ -117,4 +117,19 @@ def score(truth: list[dict], report: dict) -> dict:
     out["gap_closed"] = report.get("gap_closed")
     out["detectable"] = detectable(report)
     out["runtime_s"] = report["runtime_s"]
+    # named right: every true effect is a finding of its family at a true target, or is among the
+    # candidates of an equivalence entry there (the class with the segment that would separate it)
+    eq = report.get("equivalent", [])
+    named = []
+    for e in truth:
+        tgs = [tg for tg in e["targets"]]
+        hit = any(_matches(x, e, tg) for x in eff for tg in tgs)
+        hit_c = any(any(c["family"] == e["family"] for c in x["candidates"]) and
+                    (tgs == [None] or _target(x) in tgs) for x in eq)
+        named.append(hit or hit_c)
+    out["named_right"] = bool(truth) and all(named)
+    out["by_class"] = out["named_right"] and any(
+        any(c["family"] == e["family"] for x in eq for c in x["candidates"]) for e in truth)
+    out["wrong_found"] = list(out["spurious"])  # findings that are no true term
+    out["equivalent"] = [sorted(c["family"] for c in x["candidates"]) for x in eq]
     return out

@@ -256,8 +256,19 @@ class RefereeRealWorld(NaoRealEnv):
 
 
 def make_world(world: str, hidden: list[dict], fixed_base: bool = True, noise: float = NOISE):
-    """The referee world ``world`` ("sim" or "real") with the ``hidden`` effects injected and
-    ``noise`` [rad] of encoder noise."""
+    """The referee world ``world`` ("sim", "real" or "strangers": ``benchmarks.strangers.world``, effect
+    models written apart from this package's, used through its API only) with the ``hidden`` effects
+    injected and ``noise`` [rad] of encoder noise.
+
+    Raises:
+        ValueError: an unknown world.
+    """
     if world == "sim":
         return RefereeSimWorld(hidden, noise=noise, fixed_base=fixed_base)
-    return RefereeRealWorld(hidden, noise=noise, fixed_base=fixed_base)
+    if world == "real":
+        return RefereeRealWorld(hidden, noise=noise, fixed_base=fixed_base)
+    if world == "strangers":
+        from benchmarks.strangers.world import make_world as strangers_world
+
+        return strangers_world(hidden, fixed_base=fixed_base, noise=noise)
+    raise ValueError(f"unknown referee world {world!r}; known: sim, real, strangers")

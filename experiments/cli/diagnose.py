@@ -54,7 +54,7 @@ def register(sub) -> argparse.ArgumentParser:
                    "when listed here; +NAME adds to the default")
     p.add_argument("--base-report", type=A.in_file, metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
                    "(bottom-up staging: diagnose fixed-base logs first, then stepping logs with their report)")
-    p.add_argument("--rounds", type=A.count(1, 100), default=3, help="screen/refit rounds (default 3)")
+    p.add_argument("--rounds", type=A.count(1, 100), default=3, help="screen/refit passes (default 3)")
     p.add_argument("--time-budget", type=A.real(0.0, 86400.0, unit='s'), default=300.0, metavar="SECONDS",
                    help="start no new search step after this long (default 300; 0 = no limit)")
     p.add_argument("--use-ground-truth", action="store_true",
@@ -148,14 +148,20 @@ def _inputs(args):
 
 def _families(text: str, logs) -> list[str]:
     """``--families``: a comma list of family names, or ``+NAME,...`` for the default families of the
-    logs (actuator families for a fixed base, contact families otherwise) and those, in library order."""
-    from sysid.candidates import CONTACT_FAMILIES, FAMILIES, FIXED_BASE_FAMILIES  # lazy: loads mujoco
+    logs (actuator families for a fixed base; contact families and the torso's mass and CoM for a
+    floating one: ``sysid.candidates.FLOATING_BASE_FAMILIES``) and those, in library order.
+
+    Raises:
+        ValueError: an unknown family name (a usage error).
+    """
+    from sysid.candidates import FAMILIES, FIXED_BASE_FAMILIES, FLOATING_BASE_FAMILIES  # lazy: loads mujoco
 
     names = [f.strip() for f in text.lstrip("+").split(",") if f.strip()]
-    if not text.startswith("+"):
-        return names
-    default = FIXED_BASE_FAMILIES if logs[0].fixed_base else CONTACT_FAMILIES
     bad = [f for f in names if f not in FAMILIES]
     if bad:
-        return bad  # diagnose() names the unknown family
+        raise ValueError(f"--families: unknown famil{'ies' if len(bad) > 1 else 'y'} {', '.join(bad)}; "
+                         f"known: {', '.join(FAMILIES)}")
+    if not text.startswith("+"):
+        return names
+    default = FIXED_BASE_FAMILIES if logs[0].fixed_base else FLOATING_BASE_FAMILIES
     return [f for f in FAMILIES if f in default or f in names]

@@ -27,7 +27,8 @@ def register(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("stochasticity", help="SGAT vs GAT as the real world's per-step randomness grows",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--levels", type=A.levels, default=d.levels, metavar="LEVELS",
-                   help=f"stochasticity levels of the fidelity runs (default {','.join(f'{v:g}' for v in d.levels)})")
+                   help=f"stochasticity levels of the fidelity runs (default {','.join(f'{v:g}' for v in d.levels)}; "
+                        "none: Table I runs only)")
     p.add_argument("--table1-levels", type=A.levels, metavar="LEVELS",
                    help="levels of the Table I runs (default: the lowest and highest of --levels)")
     p.add_argument("--worlds", type=A.worlds, metavar="WORLDS", default=d.worlds,
@@ -71,7 +72,8 @@ def run(args):
         study.ex = ex
         res = study.run()
     res["out"] = args.out
+    res["text"] = format_table(res)
     if not args.json:
-        print(format_table(res), flush=True)
+        print(res["text"], flush=True)
         print(f"study directory: {args.out} (study.json, table.txt, stochasticity.png)", flush=True)
     return res

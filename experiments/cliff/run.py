@@ -26,7 +26,7 @@ from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.parse import parse_values
 from sgat import tabular as T
 
-#: Columns of ``cliff.csv`` (the first six are the ``--json`` row keys the issue asks for).
+#: Columns of ``cliff.csv`` (the first six are the ``--json`` row keys).
 CSV_COLUMNS = [
     "noise",
     "gat_return", "gat_se",

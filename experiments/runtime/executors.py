@@ -257,7 +257,11 @@ class RayExecutor(SerialExecutor):
             try:
                 ray.init(**kw) if address == "local" else ray.init(address=address, **kw)
             except (ConnectionError, RuntimeError, ValueError) as exc:
-                raise ValueError(f"cannot reach the Ray cluster at {address!r}: {exc}") from None
+                why = f"{exc}" + (f" ({exc.__cause__})" if exc.__cause__ else "")
+                if "auth" in why.lower():
+                    why += ("; the cluster uses token authentication: give this machine the cluster's token "
+                            "(RAY_AUTH_TOKEN, or ~/.ray/auth_token; docs/cluster.md)")
+                raise ValueError(f"cannot reach the Ray cluster at {address!r}: {why}") from None
             self._owns = True
         self.workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         self._task = ray.remote(max_retries=self.RETRIES, retry_exceptions=False)(_in_worker)

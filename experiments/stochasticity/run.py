@@ -288,6 +288,15 @@ def format_table(res: dict) -> str:
                     cells.append(f"{r['median']:+.2f} [{r['min']:+.2f}, {r['max']:+.2f}]" if r else "-")
                 lines.append(f"{e['level']:>5g} {100 * e['real_fall_rate']:>9.0f}% " + " ".join(f"{c:>20}" for c in cells))
         lines.append("")
+    t1 = [e for e in res["levels"] if e.get("table1")]
+    if t1:
+        lines.append("Table I: real fitness (mean ± s.e. over seeds x trials) and falls")
+        lines.append(f"{'level':>5} {'method':>8} {'step':>4} {'fitness':>14} {'falls':>9}")
+        for e in t1:
+            for r in e["table1"]:
+                lines.append(f"{e['level']:>5g} {r['method']:>8} {r['step']:>4} "
+                             f"{r['fitness_mean']:>+7.2f} ± {r['fitness_se']:<4.2f} {r['falls']:>4}/{r['n']:<4}")
+        lines.append("")
     for e in res["levels"]:
         for c in e.get("sgat_minus_gat", []):
             f, x = c["fitness"], c["fall_rate"]

@@ -74,7 +74,7 @@ TRIAL_COLUMNS = [
     "fell", "fall_reason", "fall_time_s", "speed_cm_s", "distance_m", "drift_m", "fitness", "steps",
     "wall_s",
 ]
-#: Columns of the table (``summary.csv``); the first eight are the ``--json`` row keys of the issue.
+#: Columns of the table (``summary.csv``); the first eight are the ``--json`` row keys.
 SUMMARY_COLUMNS = [
     "policy", "level", "trials", "falls", "fall_rate", "fall_rate_ci95", "speed_cm_s_mean",
     "speed_cm_s_std", "speed_n", "distance_before_fall_m_mean", "fall_time_s_mean",

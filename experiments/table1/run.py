@@ -366,7 +366,7 @@ def seed_level_interval(sl: dict) -> str:
 
 
 def _seed_level_text(test: dict, sep: str) -> str:
-    """The t-test over optimization seeds (``seed_level``, saved since the eighteenth round) in words:
+    """The t-test over optimization seeds (``seed_level``; results saved before it existed have none) in words:
     ``"over seeds +5.0 [-2.1, +12.1], t-test p = 0.08"``; ``""`` without one."""
     sl = test.get("seed_level")
     return f"{sep}over seeds {seed_level_interval(sl)}, t-test p = {sl['p_value']:.2g}" if sl else ""

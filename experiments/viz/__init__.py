@@ -50,7 +50,7 @@ entity                                      archetype         content
 ``/legend``                                 TextDocument      static: how to read the views (markdown)
 ==========================================  ================  ===================================================
 
-The robot is the one named by each recording's ``meta["robot"]`` (``nao_h25``, ``g1``, ``talos``;
+The robot is the one named by each recording's ``meta["robot"]`` (``nao``, ``g1``, ``talos``;
 one robot per file). The default camera and the footstep boxes follow the robot's size and sole.
 A G1 recording embeds its 35 STL meshes (about 9 MB in the .rrd per recording), a Talos one its 47
 (25 files, about 5 MB).

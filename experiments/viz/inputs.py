@@ -15,7 +15,7 @@ from experiments.viz.style import WORLD_COLORS
 def check_recording(rec: Recording, label: str = "recording") -> None:
     """Refuse what cannot be shown.
 
-    Any robot of :data:`robots.ROBOT_NAMES` can be drawn (``meta["robot"]``: ``nao_h25``, ``g1``,
+    Any robot of :data:`robots.ROBOT_NAMES` can be drawn (``meta["robot"]``: ``nao``, ``g1``,
     ``talos``); the recording's joint columns must be that robot's.
 
     Raises:

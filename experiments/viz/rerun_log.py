@@ -434,7 +434,7 @@ def log_rollouts_to_rrd(recordings: Mapping[str, Recording], path: str | os.Path
     (e.g. ``{"gen_005/best": rec, "gen_005/median": rec, "eval/real_seed_3": rec}``).
 
     Args:
-        recordings: label -> recording, all of one robot (``meta["robot"]``: ``nao_h25``, ``g1`` or
+        recordings: label -> recording, all of one robot (``meta["robot"]``: ``nao``, ``g1`` or
             ``talos``). A label becomes the entity path ``/<label>`` ('/' nests; characters outside
             [A-Za-z0-9_.-] become '_'); labels must stay distinct and none may be a prefix path of
             another.
