@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Keys whose values are wall times, machines or paths: what legitimately differs between two runs.
 VOLATILE = {"wall_s", "elapsed_s", "realtime_factor", "job_wall_s", "cpu_s", "phases_s", "generation_s", "run_dir",
             "out", "files", "executor", "workers", "at", "load_average", "seconds_per_generation", "timing", "text",
-            "table", "ran", "resumed", "new_rows"}
+            "table", "ran", "resumed", "new_rows", "finished_at", "started_at"}
 
 
 def _trials(run_dir: Path) -> list[dict]:
@@ -81,6 +81,8 @@ def _strip(doc):
         return {k: _strip(v) for k, v in doc.items() if k not in VOLATILE}
     if isinstance(doc, list):
         return [_strip(v) for v in doc]
+    if isinstance(doc, float) and doc != doc:
+        return "nan"  # NaN != NaN: an empty cell compares equal to an empty cell
     return doc
 
 
