@@ -312,24 +312,28 @@ def format_table(res: dict) -> str:
 
 
 def plot(res: dict, path: str) -> None:
-    """Left: each fidelity world's ρ (median, min-max over draws) against the level; right: SGAT - GAT
-    real fitness and fall rate (percentage points) at the last step, 95 % intervals over seeds."""
+    """Left: each fidelity world's ρ (median, min-max over draws) against the level (left out when the
+    study has no fidelity runs); right: SGAT - GAT real fitness and fall rate (percentage points) at the
+    last step, 95 % intervals over seeds."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
     worlds = sorted({w for e in res["levels"] for w in e.get("fidelity", {})})
+    if worlds:
+        fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    else:  # a study of Table I runs only: no fidelity panel
+        fig, a2 = plt.subplots(1, 1, figsize=(6, 4))
     for k, w in enumerate(worlds):
         pts = [(e["level"], e["fidelity"][w]["rho"]) for e in res["levels"] if w in e.get("fidelity", {})]
         x = np.array([p[0] for p in pts]) + 0.04 * (k - len(worlds) / 2)
         med = np.array([p[1]["median"] for p in pts])
         err = np.array([[m - p[1]["min"], p[1]["max"] - m] for m, p in zip(med, pts)]).T
         a1.errorbar(x, med, yerr=err, marker="o", capsize=3, label=w)
-    a1.set(xlabel="per-step stochasticity level", ylabel="Spearman ρ with real fitness", title="fidelity per world")
-    a1.axhline(0, color="0.7", lw=0.8)
     if worlds:
+        a1.set(xlabel="per-step stochasticity level", ylabel="Spearman ρ with real fitness", title="fidelity per world")
+        a1.axhline(0, color="0.7", lw=0.8)
         a1.legend(fontsize=8)
     pts = [(e["level"], e["sgat_minus_gat"][-1]) for e in res["levels"] if e.get("sgat_minus_gat")]
     for key, scale, color, label in (("fitness", 1.0, "C0", "fitness"), ("fall_rate", 100.0, "C3", "fall rate [points]")):
