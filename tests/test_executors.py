@@ -59,17 +59,23 @@ def test_make_executor():
 def test_serial_pool_and_ray_give_identical_walk_fitness():
     """Walk episodes (the optimizer's tasks) through all three executors, a local Ray cluster too."""
     pytest.importorskip("ray")
-    from experiments.runtime.tasks import run_episode
+    import dataclasses
+
+    from experiments.runtime.tasks import EpisodeTask, run_episode
     from walk_engine import GaitParams
 
-    theta = GaitParams.initial().to_array().tolist()
-    tasks = [{"world": w, "theta": theta, "seed": s, "seconds": 2.0} for w in ("sim", "real") for s in (1, 2)]
-    serial = SerialExecutor().map(run_episode, tasks)
+    theta = tuple(GaitParams.initial().to_array().tolist())
+    tasks = [EpisodeTask(world=w, theta=theta, seed=s, seconds=2.0) for w in ("sim", "real") for s in (1, 2)]
+
+    def outcome(results):  # every field but the wall time
+        return [{k: v for k, v in dataclasses.asdict(r).items() if k != "wall_s"} for r in results]
+
+    serial = outcome(SerialExecutor().map(run_episode, tasks))
     with ProcessExecutor(2) as ex:
-        pooled = ex.map(run_episode, tasks)
+        pooled = outcome(ex.map(run_episode, tasks))
     ray_ex = make_executor(ray_address="local")
     try:
-        on_ray = ray_ex.map(run_episode, tasks)
+        on_ray = outcome(ray_ex.map(run_episode, tasks))
     finally:
         ray_ex.close()
     assert serial == pooled == on_ray
