@@ -108,20 +108,20 @@ def test_theta0_walks_20s_on_flat_real_world_without_effects():
 
 @pytest.mark.slow
 def test_real_profile_is_hard_but_not_hopeless_for_theta0():
-    """Issue 3: θ0 falls in 30-90 % of 7.5 s trials on fresh terrain seeds of the "real" profile,
+    """θ0 falls in 30-90 % of 7.5 s trials on fresh terrain seeds of the "real" profile,
     while a higher swing (step_height 0.03 m) mostly survives. Thirty seeds (100-129, never used
     for tuning; measured 14/30 falls, and 16/30 on a machine without AVX-512, whose PyBullet rounds
     differently in the last bits) rather than ten: at a fall rate near 0.5 a single block of ten
     lands outside [3, 9] falls about 8 % of the time (measured blocks: 2, 4, 8 falls). The 40
     trials run on a pool of 2 (``run_episode``: the same walks as ``run_walk(world="real", seed=s)``)."""
     from experiments.runtime.executors import make_executor
-    from experiments.runtime.tasks import run_episode
+    from experiments.runtime.tasks import EpisodeTask, run_episode
 
-    theta0, higher = GaitParams().to_array().tolist(), GaitParams(step_height=0.03).to_array().tolist()
-    tasks = ([{"world": "real", "theta": theta0, "seed": s} for s in range(100, 130)]
-             + [{"world": "real", "theta": higher, "seed": s} for s in range(120, 130)])
+    theta0, higher = tuple(GaitParams().to_array().tolist()), tuple(GaitParams(step_height=0.03).to_array().tolist())
+    tasks = ([EpisodeTask(world="real", theta=theta0, seed=s) for s in range(100, 130)]
+             + [EpisodeTask(world="real", theta=higher, seed=s) for s in range(120, 130)])
     with make_executor(2) as ex:
-        fell = [r["fell"] for r in ex.map(run_episode, tasks)]
+        fell = [r.fell for r in ex.map(run_episode, tasks)]
     falls = sum(fell[:30])
     assert 9 <= falls <= 27, falls
     assert sum(fell[30:]) <= 3, sum(fell[30:])
