@@ -51,6 +51,17 @@ def noop(x):
     return x
 
 
+def warm(x):
+    """Import the engines in a worker, so that the clock measures episodes, not a worker's first imports."""
+    import mujoco  # noqa: F401
+    import pybullet  # noqa: F401
+
+    import envs  # noqa: F401
+    from experiments.runtime import batch  # noqa: F401
+
+    return x
+
+
 def karp_flatt(speedup: float, p: int) -> float:
     """The experimentally determined serial fraction e = (1/S - 1/p) / (1 - 1/p) of a speed-up S on p
     processors (Karp and Flatt 1990); 0: perfectly parallel, 1: serial."""
@@ -114,7 +125,7 @@ def time_episodes(args, say) -> tuple[list[dict], bool]:
             ex = make()
             try:
                 if name != "serial":
-                    ex.map(noop, list(range(2 * n)))  # workers up and warm before the clock starts
+                    ex.map(warm, list(range(4 * n)))  # workers up, engines imported, before the clock starts
                 t0 = time.perf_counter()
                 res = map_episodes(ex, tasks)
                 walls.setdefault((name, n), []).append(time.perf_counter() - t0)

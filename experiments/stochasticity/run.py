@@ -121,12 +121,12 @@ class Study:
 
     def parts(self) -> list[tuple[str, str, float]]:
         """``[(kind, run directory, level)]`` in run order: Table I at the Table I levels (the study's
-        question), then fidelity at every level, then the real-world bound at the Table I levels."""
+        question), then the real-world bound at those levels, then fidelity at every level."""
         cfg = self.cfg
         out = [("table1", os.path.join(self.out, f"table1-{_tag(v)}"), v) for v in cfg.table1_levels]
-        out += [("fidelity", os.path.join(self.out, f"fidelity-{_tag(v)}"), v) for v in cfg.levels]
         if cfg.real_seeds:
             out += [("real", os.path.join(self.out, f"real-{_tag(v)}"), v) for v in cfg.table1_levels]
+        out += [("fidelity", os.path.join(self.out, f"fidelity-{_tag(v)}"), v) for v in cfg.levels]
         return out
 
     def run(self) -> dict:
