@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 
 import experiments.cli.argtypes as A
+from experiments.runtime.progress import Reporter
 
 
 def register(subparsers) -> argparse.ArgumentParser:
@@ -59,7 +60,7 @@ def run(args: argparse.Namespace) -> dict:
         noises = parse_noise(args.noise)
     res, rows = run_cliff(noises, args.out, episodes=args.episodes, seed=args.seed, real_episodes=args.real_episodes,
                           explore=args.explore, patience=args.patience, max_grounding_steps=args.max_grounding_steps,
-                          max_steps=args.max_steps, progress=not args.json)
+                          max_steps=args.max_steps, reporter=Reporter("cliff"))
     if not args.json:
         print(format_table(rows, args.episodes, args.seed))
         print(f"sweep took {res['elapsed_s']:.1f} s; wrote {', '.join(res['files'].values())}")

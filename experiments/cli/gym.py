@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from experiments.runtime.executors import make_executor
+from experiments.runtime.progress import Reporter
 from experiments.gym.config import EXPERIMENTS, METHODS, PRESETS, GymConfig
 import experiments.cli.argtypes as A
 
@@ -115,7 +116,7 @@ def run(args) -> dict:
     ex = make_executor(args.workers, args.ray_address)
     t0 = time.perf_counter()
     try:
-        res = G.run_sweep(cfg, out, ex, progress=not args.json, log=log)
+        res = G.run_sweep(cfg, out, ex, reporter=Reporter("gym"), log=log)
     finally:
         ex.close()
     res["wall_s"] = time.perf_counter() - t0

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import csv
 import io
-import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ import numpy as np
 
 from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.parse import parse_values
+from experiments.runtime.progress import Reporter
 from sgat import tabular as T
 
 #: Columns of ``cliff.csv`` (the first six are the ``--json`` row keys).
@@ -116,13 +116,15 @@ def compare_at_noise(
     return row
 
 
-def sweep(noises: list[float], *, progress: bool = False, **kwargs: Any) -> list[dict[str, Any]]:
-    """:func:`compare_at_noise` for every noise value (tqdm progress bar if ``progress``)."""
-    from tqdm import tqdm  # lazy: tqdm
-
-    it = tqdm(noises, desc="cliff", unit="noise", file=sys.stderr,
-              disable=None if progress else True)  # None: only on a terminal
-    return [compare_at_noise(p, **kwargs) for p in it]
+def sweep(noises: list[float], *, reporter: Reporter | None = None, **kwargs: Any) -> list[dict[str, Any]]:
+    """:func:`compare_at_noise` for every noise value; ``reporter`` says each noise value as it is done
+    (default: quiet)."""
+    reporter = reporter or Reporter.quiet()
+    rows = []
+    for k, p in enumerate(noises):
+        rows.append(compare_at_noise(p, **kwargs))
+        reporter.say(f"noise {p:g} done ({k + 1}/{len(noises)})")
+    return rows
 
 
 # --------------------------------------------------------------------------------------------
@@ -248,7 +250,7 @@ def format_table(rows: list[dict[str, Any]], episodes: int, seed: int) -> str:
 
 
 def run_cliff(noises, out, *, episodes: int, seed: int, real_episodes: int, explore: float, patience: int,
-              max_grounding_steps: int, max_steps: int, progress: bool = True) -> tuple[dict, list[dict]]:
+              max_grounding_steps: int, max_steps: int, reporter: Reporter | None = None) -> tuple[dict, list[dict]]:
     """The sweep over ``noises`` (:func:`sweep`), its files in ``out`` (``cliff.csv``, ``cliff.png``,
     ``cliff_paths.png``: the greedy paths at the noise where SGAT gains most over GAT) and its result.
 
@@ -257,7 +259,7 @@ def run_cliff(noises, out, *, episodes: int, seed: int, real_episodes: int, expl
     """
     out = Path(out)
     t0 = time.perf_counter()
-    rows = sweep(noises, progress=progress, episodes=episodes, seed=seed, real_episodes=real_episodes, explore=explore,
+    rows = sweep(noises, reporter=reporter, episodes=episodes, seed=seed, real_episodes=real_episodes, explore=explore,
                  patience=patience, max_grounding_steps=max_grounding_steps, max_steps=max_steps)
     elapsed = time.perf_counter() - t0
     csv_path, png_path, paths_path = out / "cliff.csv", out / "cliff.png", out / "cliff_paths.png"

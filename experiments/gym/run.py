@@ -37,6 +37,7 @@ Inference in evaluation and data collection runs in NumPy (:class:`NumpyPolicy`,
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import hashlib
@@ -47,6 +48,7 @@ import math
 import os
 import sys
 import time
+import types
 import uuid
 from pathlib import Path
 from typing import Any, Callable
@@ -57,6 +59,7 @@ from common.files import atomic_write_bytes as _atomic_write_bytes
 from common.files import atomic_write_text
 from experiments.gym.config import METHODS, NO_REAL_DATA, GymConfig
 from experiments.gym.envs import make_env, set_state_from_obs
+from experiments.runtime.progress import Reporter
 from sgat.algorithm import grounding_loop, new_progress
 
 # Seed purposes (the first key after the base seed).
@@ -734,16 +737,17 @@ def _log_job(path: Path, task: dict, res: dict) -> None:
         f.write(json.dumps(rec) + "\n")
 
 
-def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: bool = True,
+def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, reporter: Reporter | None = None,
               log: Callable[..., None] = print) -> dict:
     """Run (or resume) a sweep into directory ``out``; write the table, summary and figure.
+
+    ``reporter`` counts the jobs (a bar in a terminal, a line with the count and an ETA otherwise;
+    default: quiet).
 
     Returns:
         ``{"summary": [...], "table": text, "files": {...}, "new_rows": n, "fingerprints": {...},
         "wall_s": s, "tasks": n}``.
     """
-    from tqdm import tqdm  # lazy: tqdm
-
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a directory")
@@ -757,50 +761,52 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, progress: boo
     cfg_d = dataclasses.asdict(cfg)
     t0 = time.perf_counter()
     n_tasks = len(plan["second"]) + len(plan["sim_runs"])
-    bar = tqdm(total=n_tasks, desc=f"gym {cfg.env}", unit="job", file=sys.stderr,
-               disable=None if progress else True)
-    cell_dir = str(table.cells) if local else None
+    reporter = reporter or Reporter.quiet()
+    reporter.say(f"{cfg.env} {cfg.experiment}: {n_tasks} jobs to run or load ({len(plan['sim_runs'])} sim policies "
+                 f"first), noise {', '.join(f'{v:g}' for v in cfg.noise)}, {cfg.runs} runs per cell")
+    with contextlib.ExitStack() as counting:
+        bar = types.SimpleNamespace(update=counting.enter_context(reporter.count(n_tasks, "jobs")))
+        cell_dir = str(table.cells) if local else None
 
-    # 1. sim policies (reuse stored ones)
-    sim = {}
-    todo = []
-    for r in plan["sim_runs"]:
-        t = {"kind": "sim_policy", "run": r, "cfg": cfg_d}
-        p = _policy_path(out, cfg, t)
-        if p.exists():
-            sim[r] = load_policy(p)
-            bar.update(1)
-        else:
-            todo.append({**t, "policy_path": str(p) if local else None})
-    sim_returns = {}
-
-    def keep(res, t):
-        if res.get("policy") is not None:
+        # 1. sim policies (reuse stored ones)
+        sim = {}
+        todo = []
+        for r in plan["sim_runs"]:
+            t = {"kind": "sim_policy", "run": r, "cfg": cfg_d}
             p = _policy_path(out, cfg, t)
-            if not p.exists():
-                save_policy(res["policy"], p)
-        if res["kind"] == "sim_policy":
-            sim[res["run"]] = res["policy"]
-            sim_returns[res["run"]] = res["sim_return"]
+            if p.exists():
+                sim[r] = load_policy(p)
+                bar.update(1)
+            else:
+                todo.append({**t, "policy_path": str(p) if local else None})
+        sim_returns = {}
 
-    _execute(executor, todo, table, local, bar, keep)
+        def keep(res, t):
+            if res.get("policy") is not None:
+                p = _policy_path(out, cfg, t)
+                if not p.exists():
+                    save_policy(res["policy"], p)
+            if res["kind"] == "sim_policy":
+                sim[res["run"]] = res["policy"]
+                sim_returns[res["run"]] = res["sim_return"]
 
-    # 2. everything else
-    tasks = []
-    for t in plan["second"]:
-        t = {**t, "cfg": cfg_d, "cell_dir": cell_dir}
-        if t["kind"] != "sim":
-            t["policy_path"] = str(_policy_path(out, cfg, t)) if local else None
-        if t["kind"] != "real":
-            t["init_policy"] = sim[t["run"]]
-        if t["kind"] == "ane" and _policy_path(out, cfg, t).exists():
-            t["trained_policy"] = load_policy(_policy_path(out, cfg, t))
-        if t["kind"] == "sim":  # the sim policy's own return (unknown for a policy trained before a resume)
-            t["sim_return"] = sim_returns.get(t["run"], math.nan)
-        tasks.append(t)
+        _execute(executor, todo, table, local, bar, keep)
 
-    _execute(executor, tasks, table, local, bar, keep)
-    bar.close()
+        # 2. everything else
+        tasks = []
+        for t in plan["second"]:
+            t = {**t, "cfg": cfg_d, "cell_dir": cell_dir}
+            if t["kind"] != "sim":
+                t["policy_path"] = str(_policy_path(out, cfg, t)) if local else None
+            if t["kind"] != "real":
+                t["init_policy"] = sim[t["run"]]
+            if t["kind"] == "ane" and _policy_path(out, cfg, t).exists():
+                t["trained_policy"] = load_policy(_policy_path(out, cfg, t))
+            if t["kind"] == "sim":  # the sim policy's own return (unknown for a policy trained before a resume)
+                t["sim_return"] = sim_returns.get(t["run"], math.nan)
+            tasks.append(t)
+
+        _execute(executor, tasks, table, local, bar, keep)
     wall = time.perf_counter() - t0
     rows = table.current(cfg)
     summary = summarize(rows, cfg)

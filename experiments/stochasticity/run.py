@@ -273,18 +273,26 @@ def verdict(levels: list[dict]) -> list[str]:
     return lines
 
 
+#: Fidelity scores the summary shows (``sgatwalk fidelity``'s): key, what it is.
+FIDELITY_SCORES = (("rho", "Spearman rho of the world's gait fitness with the real one"),
+                   ("bias", "bias (world - real fitness, over the panel's gaits)"),
+                   ("brier", "Brier score of the world's fall probability against real falls (0 best)"))
+
+
 def format_table(res: dict) -> str:
     """The summary as text: fidelity per world and level, then Table I's SGAT - GAT and the bound."""
     lines = ["per-step stochasticity study", ""]
     worlds = sorted({w for e in res["levels"] for w in e.get("fidelity", {})})
-    if worlds:
-        lines.append("fidelity: Spearman rho with real fitness, median [min, max] over draws")
+    for key, what in FIDELITY_SCORES:
+        if not worlds:
+            break
+        lines.append(f"fidelity: {what}, median [min, max] over draws of the real data")
         lines.append(f"{'level':>5} {'real falls':>10} " + " ".join(f"{w:>20}" for w in worlds))
         for e in res["levels"]:
             if "fidelity" in e:
                 cells = []
                 for w in worlds:
-                    r = e["fidelity"].get(w, {}).get("rho")
+                    r = e["fidelity"].get(w, {}).get(key)
                     cells.append(f"{r['median']:+.2f} [{r['min']:+.2f}, {r['max']:+.2f}]" if r else "-")
                 lines.append(f"{e['level']:>5g} {100 * e['real_fall_rate']:>9.0f}% " + " ".join(f"{c:>20}" for c in cells))
         lines.append("")
@@ -312,8 +320,8 @@ def format_table(res: dict) -> str:
 
 
 def plot(res: dict, path: str) -> None:
-    """Left: each fidelity world's ρ (median, min-max over draws) against the level (left out when the
-    study has no fidelity runs); right: SGAT - GAT real fitness and fall rate (percentage points) at the
+    """Left: each fidelity world's ρ and Brier score (median, min-max over draws) against the level (left
+    out when the study has no fidelity runs); right: SGAT - GAT real fitness and fall rate (percentage points) at the
     last step, 95 % intervals over seeds."""
     import matplotlib
 
@@ -322,19 +330,21 @@ def plot(res: dict, path: str) -> None:
 
     worlds = sorted({w for e in res["levels"] for w in e.get("fidelity", {})})
     if worlds:
-        fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
-    else:  # a study of Table I runs only: no fidelity panel
+        fig, (a1, a3, a2) = plt.subplots(1, 3, figsize=(15, 4))
+    else:  # a study of Table I runs only: no fidelity panels
         fig, a2 = plt.subplots(1, 1, figsize=(6, 4))
-    for k, w in enumerate(worlds):
-        pts = [(e["level"], e["fidelity"][w]["rho"]) for e in res["levels"] if w in e.get("fidelity", {})]
-        x = np.array([p[0] for p in pts]) + 0.04 * (k - len(worlds) / 2)
-        med = np.array([p[1]["median"] for p in pts])
-        err = np.array([[m - p[1]["min"], p[1]["max"] - m] for m, p in zip(med, pts)]).T
-        a1.errorbar(x, med, yerr=err, marker="o", capsize=3, label=w)
-    if worlds:
-        a1.set(xlabel="per-step stochasticity level", ylabel="Spearman ρ with real fitness", title="fidelity per world")
-        a1.axhline(0, color="0.7", lw=0.8)
-        a1.legend(fontsize=8)
+    for ax, key, ylabel, title in ((a1, "rho", "Spearman ρ with real fitness", "ranking (higher is better)"),
+                                   (a3, "brier", "Brier score of the fall probability", "fall calibration (lower is better)")
+                                   ) if worlds else ():
+        for k, w in enumerate(worlds):
+            pts = [(e["level"], e["fidelity"][w][key]) for e in res["levels"] if w in e.get("fidelity", {})]
+            x = np.array([p[0] for p in pts]) + 0.04 * (k - len(worlds) / 2)
+            med = np.array([p[1]["median"] for p in pts])
+            err = np.array([[m - p[1]["min"], p[1]["max"] - m] for m, p in zip(med, pts)]).T
+            ax.errorbar(x, med, yerr=err, marker="o", capsize=3, label=w)
+        ax.set(xlabel="per-step stochasticity level", ylabel=ylabel, title=f"fidelity per world: {title}")
+        ax.axhline(0, color="0.7", lw=0.8)
+        ax.legend(fontsize=8)
     pts = [(e["level"], e["sgat_minus_gat"][-1]) for e in res["levels"] if e.get("sgat_minus_gat")]
     for key, scale, color, label in (("fitness", 1.0, "C0", "fitness"), ("fall_rate", 100.0, "C3", "fall rate [points]")):
         xs = [p[0] for p in pts]
