@@ -57,6 +57,18 @@ def test_numpy_policy_matches_sb3_predict(tmp_path, task, normalize):
         pol.act(obs[0], deterministic=False)
 
 
+def test_training_leaves_no_logger_folder(tmp_path, monkeypatch):
+    """SB3's default logger makes an empty SB3-<date> folder in the temp directory on every training;
+    train_policy gives the model one that writes nothing."""
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    cfg = GymConfig.from_preset("InvertedPendulum", "quick")
+    blob = G.train_policy(cfg, lambda i: make_env("InvertedPendulum"), 256, seed=0)
+    assert G.NumpyPolicy(blob).act(np.zeros(4)).shape == (1,)
+    assert not list(tmp_path.glob("SB3-*"))
+
+
 def test_policy_file_errors(tmp_path):
     with pytest.raises(FileNotFoundError):
         G.load_policy(tmp_path / "missing.npz")

@@ -230,6 +230,7 @@ def train_policy(cfg: GymConfig, env_fn: Callable[[int], Any], steps: int, seed:
     """
     _torch_one_thread()
     from sb3_contrib import TRPO  # lazy: sb3_contrib (torch)
+    from stable_baselines3.common.logger import Logger  # lazy: stable_baselines3 (torch)
     from stable_baselines3.common.monitor import Monitor  # lazy: stable_baselines3 (torch)
     from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize  # lazy: stable_baselines3 (torch)
 
@@ -249,6 +250,8 @@ def train_policy(cfg: GymConfig, env_fn: Callable[[int], Any], steps: int, seed:
         model = TRPO.load(io.BytesIO(init["zip"]), env=venv, device="cpu")
         model.set_random_seed(int(seed))
     if steps > 0:
+        # a logger that writes nothing: SB3's default makes an empty /tmp/SB3-<date> folder per training
+        model.set_logger(Logger(folder=None, output_formats=[]))
         model.learn(total_timesteps=int(steps))
     blob = _policy_blob(model, venv)
     venv.close()
