@@ -8,6 +8,7 @@ error naming it and leaves the run directory as it was. The cluster is stopped w
 
 from __future__ import annotations
 
+import atexit
 import csv
 import json
 import os
@@ -31,6 +32,8 @@ ROOT = Path(__file__).resolve().parents[1]
 VOLATILE = {"wall_s", "elapsed_s", "realtime_factor", "job_wall_s", "cpu_s", "phases_s", "generation_s", "run_dir",
             "out", "files", "executor", "workers", "at", "load_average", "seconds_per_generation", "timing", "text",
             "table", "ran", "resumed", "new_rows", "finished_at", "started_at"}
+#: A grounded world with one real and one sim walk per grounding step and short model fits (tiny runs).
+SGAT = "sgat:epochs=20:real=1:sim=1"
 
 
 def _trials(run_dir: Path) -> list[dict]:
@@ -45,9 +48,15 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 @pytest.fixture(scope="module")
 def cluster():
-    """A Ray head on 127.0.0.1 with 2 CPUs, its address; stopped (``ray stop --force``) at the end."""
+    """A Ray head on 127.0.0.1 with 2 CPUs, its address; stopped (``ray stop --force``) at the end, also
+    when the tests are stopped by SIGTERM (e.g. a CI time limit): SIGTERM is turned into
+    KeyboardInterrupt while the cluster runs, and the stop is registered with ``atexit`` too."""
     temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's socket paths are limited to 107 bytes
     port = _free_port()
     # Token authentication (Ray >= 2.52; on by default where ~/.ray/auth_token exists): a fresh token for
@@ -59,6 +68,19 @@ def cluster():
     saved = {k: os.environ.get(k) for k in auth}
     os.environ.update(auth)
     env = dict(os.environ)
+    stopped = []
+
+    def stop():
+        if not stopped:
+            stopped.append(True)
+            subprocess.run([RAY, "stop", "--force"], env=env, timeout=300, capture_output=True)
+            shutil.rmtree(temp, ignore_errors=True)
+
+    atexit.register(stop)
+    try:
+        old_term = signal.signal(signal.SIGTERM, _interrupt)
+    except ValueError:  # not the main thread: SIGTERM stays as it is
+        old_term = None
     try:
         pytest.importorskip("ray")  # the dev install has it; this only names the cause where it is missing
         subprocess.run([RAY, "start", "--head", "--node-ip-address", "127.0.0.1", "--port", str(port),
@@ -66,8 +88,10 @@ def cluster():
                        check=True, env=env, timeout=300, capture_output=True)
         yield f"127.0.0.1:{port}"
     finally:
-        subprocess.run([RAY, "stop", "--force"], env=env, timeout=300, capture_output=True)
-        shutil.rmtree(temp, ignore_errors=True)
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+        stop()
+        atexit.unregister(stop)
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
@@ -108,9 +132,9 @@ def _same_on_pool_and_ray(tmp_path, cluster, args: list[str], result_file: str):
 
 def test_optimize_on_ray_equals_the_pool(tmp_path, cluster):
     doc = _same_on_pool_and_ray(tmp_path, cluster, [
-        "optimize", "--methods", "sgat,sim", "--generations", "1", "--popsize", "4", "--eval-trials", "2",
+        "optimize", "--methods", f"{SGAT},sim", "--generations", "1", "--popsize", "4", "--eval-trials", "2",
         "--select-episodes", "2", "--grounding-steps", "1", "--seconds", "0.8"], "results.json")
-    assert {r["method"] for r in doc["rows"]} == {"theta0", "sgat", "sim"}
+    assert {r["method"] for r in doc["rows"]} == {"theta0", SGAT, "sim"}
 
 
 def test_fidelity_on_ray_equals_the_pool(tmp_path, cluster):
@@ -122,9 +146,9 @@ def test_fidelity_on_ray_equals_the_pool(tmp_path, cluster):
 
 def test_table1_on_ray_equals_the_pool(tmp_path, cluster):
     doc = _same_on_pool_and_ray(tmp_path, cluster, [
-        "table1", "--methods", "sgat,sim", "--seeds", "2", "--trials", "2", "--popsize", "3", "--generations", "1",
+        "table1", "--methods", f"{SGAT},sim", "--seeds", "2", "--trials", "2", "--popsize", "3", "--generations", "1",
         "--grounding-steps", "1", "--seconds", "0.8"], "table1.json")
-    assert {r["method"] for r in doc["rows"]} >= {"sgat", "sim"}
+    assert {r["method"] for r in doc["rows"]} >= {SGAT, "sim"}
 
 
 def test_stress_on_ray_equals_the_pool(tmp_path, cluster):
@@ -198,7 +222,7 @@ def test_a_killed_ray_worker_is_replaced_and_its_task_rerun(tmp_path, cluster):
 def test_a_killed_driver_resumes_without_redoing_what_was_saved(tmp_path, cluster):
     """SIGKILL ``sgatwalk table1`` on the cluster once its first optimization has saved a generation; the
     same command resumes it: what was saved stays as it was, and the result equals an undisturbed run's."""
-    args = ["table1", "--methods", "sgat,sim", "--seeds", "1", "--trials", "2", "--popsize", "3", "--generations", "2",
+    args = ["table1", "--methods", f"{SGAT},sim", "--seeds", "1", "--trials", "2", "--popsize", "3", "--generations", "2",
             "--grounding-steps", "1", "--seconds", "0.8", "--ray-address", cluster]
     run = tmp_path / "killed"
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
