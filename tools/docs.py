@@ -252,7 +252,7 @@ class Results:
         """The stamp line of a result: the command, CPU model and cores, commit and date. None: a
         result without a stamp whose commit git cannot tell (keep what the page says)."""
         doc = self.load(name)
-        cmd = doc.get("command") or "(command not recorded)"
+        cmd = _shown_command(doc.get("command"))
         st = doc.get("stamp")
         if isinstance(st, dict):
             cores = st.get("cores")
@@ -273,8 +273,16 @@ class Results:
         """The part of a stamp line before the commit (for keeping a page's commit where git cannot tell)."""
         doc = self.load(name)
         cores = (doc.get("machine") or {}).get("cpus")
-        return (f"*`{doc.get('command') or '(command not recorded)'}` · CPU model not recorded"
+        return (f"*`{_shown_command(doc.get('command'))}` · CPU model not recorded"
                 + (f", {cores} cores" if cores else "") + " · ")
+
+
+def _shown_command(cmd: str | None) -> str:
+    """A result's command as a stamp shows it: without ``--out DIR`` (where its files went, not a setting
+    of the run; the directory names a run by when it was made)."""
+    if not cmd:
+        return "(command not recorded)"
+    return re.sub(r"\s--out(?:=|\s+)\S+", "", cmd)
 
 
 def _blob_hash(data: bytes) -> str:
