@@ -19,6 +19,8 @@ coulomb_friction      joint      N m       ``dof_frictionloss`` (added)         
 coulomb_friction_all  global     N m       the same, one value on every joint            0.05
 stribeck_friction     joint      N m       static excess over the Coulomb level:         0.05, 0.2
                                            frictionloss + a Stribeck actuator
+stribeck_velocity     joint      rad/s     the speed over which that excess falls away   (a shape:
+                                           (the Stribeck actuator's gain excess / v_s)   no column)
 viscous_damping       joint      N m s/rad ``dof_damping`` (added)                       0.05
 viscous_damping_all   global     N m s/rad the same, one value on every joint            0.01
 pd_gain               joint      x kp      ``actuator_gainprm[0]``, ``biasprm[1]``        x0.85
@@ -109,7 +111,8 @@ the motor hinge) or on the link side of a motor-shaft encoder (``backlash_link``
 every joint (``torque_limit``), of one (``joint_torque_limit``) or falling with speed (``back_emf``: a DC
 motor's torque-speed line, W. Leonhard, *Control of Electrical Drives*, Springer 2001, ch. 5); joint
 friction as Coulomb (BAM's M1 with ``viscous_damping``) or Stribeck (M2: ``stribeck_friction`` beside a
-Coulomb term, the static level falling to the Coulomb one over :data:`sysid.model.STRIBECK_VELOCITY`);
+Coulomb term, the static level falling to the Coulomb one over a Stribeck velocity: by default
+:data:`sysid.model.STRIBECK_VELOCITY`, fitted as ``stribeck_velocity`` in the class test, BAM's M2);
 link inertial parameters as mass, centre of mass and rotational inertia (R. Featherstone, *Rigid Body
 Dynamics Algorithms*, Springer 2008, ch. 2); an offset of the log alone (``sensor_bias``) or of the
 encoder the servo reads too (``encoder_offset``); a command delay (``latency``) or smoothing
@@ -133,9 +136,11 @@ import numpy as np
 from envs.effects import NOMINAL_FOOT_FRICTION
 from envs.mujoco_world import GROUND_TIMECONST
 from robots import RobotModel, get_robot
+from sysid.model import STRIBECK_VELOCITY
 
-#: Every family name the report may use (issue 8).
+#: Every family name the report may use.
 FAMILY_NAMES = ("latency", "command_lowpass", "backlash", "backlash_motor", "backlash_link", "coulomb_friction", "coulomb_friction_all", "stribeck_friction",
+                "stribeck_velocity",
                 "viscous_damping", "viscous_damping_all", "pd_gain", "pd_gain_all", "kd_gain", "torque_constant",
                 "torque_limit", "joint_torque_limit", "back_emf", "link_mass", "link_com", "link_inertia", "armature",
                 "joint_compliance", "parallel_spring", "foot_friction", "ground_compliance", "terrain_roughness",
@@ -206,6 +211,8 @@ FAMILIES: dict[str, Family] = {f.name: f for f in (
            "joint", "rad", 0.0, 0.0, 0.10, 0.02, smooth=False, probe2=0.05, min_effect=0.002),
     Family("stribeck_friction", "Stribeck joint friction (static above kinetic, decaying with speed)", "joint",
            "N m", 0.0, 0.0, 0.8, 0.05, smooth=False, probe2=0.2, min_effect=0.01, scale="effort"),
+    Family("stribeck_velocity", "Stribeck velocity (the speed over which the static excess falls away)", "joint",
+           "rad/s", STRIBECK_VELOCITY, 0.02, 1.0, 0.3, log=True),
     Family("coulomb_friction", "Coulomb (dry) joint friction", "joint", "N m", 0.0, 0.0, 0.8, 0.05, smooth=False,
            probe2=0.2, min_effect=0.01, scale="effort"),
     Family("coulomb_friction_all", "common Coulomb (dry) joint friction", "global", "N m", 0.0, 0.0,
@@ -267,16 +274,21 @@ PARALLEL_SPRING_KP = {"probe": 0.03, "hi": 0.5, "min_effect": 0.005}
 #: default sent a kp error (x0.64 at a hip) and a tibia mass down wrong paths, and turned a friction
 #: into five uncertain terms on one elbow (README, "The blind proof": the run with
 #: ``--diagnose-families +parallel_spring``). Listed, it is found as itself (``tests/test_sysid_families.py``).
-#: ``pd_gain_all``: added in the fifteenth fidelity round for the identified training world, which fits it
+#: ``pd_gain_all``: added for the identified training world, which fits it
 #: without screening (``experiments.identify.fit_servo_gain``); the blind benchmark was not rerun with it
 #: screened, so the default stays as it was validated there. ``coulomb_friction_all``,
-#: ``viscous_damping_all``: added in the sixteenth round for the same world, on the same terms.
+#: ``viscous_damping_all``: added for the same world, on the same terms.
 #: ``torque_constant`` is also reached without being listed: screening moves a joint's kp and kd together
 #: (:data:`sysid.identify.JOINT_BLOCKS`) and the diagnosis names the form of the fitted pair, kp and kd
 #: together among them (:func:`sysid.diagnose.servo_forms`).
 OPTIONAL_FAMILIES = ("torque_constant", "parallel_spring", "pd_gain_all", "coulomb_friction_all", "viscous_damping_all")
+#: Parameters of another family's shape, not effects of their own: never screened, fitted only beside
+#: that family (the Stribeck velocity of a Stribeck friction at the same joint, in the class test of
+#: :func:`sysid.diagnose.diagnose`), reported as part of its effect.
+SHAPE_FAMILIES = ("stribeck_velocity",)
 #: Families screened by default on fixed-base (in-air) logs; contact families need floating-base logs.
-FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.contact and n not in OPTIONAL_FAMILIES)
+FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items()
+                            if not f.contact and n not in OPTIONAL_FAMILIES and n not in SHAPE_FAMILIES)
 #: Families screened by default on floating-base (standing/stepping) logs: bottom-up staging
 #: (Bjelonic et al., arXiv:2509.06342) fixes actuator effects in the air first and passes them in as a
 #: base model.
@@ -557,7 +569,7 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
         ValueError: a backlash (compliance, Stribeck) term on a joint without a play hinge (spring
             hinge, Stribeck element) in ``rm``; both backlash forms on one joint; unknown family.
     """
-    from sysid.model import LOWPASS_MIN, STRIBECK_GAIN_SHARE, STRIBECK_VELOCITY, joint_inertia, spring_stiffness_max
+    from sysid.model import LOWPASS_MIN, STRIBECK_GAIN_SHARE, joint_inertia, spring_stiffness_max
 
     robot = rm.robot
     n = len(robot.joint_names)
@@ -584,10 +596,13 @@ def apply_terms(rm, m: mujoco.MjModel, values: dict[Term, float]) -> np.ndarray:
             i = jidx[tg]
             m.dof_frictionloss[rm.dadr[i]] += v  # static level: + the excess v
             inertia = joint_inertia(robot.name, rm.structure.fixed_base)[tg]
-            k = min(v / STRIBECK_VELOCITY, STRIBECK_GAIN_SHARE * inertia / rm.structure.physics_dt)
+            vs = values.get(Term("stribeck_velocity", tg), STRIBECK_VELOCITY)
+            k = min(v / vs, STRIBECK_GAIN_SHARE * inertia / rm.structure.physics_dt)
             a = rm.stribeck_act[tg]
             m.actuator_biasprm[a, 2] = k  # +k qdot: gives the excess back as the joint speeds up
             m.actuator_forcerange[a] = [-max(v, 1e-9), max(v, 1e-9)]
+        elif f == "stribeck_velocity":
+            pass  # the shape of the joint's Stribeck friction, applied with it (above)
         elif f == "viscous_damping":
             m.dof_damping[rm.dadr[jidx[tg]]] += v
         elif f == "viscous_damping_all":

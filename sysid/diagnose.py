@@ -34,12 +34,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import nnls
 
-from sysid.candidates import (FAMILIES, FIXED_BASE_FAMILIES, FLOATING_BASE_FAMILIES, PLAY_FAMILIES, Term, joints_above,
-                              term_allowed, term_bounds, term_link, term_min_effect, term_probe)
+from sysid.candidates import (FAMILIES, FIXED_BASE_FAMILIES, FLOATING_BASE_FAMILIES, PLAY_FAMILIES, SHAPE_FAMILIES, Term,
+                              joints_above, term_allowed, term_bounds, term_link, term_min_effect, term_probe)
 from sysid.data import (BASE_ESTIMATED, Log, base_state_source, split_by_trajectory,
                          without_ground_truth)
 from sysid.identify import (FLAG_ENERGY, Problem, ScreenResult, confidence, flagged_joints, refit, screen,
                             two_sided)
+from sysid.model import STRIBECK_VELOCITY
 from sysid.replay import IMU_CHANNELS, MUJOCO_WARNINGS, Window, predict, whole_logs, windows
 from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
 from sysid.stats import integrated_autocorr, localisation, noise_sigma
@@ -819,7 +820,8 @@ def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, f
                  robot, clock: _Clock, say: Callable[[str], None]) -> _Round:
     """Refit the screening picks with the current model, let rival families compete on the same
     joints (:func:`_compete`, skipped once the budget is spent), prune terms on held-out data
-    (:func:`_prune_terms`), and decide: the round is kept if it lowers the held-out cost by the
+    (:func:`_prune_terms`), name the servo and friction forms (:func:`servo_forms`,
+    :func:`friction_forms`), and decide: the round is kept if it lowers the held-out cost by the
     margin and the training BIC by more than 10.
 
     Args:
@@ -836,6 +838,9 @@ def _refit_round(problem: Problem, model: dict, cost: float, sr: ScreenResult, f
     cand, merged = servo_forms(problem, cand)
     for m in merged:
         say(f"round {rnd}: {m['reason']}")
+    cand, added = friction_forms(problem, cand) if not clock.over() else (cand, [])
+    for a in added:
+        say(f"round {rnd}: {a['term']} {a['reason']}")
     rejected = list(swaps) + pruned + merged
     c_new = float(problem.cost([cand], "heldout")[0]) if cand else cost
     bic_new = _bic(problem, cand, len(cand))
@@ -891,6 +896,40 @@ def servo_forms(problem: Problem, model: dict) -> tuple[dict, list[dict]]:
                                       f"error x{fit.values[tc]:.3f} (kp and kd together): held-out cost {c_tc:.1f} "
                                       f"vs {c_pair:.1f} with both free"})
             out, c_pair = dict(fit.values), c_tc
+    return out, records
+
+
+#: The two terms of a joint's Coulomb-viscous friction (BAM's model M1, M. Duclusaud et al., ICRA 2025,
+#: arXiv:2410.08650): a joint whose model holds one of them is refitted with the other beside it
+#: (:func:`friction_forms`).
+FRICTION_PAIR = ("coulomb_friction", "viscous_damping")
+
+
+def friction_forms(problem: Problem, model: dict) -> tuple[dict, list[dict]]:
+    """Complete each joint's friction to BAM's Coulomb-viscous form (M1, :data:`FRICTION_PAIR`): where the
+    model holds a Coulomb friction and no viscous damping at a joint (or the reverse), the other term is
+    fitted beside it (both free, the rest of the model fixed) and kept when it lowers the held-out cost
+    by the selection margin, away from its family's bounds. Screening sees one family per joint at a
+    time, and a linearisation around dry friction hides the viscous share that only shows at speed.
+
+    Returns:
+        (the model Term -> value, records of the terms added: ``{"term", "family", "value", "reason"}``).
+    """
+    out = dict(model)
+    records = []
+    cost = float(problem.cost([out], "heldout")[0]) if out else math.inf
+    for t in sorted(u for u in model if u.family in FRICTION_PAIR):
+        other = Term(FRICTION_PAIR[1 - FRICTION_PAIR.index(t.family)], t.target)
+        if other in out or t not in out or not term_allowed(other, problem.robot):
+            continue
+        fit = refit(problem, {**out, other: float(term_probe(other, problem.robot))}, free=[t, other], grid=False,
+                    max_nfev=8)
+        c = float(problem.cost([fit.values], "heldout")[0])
+        if cost - c >= _margin(cost, problem.k) and not _at_bound(other, fit.values[other], problem.robot):
+            records.append({"term": other.label(), "family": other.family, "value": fit.values[other],
+                            "reason": f"added beside {t.label()} (Coulomb and viscous friction together, BAM's M1): "
+                                      f"held-out cost {cost:.1f} -> {c:.1f}"})
+            out, cost = dict(fit.values), c
     return out, records
 
 
@@ -1002,6 +1041,8 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
     term pairs with |correlation| > 0.9 are listed as indistinguishable. An empty model returns empty lists.
     """
     effects, indist, terms_of = [], [], []
+    # a shape parameter goes with its effect: one left without it (its effect replaced) is dropped
+    model = {t: v for t, v in model.items() if t.family not in SHAPE_FAMILIES or _shape_owner(t) in model}
     if model:
         fit = refit(problem, model, grid=False, max_nfev=4)
         if float(problem.cost([fit.values], "heldout")[0]) <= cost:
@@ -1012,12 +1053,18 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
         tau = integrated_autocorr(res)
         spread = _trajectory_spread(problem, model) if n_logs > 1 else {}
         ci, corr = confidence(fit, problem, tau, spread=spread, spread_dof=n_logs - 1 if spread else None)
-        order = sorted(model, key=lambda u: (u.family, u.target or ""))
+        order = sorted((u for u in model if u.family not in SHAPE_FAMILIES), key=lambda u: (u.family, u.target or ""))
         c_drop = problem.cost([model] + [{u: v for u, v in model.items() if u != t} for t in order], "heldout")
         pairs = []
         for t, cd in zip(order, c_drop[1:]):
             e = _entry(t, model[t], ci.get(t), robot)
             e["heldout_cost_without"] = float(cd - c_drop[0])  # how much worse held-out gets without it
+            for u in model:
+                if u.family in SHAPE_FAMILIES and _shape_owner(u) == t:
+                    lo, hi = ci.get(u, (None, None))
+                    e["shape"] = {u.family: {"value": float(model[u]), "unit": u.fam.unit,
+                                             "ci95": [None if lo is None else float(lo), None if hi is None else float(hi)]}}
+                    e["display"] += f", falling away over {u.fam.fmt(model[u])}"
             pairs.append((t, e))
         pairs.sort(key=lambda te: -te[1]["heldout_cost_without"])
         terms_of = [t for t, _ in pairs]
@@ -1029,6 +1076,11 @@ def _intervals(problem: Problem, model: dict, cost: float, floor: np.ndarray, ro
                     indist.append({"a": terms[i].label(), "b": terms[j].label(), "corr": float(corr[i, j]),
                                    "experiment": _experiment(terms[i].family, terms[j].family)})
     return _Intervals(model=model, cost=cost, effects=effects, indistinguishable=indist, terms=terms_of)
+
+
+def _shape_owner(t: Term) -> Term:
+    """The effect a shape parameter belongs to (a Stribeck velocity's Stribeck friction at its joint)."""
+    return Term("stribeck_friction", t.target)
 
 
 def _identifiability(confusable: list, indist: list[dict], model: dict, ties: list = ()) -> list[dict]:
@@ -1167,7 +1219,8 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
     (:func:`sysid.equivalence.rival_families`) is fitted in its place (the effect's terms removed, the
     rival's terms fitted, grid starts for non-smooth families, the rest of the model kept; a Stribeck
     friction is fitted beside the Coulomb term it rivals, whose static excess it is: BAM's nested
-    comparison). The candidate with the lowest held-out cost is the winner (one fitted at a bound of its
+    comparison; a rival gear play replaces the play the model already holds at that joint, since one
+    joint holds one play). The candidate with the lowest held-out cost is the winner (one fitted at a bound of its
     family only if no other comes within the margin of it), and the model keeps it. A candidate fitted
     at a bound is otherwise no candidate (a distorted form), except a nested excess fitted to zero,
     which is tested at its probe size beside the winner: could these logs show it? If not, the winner
@@ -1210,27 +1263,40 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
         rest = {u: v for u, v in base_vals.items() if u not in grp}
         nested = {u for u in grp if u.family == "coulomb_friction"}  # Stribeck's excess is beside a Coulomb level
         cands = [{"family": fam, "values": base_vals, "terms": list(grp)}]
-        plays = {v.target for v in rest if v.family in PLAY_FAMILIES}
-        rival_sets = {}
+        rival_sets, replaced = {}, {}
         for g in rivals:
             rts = [u for u in rival_terms(grp[0], g, robot) if u not in rest]
-            if rts and not any(u.family in PLAY_FAMILIES and u.target in plays for u in rts):
-                rival_sets[g] = rts
-        # a Stribeck excess rivals a Coulomb term beside it (nested): no linearised probe without the
-        # Coulomb level can show what it adds, so it is always fitted
+            if not rts:
+                continue
+            rival_sets[g] = rts
+            # one joint holds one gear play: a rival play replaces the play the model has there (a series
+            # spring beside a dead band is tested against motor-side play in place of both)
+            drop = [v for v in rest if v.family in PLAY_FAMILIES
+                    and any(u.family in PLAY_FAMILIES and u.target == v.target for u in rts)]
+            if drop:
+                replaced[g] = drop
+        # a Stribeck excess rivals a Coulomb term beside it (nested), and a replacing play takes another
+        # term with it: no linearised probe on ``rest`` shows what they add, so they are always fitted
+        always = [g for g in rival_sets if (nested and g == "stribeck_friction") or g in replaced]
         plausible = _plausible_rivals(problem, base_vals, rest,
-                                      {g: r for g, r in rival_sets.items() if not (nested and g == "stribeck_friction")},
-                                      robot)
-        plausible += [g for g in rival_sets if nested and g == "stribeck_friction"]
+                                      {g: r for g, r in rival_sets.items() if g not in always}, robot)
+        plausible += always
         for g in plausible:
             rts = rival_sets[g]
             keep = {u: base_vals[u] for u in nested} if g == "stribeck_friction" else {}
-            start = {**rest, **keep, **{u: float(term_probe(u, robot)) for u in rts}}
+            # a Stribeck friction is fitted with its Stribeck velocity (BAM's M2), from two starts: the
+            # library's default and a slower fall-off (the fit is not convex in it)
+            shape = [Term("stribeck_velocity", u.target) for u in rts if u.family == "stribeck_friction"]
+            start = {**{u: v for u, v in rest.items() if u not in replaced.get(g, ())}, **keep,
+                     **{u: float(term_probe(u, robot)) for u in rts}}
             try:
-                fit = refit(problem, start, free=rts + list(keep), max_nfev=6)
+                fits = [refit(problem, {**start, **{u: v0 for u in shape}}, free=rts + list(keep) + shape, max_nfev=6)
+                        for v0 in ((STRIBECK_VELOCITY, SLOW_STRIBECK_START) if shape else (None,))]
             except ValueError:  # a rival this robot's model cannot hold (e.g. a structure clash): not a candidate
                 continue
-            cands.append({"family": g, "values": dict(fit.values), "terms": rts + list(keep), "own": rts})
+            fit = min(fits, key=lambda f: f.cost)
+            cands.append({"family": g, "values": dict(fit.values), "terms": rts + list(keep), "own": rts,
+                          "replaces": replaced.get(g, [])})
         if len(cands) == 1:
             continue
         costs = problem.cost([c["values"] for c in cands], "heldout")
@@ -1282,8 +1348,8 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
         if win != 0:
             out.model = dict(w["values"])
             out.cost = w["heldout_cost"]
-            for t in grp:
-                out.rejected.append({"term": t.label(), "family": fam, "value": base_vals[t],
+            for t in list(grp) + list(w.get("replaces", [])):
+                out.rejected.append({"term": t.label(), "family": t.family, "value": base_vals[t],
                                      "reason": f"{w['family']} in its place fits the held-out logs better "
                                                f"(cost {w['heldout_cost']:.1f} vs {cands[0]['heldout_cost']:.1f})"})
         seg, text = separating(w["family"], tied[1]["family"]) if len(tied) > 1 else (None, None)
@@ -1304,6 +1370,12 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
             continue
         out.decisions.append(dec)
     return out
+
+
+#: Second start [rad/s] of a Stribeck velocity fitted in the class test (the first is the library's
+#: :data:`sysid.model.STRIBECK_VELOCITY`): friction whose static excess fades over several tenths of a
+#: rad/s (BAM's servos, Duclusaud et al., arXiv:2410.08650) is far from the default's basin.
+SLOW_STRIBECK_START = 0.4
 
 
 #: A rival family is fitted in the class test only if its linearised probes explain at least this share

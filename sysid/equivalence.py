@@ -48,6 +48,8 @@ CLASSES: dict[str, EffectClass] = {c.name: c for c in (
     EffectClass("damping", "joint damping", ("kd_gain", "viscous_damping")),
     EffectClass("offset", "static angle offset", ("sensor_bias", "encoder_offset", "backlash_motor", "link_com")),
     EffectClass("play", "gear play", ("backlash", "backlash_motor", "backlash_link")),
+    EffectClass("transmission", "transmission (a series spring or gear play)",
+                ("joint_compliance", "backlash", "backlash_motor", "backlash_link")),
     EffectClass("lag", "command lag", ("latency", "command_lowpass")),
     EffectClass("load", "static load", ("link_mass", "link_com", "pd_gain")),
     EffectClass("saturation", "actuator torque limit", ("torque_limit", "joint_torque_limit", "back_emf")),
@@ -103,6 +105,15 @@ SEPARATING: dict[frozenset, tuple[str, str]] = {
     frozenset({"backlash_link", "backlash_motor"}): (
         "load_reversal", "slow sweeps through the load reversal: an encoder on the motor shaft hides the link's "
                          "travel across the play, one on the output shows it"),
+    frozenset({"joint_compliance", "backlash"}): (
+        "load_reversal", "slow sweeps through the load reversal: a series spring's deflection follows the load "
+                         "smoothly through zero, gear play jumps by its width there"),
+    frozenset({"joint_compliance", "backlash_motor"}): (
+        "load_reversal", "slow sweeps through the load reversal: a series spring's deflection follows the load "
+                         "smoothly through zero, gear play jumps by its width there"),
+    frozenset({"joint_compliance", "backlash_link"}): (
+        "load_reversal", "slow sweeps through the load reversal: a series spring's deflection follows the load "
+                         "smoothly through zero, gear play jumps by its width there"),
     frozenset({"latency", "command_lowpass"}): (
         "chirp", "a chirp to 4 Hz or beyond: a delay's phase lag grows in proportion to the frequency at full "
                  "amplitude, a low-pass's levels off while its amplitude falls"),

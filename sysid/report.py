@@ -167,8 +167,9 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
         KeyError: an unknown robot name.
     """
     from robots import get_robot
-    from sysid.candidates import series_structure
-    from sysid.model import Structure, replay_spec, spring_stiffness_max
+    from sysid.candidates import Term, series_structure
+    from sysid.model import (STRIBECK_GAIN_SHARE, STRIBECK_SUFFIX, STRIBECK_VELOCITY, Structure, joint_inertia,
+                             replay_spec, spring_stiffness_max)
 
     robot = get_robot(robot_name)
     st = series_structure(Structure(fixed_base=fixed_base, physics_dt=physics_dt, robot=robot.name), model_terms)
@@ -177,12 +178,22 @@ def export_mjcf(model_terms: dict, fixed_base: bool, physics_dt: float, robot_na
     for t, v in model_terms.items():
         v = float(v)
         f = t.family
-        if f == "latency":
-            for a in spec.actuators:
-                a.delay = v
+        if f == "latency":  # the servos' commands (a Stribeck element is friction, not commanded)
+            for n in robot.joint_names:
+                spec.actuator(n).delay = v
         elif f in ("coulomb_friction", "coulomb_friction_all"):
             for n in ([t.target] if f == "coulomb_friction" else robot.joint_names):
                 spec.joint(n).frictionloss = spec.joint(n).frictionloss + v
+        elif f == "stribeck_friction":  # as sysid.candidates.apply_terms: the static level, given back with speed
+            spec.joint(t.target).frictionloss = spec.joint(t.target).frictionloss + v
+            vs = float(model_terms.get(Term("stribeck_velocity", t.target), STRIBECK_VELOCITY))
+            k = min(v / vs, STRIBECK_GAIN_SHARE * joint_inertia(robot.name, fixed_base)[t.target] / physics_dt)
+            a = spec.actuator(t.target + STRIBECK_SUFFIX)
+            a.biasprm[2] = k
+            # MuJoCo 4.0 compiles an affine bias [0, 0, k] under a zero gain to [0, 0, -0]; a gain of 1e-12
+            # keeps it (the element has no command: ctrl 0, so the gain adds nothing)
+            a.gainprm[0] = 1e-12
+            a.forcerange = [-max(v, 1e-9), max(v, 1e-9)]
         elif f in ("viscous_damping", "viscous_damping_all"):
             for n in ([t.target] if f == "viscous_damping" else robot.joint_names):
                 j = spec.joint(n)

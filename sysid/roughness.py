@@ -1,4 +1,4 @@
-"""Terrain roughness as a fitted *distribution* of ground surfaces (issue 8; BayesSim/DROPO-style, below).
+"""Terrain roughness as a fitted *distribution* of ground surfaces (BayesSim/DROPO-style, below).
 
 Uneven ground is not a value the sim lacks but a random surface under the feet that nobody
 measured: replaying a log on flat ground leaves a residual that no deterministic term removes

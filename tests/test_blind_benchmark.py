@@ -1,4 +1,4 @@
-"""The blind benchmark of ``sgatwalk diagnose`` (issue 20): what reaches the tool holds nothing of
+"""The blind benchmark of ``sgatwalk diagnose``: what reaches the tool holds nothing of
 the truth, and the scorer counts every reported term."""
 
 import os
@@ -211,6 +211,8 @@ def test_stranger_truth_in_the_library_units():
     e = {"family": "friction_stribeck", "targets": ["LKneePitch"], "values": [0.1], "params": [{"stiction_ratio": 1.5}]}
     assert truth_values(e, r) == [("stribeck_friction", "LKneePitch", pytest.approx(0.05)),
                                   ("coulomb_friction", "LKneePitch", 0.1)]
+    e["params"] = [{"stiction_ratio": 1.5, "viscous": 0.02}]
+    assert truth_values(e, r)[-1] == ("viscous_damping", "LKneePitch", 0.02)
     e = {"family": "com_offset", "targets": ["LTibia"], "values": [0.02], "params": [{"direction": [0.0, 0.6, 0.8]}]}
     assert [(f, t, round(v, 4)) for f, t, v in truth_values(e, r)] == [
         ("link_com", "LTibia:x", 0.0), ("link_com", "LTibia:y", 0.012), ("link_com", "LTibia:z", 0.016)]
@@ -251,6 +253,13 @@ def test_a_stribeck_stranger_named_as_coulomb_with_its_excess_not_excluded_is_na
                                          "segment": "velocity_sweep", "experiment": "..."}]}
     s = score(truth, _sreport([caveat]), r)
     assert s["named_right"] and s["by_class"] and not s["wrong_found"]
+    # the strangers' Stribeck friction has a viscous term: a viscous damping found beside is no wrong Found,
+    # and it does not name the Stribeck form alone
+    visc = _eff("viscous_damping", joints=["LHipPitch"], value=0.03, ci=(0.02, 0.04))
+    s = score([{**truth[0], "params": [{"stiction_ratio": 1.5, "viscous": 0.03}]}], _sreport([visc]), r)
+    assert not s["named_right"] and not s["wrong_found"] and s["ci_cover"] == [True]
+    s = score(truth, _sreport([_eff("viscous_damping", joints=["RHipRoll"], value=0.03)]), r)
+    assert s["wrong_found"] == ["viscous_damping[RHipRoll]"]  # elsewhere it is wrong
 
 
 def test_own_benchmark_counts_a_class_that_holds_the_truth_as_named_right():

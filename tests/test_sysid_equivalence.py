@@ -33,6 +33,10 @@ def test_every_separating_segment_is_one_the_excitation_records_and_classes_name
     assert "torque_constant" in rival_families("pd_gain") and "joint_compliance" in rival_families("pd_gain")
     assert separating("sensor_bias", "backlash_motor")[0] == "load_reversal"
     assert separating("pd_gain", "torque_constant")[0] == "velocity_sweep"
+    # a series spring and gear play are one transmission class: a play's deflection jumps at the reversal
+    assert {"backlash", "backlash_motor", "backlash_link"} <= set(rival_families("joint_compliance"))
+    assert "joint_compliance" in rival_families("backlash_motor")
+    assert separating("joint_compliance", "backlash_motor")[0] == "load_reversal"
 
 
 def test_rivals_stand_in_at_the_place_of_the_term():
@@ -104,3 +108,23 @@ def test_a_nested_excess_the_logs_cannot_show_leaves_the_winner_found_with_a_cav
                                                           "heldout_cost": 24.1, "z": 0.5}]}], robot)
     assert found == [] and eq[0]["family"] == t.family and [c["family"] for c in eq[0]["candidates"]] == \
         ["coulomb_friction", "backlash"]
+
+
+@pytest.mark.slow
+def test_a_rival_play_replaces_the_play_the_model_holds_at_that_joint():
+    """A series spring beside a dead band at a joint with motor-side play: the spring's class test fits
+    motor-side play in place of both (one joint holds one play) instead of leaving the rival out."""
+    from sysid.diagnose import _Clock, _equivalence
+
+    robot = nao_h25()
+    j = "LKneePitch"
+    p = _problem({Term("backlash_motor", j): 0.012}, ("holds", "load_reversal"))
+    spring, band = Term("joint_compliance", j), Term("backlash", j)
+    fit = refit(p, {spring: 0.005, band: 0.006})
+    cost = float(p.cost([fit.values], "heldout")[0])
+    eq = _equivalence(p, fit.values, cost, robot, _Clock(time.perf_counter(), None), lambda s: None)
+    tried = [t for t in eq.tests if t["effect"] == spring.label()]
+    assert any(t["rival"] == "backlash_motor" or t["winner"] == "backlash_motor" for t in tried)
+    if Term("backlash_motor", j) in eq.model:  # the play replaced both: the dead band went with the spring
+        assert band not in eq.model and spring not in eq.model
+        assert {r["term"] for r in eq.rejected} >= {spring.label(), band.label()}

@@ -159,6 +159,32 @@ def test_the_identified_model_carries_a_parallel_spring():
     assert np.count_nonzero(k) == 1 and np.all(m.qpos_spring[m.jnt_qposadr[jid]] == 0.0)
 
 
+def test_the_identified_model_carries_a_stribeck_friction_beside_a_latency():
+    """The MJCF export writes a Stribeck friction as the replays hold it (the static level in
+    frictionloss, the Stribeck element's velocity gain excess / v_s and its cap), with its fitted Stribeck
+    velocity; a latency delays the servos only (the Stribeck element has no command to delay)."""
+    import copy
+
+    import mujoco
+
+    from sysid.model import STRIBECK_SUFFIX, Structure, replay_model
+    from sysid.candidates import apply_terms, series_structure
+    from sysid.report import export_mjcf
+
+    j = "LKneePitch"
+    terms = {Term("latency"): 0.02, Term("coulomb_friction", j): 0.1, Term("stribeck_friction", j): 0.05,
+             Term("stribeck_velocity", j): 0.4}
+    m = mujoco.MjModel.from_xml_string(export_mjcf(terms, True, 0.001))
+    rm = replay_model(series_structure(Structure(fixed_base=True, physics_dt=0.001), terms))
+    ref = copy.copy(rm.model)
+    apply_terms(rm, ref, terms)
+    a, a_ref = m.actuator(j + STRIBECK_SUFFIX), ref.actuator(j + STRIBECK_SUFFIX)
+    assert a.biasprm[2] == pytest.approx(a_ref.biasprm[2]) == pytest.approx(0.05 / 0.4)
+    assert list(a.forcerange) == pytest.approx([-0.05, 0.05]) and m.actuator_delay[a.id] == 0
+    assert m.dof_frictionloss[m.jnt_dofadr[m.joint(j).id]] == pytest.approx(0.15)
+    assert m.actuator_delay[m.actuator(j).id] == pytest.approx(0.02)
+
+
 def test_parallel_spring_scales_with_each_joints_kp():
     """Probe, upper bound and smallest reported effect are shares of the joint's kp (the NAO's legs:
     the family's numbers), so a wrist (kp 1) and a G1 knee get theirs."""

@@ -156,3 +156,31 @@ def test_the_joint_blocks_partner_joins_a_pick_at_its_nominal_value():
     sr = screen(problem, robot, {}, ("pd_gain", "kd_gain", "latency"))
     assert Term("pd_gain", "LAnklePitch") in sr.selected
     assert sr.selected.get(Term("kd_gain", "LAnklePitch")) == 1.0
+
+
+@pytest.mark.slow
+def test_a_stribeck_friction_is_fitted_with_its_stribeck_velocity():
+    """BAM's M2 form: the static excess falls away over a fitted Stribeck velocity. Logs of moves at
+    several constant speeds with friction whose excess fades over 0.4 rad/s are fitted better with the
+    velocity free than at the library's default (0.1 rad/s), and the velocity comes back; the class test of the Coulomb friction
+    that screening finds fits its Stribeck rival with the velocity too."""
+    import time
+
+    from sysid.diagnose import _Clock, _equivalence
+    from sysid.model import STRIBECK_VELOCITY
+
+    robot = nao_h25()
+    j = "LHipPitch"
+    cf, sf, sv = Term("coulomb_friction", j), Term("stribeck_friction", j), Term("stribeck_velocity", j)
+    problem = _problem({cf: 0.1, sf: 0.15, sv: 0.4}, segments=("holds", "velocity_sweep", "reversals"), seconds=4.0)
+    fixed = refit(problem, {cf: 0.1, sf: 0.1})
+    free = min((refit(problem, {cf: 0.1, sf: 0.1, sv: v0}) for v0 in (STRIBECK_VELOCITY, 0.4)), key=lambda f: f.cost)
+    # a shape difference, not a level one: the sum of squared residuals (over ~9600 of noise) drops by > 5
+    assert free.cost < fixed.cost - 5
+    assert 0.25 < free.values[sv] < 0.65, free.values[sv]
+    coulomb = refit(problem, {cf: 0.15})
+    cost = float(problem.cost([coulomb.values], "heldout")[0])
+    eq = _equivalence(problem, coulomb.values, cost, robot, _Clock(time.perf_counter(), None), lambda s: None)
+    assert any("stribeck_friction" in (t["winner"], t["rival"]) for t in eq.tests)
+    if sf in eq.model:  # the Stribeck form won: its velocity came with it
+        assert 0.2 < eq.model[sv] < 0.8

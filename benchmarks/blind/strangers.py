@@ -44,6 +44,10 @@ KIND_FAMILIES = {
 #: a delay behind a low-pass named as the delay alone): such a report is counted as *partly right*
 #: beside the named-right rate, not in it.
 PARTIAL = {"friction_stribeck": ("coulomb_friction",), "latency_lowpass": ("latency",)}
+#: Families that are a part of a kind's form but do not name it alone: the viscous term of the strangers'
+#: Stribeck friction (its ``viscous`` parameter, drawn in every trial). A finding of one at the kind's
+#: place is no wrong Found; it does not make the kind named right either.
+COMPONENTS = {"friction_stribeck": ("viscous_damping",)}
 
 
 def kinds(fixed_base: bool) -> list[str]:
@@ -100,6 +104,8 @@ def truth_values(e: dict, robot) -> list[tuple[str, str | None, float]]:
         elif k == "friction_stribeck":
             out.append(("stribeck_friction", tg, (float(p.get("stiction_ratio", 1.5)) - 1.0) * v))
             out.append(("coulomb_friction", tg, v))
+            if p.get("viscous"):
+                out.append(("viscous_damping", tg, float(p["viscous"])))
         elif k == "encoder_offset":
             out.append(("encoder_offset", tg, v))
         elif k == "readout_offset":
@@ -191,7 +197,8 @@ def score(truth: list[dict], report: dict, robot) -> dict:
         named.append(bool(hit_f or hit_c))
         by_class.append(bool(hit_c and not hit_f))
         partly.append(bool(not hit_f and not hit_c and hit_p))
-        right_entries.update(i for i, x in enumerate(eff) if x["family"] in fams and _at(x, e))
+        right_entries.update(i for i, x in enumerate(eff)
+                             if x["family"] in fams + COMPONENTS.get(k, ()) and _at(x, e))
     wrong_entries = [x for i, x in enumerate(eff) if i not in right_entries]
 
     def label(x):
