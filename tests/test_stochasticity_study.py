@@ -52,13 +52,36 @@ def test_trend_test_is_welch_on_the_per_seed_contrasts():
     assert trend_test([1.0], [2.0, 3.0]) is None
 
 
+def _parts(cfg):
+    return [k for k, _, _ in Study.parts(type("S", (), {"cfg": cfg, "out": "x"})())]
+
+
 def test_a_study_of_table1_runs_only_has_no_fidelity_level():
-    cfg = StudyConfig(levels=(), table1_levels=(0, 3), real_seeds=0)
+    cfg = StudyConfig(levels=(), table1_levels=(0, 3), real_seeds=0, check_episodes=0)
     cfg.validate()
-    assert [k for k, _, _ in Study.parts(
-        type("S", (), {"cfg": cfg, "out": "x"})())] == ["table1", "table1"]
+    assert _parts(cfg) == ["table1", "table1"]
     with pytest.raises(ValueError, match="no level given"):
         StudyConfig(levels=()).validate()
+
+
+def test_the_falls_check_follows_the_other_parts_for_grounded_methods_only():
+    assert _parts(StudyConfig(levels=(0,), table1_levels=(0, 3), real_seeds=0)) == [
+        "table1", "table1", "fidelity", "falls", "falls"]
+    assert "falls" not in _parts(StudyConfig(levels=(0,), methods=("sim", "ane"), real_seeds=0))
+    with pytest.raises(ValueError, match="check_episodes"):
+        StudyConfig(check_episodes=-1).validate()
+
+
+def test_a_study_saved_before_a_setting_existed_resumes_with_it(tmp_path):
+    cfg = StudyConfig(levels=(0,), real_seeds=0)
+    old = cfg.to_dict()
+    del old["check_episodes"]
+    (tmp_path / "study_config.json").write_text(json.dumps(old))
+    Study(cfg, str(tmp_path), None)  # no error: the new setting only adds a part
+    old["seeds"] = 9
+    (tmp_path / "study_config.json").write_text(json.dumps(old))
+    with pytest.raises(ValueError, match="other settings \\(seeds\\)"):
+        Study(cfg, str(tmp_path), None)
 
 
 def test_summary_reads_the_parts_done_so_far(tmp_path):
@@ -81,14 +104,26 @@ def test_bad_settings_are_usage_errors(capsys):
 
 @pytest.mark.slow
 def test_a_tiny_study_runs_resumes_and_draws_its_figure(tmp_path, capsys):
-    args = ["stochasticity", "--levels", "0,1", "--worlds", "sim,gat", "--gaits", "2", "--real-trials", "2",
-            "--data-seeds", "1", "--episodes", "1", "--methods", "sgat,gat", "--seeds", "2", "--trials", "2",
-            "--real-seeds", "0", "--popsize", "3", "--generations", "1", "--seconds", "0.8", "--out", str(tmp_path / "s"),
-            "--json"]
+    args = ["stochasticity", "--levels", "0,1", "--table1-levels", "1", "--worlds", "sim,sgat", "--gaits", "2",
+            "--real-trials", "2", "--data-seeds", "2", "--episodes", "1", "--methods", "sgat,gat", "--seeds", "2",
+            "--trials", "2", "--real-seeds", "0", "--popsize", "3", "--generations", "1", "--seconds", "0.8",
+            "--check-episodes", "3", "--out", str(tmp_path / "s"), "--json"]
     assert main(args) == 0
     res = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert [e["level"] for e in res["levels"]] == [0.0, 1.0]
-    assert {"sim", "gat"} <= set(res["levels"][1]["fidelity"]) and res["levels"][1]["sgat_minus_gat"]
+    assert {"sim", "sgat"} <= set(res["levels"][1]["fidelity"]) and res["levels"][1]["sgat_minus_gat"]
+    assert "table1" not in res["levels"][0]  # Table I at level 1 only
+    # the falls check: each method's last-step gaits, 3 grounded episodes per seed, beside Table I's real trials
+    for e in res["levels"][1:]:
+        rows = {(r["method"], r["step"]): r for r in e["table1"]}
+        for m in ("sgat", "gat"):
+            g = e["grounded_falls"][m]
+            assert g["grounded"]["n"] == 2 * 3 and 0 <= g["grounded"]["falls"] <= 6
+            last = max(st for mm, st in rows if mm == m)
+            assert g["real"]["n"] == rows[(m, last)]["n"] == 4 and g["real"]["falls"] == rows[(m, last)]["falls"]
+    for e in res["levels"]:
+        c = e["forward_calibration"]  # SGAT's models of one draw on the other draw's real walks
+        assert c["transitions"] > 0 and 0 < c["median_z_std"] < 100 and len(c["worst"]) == 3
     assert (tmp_path / "s" / "stochasticity.png").read_bytes()[:4] == b"\x89PNG"
     cfg = json.loads((tmp_path / "s" / "table1-L1" / "table1.json").read_text())["config"]
     assert cfg["optimize"]["stochasticity"] == 1.0

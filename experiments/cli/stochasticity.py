@@ -46,6 +46,9 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--trials", type=A.count(2, 10000), default=d.trials, help=f"Table I paired real trials (default {d.trials})")
     p.add_argument("--real-seeds", type=A.count(0, 100), default=d.real_seeds,
                    help=f"seeds of CMA-ES in the real world, the bound (default {d.real_seeds}; 0: none)")
+    p.add_argument("--check-episodes", type=A.count(0, 1000), default=d.check_episodes,
+                   help=f"episodes of each SGAT and GAT gait in its own grounded world, beside its real fall rate "
+                        f"(default {d.check_episodes}; 0: none)")
     p.add_argument("--popsize", type=A.count(2, 10000), help="CMA-ES population of each optimization (default: optimize's)")
     p.add_argument("--generations", type=A.count(1, 10000), help="CMA-ES generations per grounding step (default: optimize's)")
     p.add_argument("--seconds", type=A.seconds, default=d.seconds, help=f"episode length [s] (default {d.seconds:g})")
@@ -66,6 +69,7 @@ def run(args):
         cfg = StudyConfig(levels=args.levels, table1_levels=args.table1_levels, worlds=args.worlds, gaits=args.gaits,
                           real_trials=args.real_trials, data_seeds=args.data_seeds, episodes=args.episodes,
                           methods=args.methods, seeds=args.seeds, trials=args.trials, real_seeds=args.real_seeds,
+                          check_episodes=args.check_episodes,
                           optimize=opt, seconds=args.seconds, seed=args.seed)
         study = Study(cfg, args.out, None, reporter=Reporter("stochasticity"))
     with make_executor(args.workers, args.ray_address) as ex:

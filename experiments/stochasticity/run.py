@@ -10,7 +10,11 @@ friction and contact softness per touchdown) is the axis the paper sweeps. At ea
   fall calibration, over independent draws of the real data), in ``fidelity-L<level>/``;
 * at the lowest and the highest level, ``sgatwalk table1`` of SGAT, GAT, the plain sim and ANE (optimization
   seeds x paired real trials), in ``table1-L<level>/``, and CMA-ES in the real world itself (``--methods
-  real``, the bound of what the walk engine reaches there), in ``real-L<level>/``.
+  real``, the bound of what the walk engine reaches there), in ``real-L<level>/``;
+* why the grounded gaits fall (:mod:`experiments.stochasticity.falls`): at the Table I levels, each
+  SGAT and GAT gait walked ``check_episodes`` times in the grounded world it was optimized in, beside
+  its real fall rate, in ``falls-L<level>/``; at every fidelity level, SGAT's forward-model σ against
+  held-out real transitions (in the summary).
 
 Every part is an ordinary run directory, resumed where it stopped; the summary (``study.json``,
 ``stochasticity.png``, ``table.txt``) is rewritten after each part, from the parts done so far.
@@ -41,6 +45,7 @@ class StudyConfig:
             (``sgatwalk fidelity``).
         methods: Table I methods; seeds: optimization seeds; trials: paired real trials per gait.
         real_seeds: optimization seeds of CMA-ES in the real world (0: none).
+        check_episodes: grounded-world episodes per Table I gait of the falls check (0: none).
         optimize: ``sgatwalk optimize`` settings of every optimization (e.g. ``{"generations": 15}``).
         seconds: episode length [s] of every part; seed: the run seed of every part.
     """
@@ -56,6 +61,7 @@ class StudyConfig:
     seeds: int = 5
     trials: int = 30
     real_seeds: int = 3
+    check_episodes: int = 20
     optimize: dict = dataclasses.field(default_factory=dict)
     seconds: float = 7.5
     seed: int = 0
@@ -77,6 +83,8 @@ class StudyConfig:
                 raise ValueError(f"levels must be numbers >= 0, got {v}")
         if self.real_seeds < 0:
             raise ValueError(f"real_seeds must be >= 0, got {self.real_seeds}")
+        if self.check_episodes < 0:
+            raise ValueError(f"check_episodes must be >= 0, got {self.check_episodes}")
         self.fidelity(self.levels[0] if self.levels else 0.0).validate()
         Table1Config(**self._table1(self.table1_levels[0] if self.table1_levels else 0.0)).validate()
 
@@ -96,6 +104,10 @@ class StudyConfig:
         return jsonable(dataclasses.asdict(self))
 
 
+#: Grounded methods whose Table I gaits the falls check walks in their own training world.
+CHECKED = ("sgat", "gat")
+
+
 def _tag(level: float) -> str:
     return f"L{level:g}"
 
@@ -113,7 +125,8 @@ class Study:
             with open(path) as f:
                 old = json.load(f)
             fixed = {k: v for k, v in cfg.to_dict().items() if k not in ("levels", "table1_levels")}
-            changed = sorted(k for k, v in fixed.items() if old.get(k) != v)
+            # a setting the saved study does not name is one added since: it adds a part, changes none
+            changed = sorted(k for k, v in fixed.items() if k in old and old[k] != v)
             if changed:
                 raise ValueError(f"{out} holds a study with other settings ({', '.join(changed)}); "
                                  "use another --out (more levels may be added)")
@@ -121,23 +134,27 @@ class Study:
 
     def parts(self) -> list[tuple[str, str, float]]:
         """``[(kind, run directory, level)]`` in run order: Table I at the Table I levels (the study's
-        question), then the real-world bound at those levels, then fidelity at every level."""
+        question), then the real-world bound at those levels, then fidelity at every level, then the
+        falls check of the Table I gaits of grounded methods."""
         cfg = self.cfg
         out = [("table1", os.path.join(self.out, f"table1-{_tag(v)}"), v) for v in cfg.table1_levels]
         if cfg.real_seeds:
             out += [("real", os.path.join(self.out, f"real-{_tag(v)}"), v) for v in cfg.table1_levels]
         out += [("fidelity", os.path.join(self.out, f"fidelity-{_tag(v)}"), v) for v in cfg.levels]
+        if cfg.check_episodes and set(cfg.methods) & set(CHECKED):
+            out += [("falls", os.path.join(self.out, f"falls-{_tag(v)}"), v) for v in cfg.table1_levels]
         return out
 
     def run(self) -> dict:
         """Run every part not finished yet, rewriting the summary after each; returns the summary."""
         from experiments.fidelity.run import Fidelity
         from experiments.table1.config import Table1Config
+        from experiments.stochasticity.falls import grounded_falls
         from experiments.table1.run import Table1
 
         parts = self.parts()
         for i, (kind, run_dir, level) in enumerate(parts):
-            done = os.path.join(run_dir, "fidelity.json" if kind == "fidelity" else "table1.json")
+            done = os.path.join(run_dir, {"fidelity": "fidelity.json", "falls": "falls.json"}.get(kind, "table1.json"))
             self.report.say(f"part {i + 1}/{len(parts)}: {kind} at level {level:g} ({run_dir})"
                             + (" - done" if os.path.exists(done) else ""))
             if os.path.exists(done):
@@ -145,6 +162,9 @@ class Study:
             child = self.report.child(f"{kind} {_tag(level)}")
             if kind == "fidelity":
                 Fidelity(self.cfg.fidelity(level), run_dir, self.ex, reporter=child).run()
+            elif kind == "falls":
+                grounded_falls(os.path.join(self.out, f"table1-{_tag(level)}"), run_dir, self.ex,
+                               methods=CHECKED, episodes=self.cfg.check_episodes, seed=self.cfg.seed, reporter=child)
             else:
                 kw = self.cfg._table1(level, ("real",), self.cfg.real_seeds) if kind == "real" else self.cfg._table1(level)
                 Table1(Table1Config(**kw), run_dir, self.ex, reporter=child).run()
@@ -220,8 +240,10 @@ def table1_contrast(res: dict, a: str = "sgat", b: str = "gat") -> list[dict]:
 
 
 def summarize(out: str, cfg: StudyConfig) -> dict:
-    """What the parts in ``out`` found so far: per level, every fidelity world's scores over the draws;
-    at the Table I levels, the rows, SGAT - GAT (fitness, falls) and the real-world bound."""
+    """What the parts in ``out`` found so far: per level, every fidelity world's scores over the draws and
+    SGAT's forward-model calibration (:func:`experiments.stochasticity.falls.forward_calibration`); at the
+    Table I levels, the rows, SGAT - GAT (fitness, falls), the real-world bound and the grounded worlds'
+    fall rates of the gaits (:func:`experiments.stochasticity.falls.grounded_falls`)."""
     levels = []
     for v in sorted(set(cfg.levels) | set(cfg.table1_levels)):
         entry: dict = {"level": v}
@@ -230,11 +252,25 @@ def summarize(out: str, cfg: StudyConfig) -> dict:
             entry["real_fall_rate"] = float(np.mean(fid["real"]["fall_rate"]))
             entry["fidelity"] = {w: {k: d["summary"][k] for k in ("rho", "bias", "brier")}
                                  for w, d in fid["worlds"].items()}
+            # θ0, the gait every grounding walk uses: its fall rate in each world (mean over draws) and real
+            entry["theta0_fall_rate"] = {"real": float(fid["real"]["fall_rate"][0]), **{
+                w: float(np.mean([dr["fall_rate"][0] for dr in d["draws"]])) for w, d in fid["worlds"].items()
+                if d.get("draws") and "fall_rate" in d["draws"][0]}}
         t1 = _load(os.path.join(out, f"table1-{_tag(v)}", "table1.json"))
         if t1:
             entry["table1"] = [{k: r[k] for k in ("method", "step", "n", "fitness_mean", "fitness_se", "falls", "falls_ci95")}
                                for r in t1["rows"]]
             entry["sgat_minus_gat"] = table1_contrast(t1)
+        gf = _load(os.path.join(out, f"falls-{_tag(v)}", "falls.json"))
+        if gf:
+            entry["grounded_falls"] = {m: {k: r[k] for k in ("grounded", "real")} for m, r in gf["methods"].items()}
+        if fid and "sgat" in fid["worlds"] and len(fid["worlds"]["sgat"].get("draws", [])) >= 2:
+            from experiments.stochasticity.falls import forward_calibration
+
+            c = forward_calibration(os.path.join(out, f"fidelity-{_tag(v)}"))
+            entry["forward_calibration"] = {k: c[k] for k in ("median_z_std", "overconfident_share", "worst",
+                                                              "mixture_median_z_std", "in_sample_median_z_std",
+                                                              "transitions")}
         rb = _load(os.path.join(out, f"real-{_tag(v)}", "table1.json"))
         if rb:
             entry["real_bound"] = [{k: r[k] for k in ("method", "step", "n", "fitness_mean", "fitness_se", "falls", "falls_ci95")}
@@ -315,6 +351,26 @@ def format_table(res: dict) -> str:
         for r in e.get("real_bound", []):
             lines.append(f"level {e['level']:g}: CMA-ES in the real world, step {r['step']}: fitness "
                          f"{r['fitness_mean']:.2f} ± {r['fitness_se']:.2f}, falls {r['falls']}/{r['n']}")
+    checks = [e for e in res["levels"] if e.get("grounded_falls") or e.get("forward_calibration")]
+    if checks:
+        lines += ["", "why the grounded gaits fall: fall rate of the last step's gaits in their own grounded world "
+                      "and in the real one (95 % Wilson interval)"]
+        for e in checks:
+            for m, r in e.get("grounded_falls", {}).items():
+                g, x = r["grounded"], r["real"]
+                lines.append(f"level {e['level']:g} {m:>5}: grounded {g['falls']:>3}/{g['n']:<3} "
+                             f"[{100 * g['ci95'][0]:.0f}, {100 * g['ci95'][1]:.0f}] %, fitness {g['fitness_mean']:+.2f}; "
+                             f"real {x['falls']:>3}/{x['n']:<3} [{100 * x['ci95'][0]:.0f}, {100 * x['ci95'][1]:.0f}] %, "
+                             f"fitness {x['fitness_mean']:+.2f}")
+        lines.append("SGAT forward model on held-out real transitions: spread of z = (ds - mu) / sigma per state "
+                     "dimension (1: calibrated, above 1: sigma too small)")
+        for e in checks:
+            c = e.get("forward_calibration")
+            if c:
+                worst = ", ".join(f"{n} {z:.2f}" for n, z in c["worst"])
+                lines.append(f"level {e['level']:g}: median {c['median_z_std']:.2f} (own data {c['in_sample_median_z_std']:.2f}, "
+                             f"members' mixture {c['mixture_median_z_std']:.2f}), over 1.5 in "
+                             f"{100 * c['overconfident_share']:.0f} % of dimensions; worst {worst}")
     lines += [""] + res["verdict"]
     return "\n".join(lines)
 
