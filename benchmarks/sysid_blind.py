@@ -1,4 +1,4 @@
-"""Blind benchmark of ``sgatwalk diagnose`` (issue 8; protocol: README, "The blind proof").
+"""Blind benchmark of ``sgatwalk diagnose`` (protocol: README, "The blind proof").
 
 A referee draws hidden effects (one family or "none", or two families), injects them in a world,
 records excitation logs with 1 mrad encoder noise, writes **only the recordings** to a folder the

@@ -1,4 +1,4 @@
-"""``--robot g1|talos`` on the commands (issue 22): the robot reaches the worlds, the gait
+"""``--robot g1|talos`` on the commands: the robot reaches the worlds, the gait
 parameters are the robot's, recordings say which robot, and the NAO-only parts refuse clearly."""
 
 import json

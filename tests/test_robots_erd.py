@@ -1,4 +1,4 @@
-"""Humanoids from example-robot-data (Unitree G1, PAL Talos) in both worlds (issue 22)."""
+"""Humanoids from example-robot-data (Unitree G1, PAL Talos) in both worlds."""
 
 import os
 import xml.etree.ElementTree as ET

@@ -1,4 +1,4 @@
-"""Diagnosis that holds on recordings it has never seen (issue 20): no ground truth unless asked, a
+"""Diagnosis that holds on recordings it has never seen: no ground truth unless asked, a
 noise floor from the diagnosed logs themselves, the torso as a link-mass candidate, and a floating
 excitation protocol that does not tip the robot over in its own flat world."""
 

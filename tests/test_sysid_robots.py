@@ -1,4 +1,4 @@
-"""System identification of any robot (issue 22): ``sysid`` takes the channel count and the joint and
+"""System identification of any robot: ``sysid`` takes the channel count and the joint and
 link names from the recordings' robot (``meta["robot"]``), so the NAO's flow (``sgatwalk excite`` +
 ``sgatwalk diagnose``) names a latency hidden in the Unitree G1's real world (PyBullet, fixed base)."""
 

@@ -1,4 +1,4 @@
-"""The walk engine on the humanoids of example-robot-data (issue 22): leg kinematics read from the
+"""The walk engine on the humanoids of example-robot-data: leg kinematics read from the
 RobotModel, gait parameters scaled per robot, 20 s walks in both worlds."""
 
 import numpy as np
@@ -10,7 +10,7 @@ from walk_engine import GaitParams, LegChain, WalkEngine, params_for
 from walk_engine.footsteps import SupportPolygon
 
 #: Measured forward speeds of θ0 over 20 s (flat ground, "none" profile) are 24.4 (G1) and 31.4 cm/s
-#: (Talos) in both worlds; the issue's floors:
+#: (Talos) in both worlds; the floors it must clear:
 MIN_SPEED = {"g1": 0.15, "talos": 0.08}
 
 

@@ -18,7 +18,7 @@ def _frac(k: int, n: int) -> dict:
 
 
 def metrics(rows: list[dict]) -> dict:
-    """Headline figures of scored trials (what the README shows), against the issue's targets:
+    """Headline figures of scored trials (what the README shows), against the diagnosis's targets:
     ``top1`` (single-effect trials with an effect; top-1 family), ``none_fp`` (trials on clean logs
     with any term found), ``spurious`` (trials with a reported term that is no true term),
     ``coverage`` (95 % intervals of every reported term holding the truth), ``precision``/``recall``

@@ -19,7 +19,7 @@ from .families import NOMINAL
 #: A hidden effect is *detectable* (its signal is above the noise) when it lifts at least one
 #: channel's residual RMS against the plain sim, over the trial's logs before anything is fitted, to
 #: sqrt(1.5) x that channel's noise floor: 1.5x the energy, the level at which the tool flags a joint.
-#: The diagnosis issue's top-1 target is on detectable effects; below it no tool can tell an effect
+#: The diagnosis's top-1 target is on detectable effects; below it no tool can tell an effect
 #: from the noise, and "no missing physics" is the right answer.
 DETECTABLE_RMS = math.sqrt(1.5)
 
