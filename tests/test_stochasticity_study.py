@@ -84,6 +84,16 @@ def test_a_study_saved_before_a_setting_existed_resumes_with_it(tmp_path):
         Study(cfg, str(tmp_path), None)
 
 
+def test_more_table1_methods_reopen_a_finished_table1_part(tmp_path):
+    cfg = StudyConfig(levels=(0,), methods=("sgat", "gat"), real_seeds=0)
+    study = Study(cfg, str(tmp_path), None)
+    (tmp_path / "table1-L0").mkdir()
+    (tmp_path / "table1-L0" / "table1.json").write_text(json.dumps({"config": {"methods": ["sgat", "gat"]}}))
+    assert study._done("table1", str(tmp_path / "table1-L0"))
+    more = Study(StudyConfig(levels=(0,), methods=("sgat", "gat", "sim"), real_seeds=0), str(tmp_path), None)
+    assert not more._done("table1", str(tmp_path / "table1-L0")) and not more._done("fidelity", str(tmp_path / "x"))
+
+
 def test_summary_reads_the_parts_done_so_far(tmp_path):
     cfg = StudyConfig(levels=(0, 2), real_seeds=0)
     assert cfg.table1_levels == (0.0, 2.0)

@@ -115,6 +115,10 @@ def _tag(level: float) -> str:
 class Study:
     """Runs (or resumes) a stochasticity study in ``out`` with ``executor``; see the module docstring."""
 
+    #: Settings a study directory may be resumed with changed: more levels add parts, more Table I
+    #: methods are added to the Table I parts (what was done is reused).
+    RESUMABLE = ("levels", "table1_levels", "methods")
+
     def __init__(self, cfg: StudyConfig, out: str, executor, *, reporter: Reporter | None = None):
         cfg.validate()
         self.cfg, self.out, self.ex = cfg, out, executor
@@ -124,12 +128,12 @@ class Study:
         if os.path.exists(path):
             with open(path) as f:
                 old = json.load(f)
-            fixed = {k: v for k, v in cfg.to_dict().items() if k not in ("levels", "table1_levels")}
+            fixed = {k: v for k, v in cfg.to_dict().items() if k not in self.RESUMABLE}
             # a setting the saved study does not name is one added since: it adds a part, changes none
             changed = sorted(k for k, v in fixed.items() if k in old and old[k] != v)
             if changed:
                 raise ValueError(f"{out} holds a study with other settings ({', '.join(changed)}); "
-                                 "use another --out (more levels may be added)")
+                                 "use another --out (more levels or Table I methods may be added)")
         atomic_write_text(path, json.dumps(cfg.to_dict(), indent=1))
 
     def parts(self) -> list[tuple[str, str, float]]:
@@ -154,10 +158,10 @@ class Study:
 
         parts = self.parts()
         for i, (kind, run_dir, level) in enumerate(parts):
-            done = os.path.join(run_dir, {"fidelity": "fidelity.json", "falls": "falls.json"}.get(kind, "table1.json"))
+            done = self._done(kind, run_dir)
             self.report.say(f"part {i + 1}/{len(parts)}: {kind} at level {level:g} ({run_dir})"
-                            + (" - done" if os.path.exists(done) else ""))
-            if os.path.exists(done):
+                            + (" - done" if done else ""))
+            if done:
                 continue
             child = self.report.child(f"{kind} {_tag(level)}")
             if kind == "fidelity":
@@ -172,6 +176,14 @@ class Study:
         res = summarize(self.out, self.cfg)
         self.write(res)
         return res
+
+    def _done(self, kind: str, run_dir: str) -> bool:
+        """Whether a part is finished: its result file exists and, for a Table I part, holds every
+        method of the study (methods added since are run, resuming what was done)."""
+        res = _load(os.path.join(run_dir, {"fidelity": "fidelity.json", "falls": "falls.json"}.get(kind, "table1.json")))
+        if res is None:
+            return False
+        return kind != "table1" or set(self.cfg.methods) <= set(res["config"]["methods"])
 
     def write(self, res: dict) -> None:
         atomic_write_text(os.path.join(self.out, "study.json"), json.dumps(jsonable(res), indent=1))
