@@ -8,8 +8,9 @@ seeds, ``--trials`` paired real trials) and CMA-ES in the real world itself (``-
 bound of what the walk engine reaches there). Writes ``study.json``, ``table.txt`` and
 ``stochasticity.png`` (fidelity per world against the level; SGAT - GAT real fitness and falls with
 95 % intervals over seeds) in ``--out``, after every part; the parts are run directories of their
-own, and the same command resumes where it stopped. The full default study takes about a day on 2
-cores: use fewer levels, seeds or --generations to fit a budget.
+own, and the same command resumes where it stopped (more levels or Table I methods may be added to
+a study later). The full default study takes about a day on 2 cores: use fewer levels, seeds or
+--generations to fit a budget.
 """
 
 from __future__ import annotations
