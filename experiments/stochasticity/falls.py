@@ -31,22 +31,6 @@ GROUNDED = 47
 OVERCONFIDENT = 1.5
 
 
-def _last_step_gaits(table1_dir: str, method: str, seed: int) -> tuple[int, list, str]:
-    """(step, θ in SI units, directory of that step's action transformer) of a Table I run's gait."""
-    from experiments.optimize import slug
-
-    opt = os.path.join(table1_dir, f"opt_seed{seed}", slug(method))
-    with open(os.path.join(opt, "results.json")) as f:
-        rows = [r for r in json.load(f)["rows"] if r["method"] == method and r.get("theta")]
-    if not rows:
-        raise ValueError(f"{opt} holds no optimized gait of {method}")
-    row = max(rows, key=lambda r: r["step"])
-    model = os.path.join(opt, "models", f"{slug(method)}_step{row['step']}")
-    if not os.path.isdir(model):
-        raise ValueError(f"{method} seed {seed}: no action transformer at {model} (a grounded method only)")
-    return int(row["step"]), list(row["theta"]), model
-
-
 def grounded_falls(table1_dir: str, run_dir: str, executor, *, methods=("sgat", "gat"), episodes: int = 20,
                    seed: int = 0, reporter: Reporter | None = None) -> dict:
     """Fall rate of each Table I gait in its own grounded world against the real one.
@@ -69,6 +53,7 @@ def grounded_falls(table1_dir: str, run_dir: str, executor, *, methods=("sgat", 
     from experiments.runtime.seeds import derive_seeds
     from experiments.runtime.stats import wilson_interval
     from experiments.runtime.tasks import EpisodeTask
+    from experiments.table1.run import last_step_gait
 
     report = reporter or Reporter.quiet()
     path = os.path.join(table1_dir, "table1.json")
@@ -85,7 +70,7 @@ def grounded_falls(table1_dir: str, run_dir: str, executor, *, methods=("sgat", 
     gaits, tasks = {}, []
     for m in methods:
         for s in range(cfg["seeds"]):
-            step, theta, model = _last_step_gaits(table1_dir, m, s)
+            step, theta, model = last_step_gait(table1_dir, m, s)
             gaits[(m, s)] = step
             tasks += [EpisodeTask("sim", tuple(theta), sd, seconds, transformer=model, key=f"{m}|{s}|e{j}")
                       for j, sd in enumerate(seeds)]

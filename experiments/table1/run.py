@@ -75,6 +75,28 @@ def _slug(method: str) -> str:
     return slug(method)
 
 
+def last_step_gait(table1_dir: str, method: str, seed: int) -> tuple[int, list, str]:
+    """The last grounding step's gait of ``method`` at optimization seed ``seed`` in a Table I run.
+
+    Returns:
+        (step, θ in SI units, the directory of that step's saved action transformer: the training
+        world the gait was optimized in is the sim grounded by it).
+
+    Raises:
+        ValueError: the run holds no optimized gait of the method, or the method is not grounded.
+    """
+    opt = os.path.join(table1_dir, f"opt_seed{seed}", _slug(method))
+    with open(os.path.join(opt, "results.json")) as f:
+        rows = [r for r in json.load(f)["rows"] if r["method"] == method and r.get("theta")]
+    if not rows:
+        raise ValueError(f"{opt} holds no optimized gait of {method}")
+    row = max(rows, key=lambda r: r["step"])
+    model = os.path.join(opt, "models", f"{_slug(method)}_step{row['step']}")
+    if not os.path.isdir(model):
+        raise ValueError(f"{method} seed {seed}: no action transformer at {model} (a grounded method only)")
+    return int(row["step"]), list(row["theta"]), model
+
+
 def _identify_job(job, executor) -> dict:
     """One optimization seed's identification of the real world (an executor job)."""
     from experiments.optimize import identify  # lazy: loads the engines
