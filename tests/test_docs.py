@@ -43,6 +43,14 @@ def test_render_fills_values_tables_and_stamps(tmp_path):
     assert docs.run(root, check=True) == []  # rendered: nothing stale
 
 
+def test_a_stamp_shows_the_command_without_its_output_and_run_directory_names():
+    assert docs._shown_command("sgatwalk fidelity --out runs/fid-r28 --seed 3") == "sgatwalk fidelity --seed 3"
+    assert docs._shown_command("python b.py --run runs/fid-r25 --walks 4") == "python b.py --run runs/RUN --walks 4"
+    shown = docs._shown_command("sgatwalk fidelity --params runs/t-r27/a.json runs/t-r27/b.json runs/x/c.json")
+    assert shown == "sgatwalk fidelity --params runs/RUN1/a.json runs/RUN1/b.json runs/RUN2/c.json"
+    assert docs._shown_command(None) == "(command not recorded)"
+
+
 def test_a_stale_block_is_detected_and_check_changes_nothing(tmp_path):
     page = "x is <!-- value r:x:.2f -->9.99<!-- /value -->.\n"
     root = _repo(tmp_path, {"README.md": page})

@@ -277,12 +277,20 @@ class Results:
                 + (f", {cores} cores" if cores else "") + " · ")
 
 
+#: A run directory under ``runs/`` named in a command (its name, group 1).
+_RUN_DIR = re.compile(r"\bruns/([^/\s]+)")
+
+
 def _shown_command(cmd: str | None) -> str:
     """A result's command as a stamp shows it: without ``--out DIR`` (where its files went, not a setting
-    of the run; the directory names a run by when it was made)."""
+    of the run), and with the run directories it reads under ``runs/`` shown as ``runs/RUN`` (``RUN1``,
+    ``RUN2``, ... when there are several): a directory's name says when it was made, not what it holds."""
     if not cmd:
         return "(command not recorded)"
-    return re.sub(r"\s--out(?:=|\s+)\S+", "", cmd)
+    cmd = re.sub(r"\s--out(?:=|\s+)\S+", "", cmd)
+    names = list(dict.fromkeys(_RUN_DIR.findall(cmd)))
+    tag = {n: "RUN" if len(names) == 1 else f"RUN{i + 1}" for i, n in enumerate(names)}
+    return _RUN_DIR.sub(lambda m: f"runs/{tag[m.group(1)]}", cmd)
 
 
 def _blob_hash(data: bytes) -> str:
