@@ -917,8 +917,11 @@ def friction_forms(problem: Problem, model: dict) -> tuple[dict, list[dict]]:
     """
     out = dict(model)
     records = []
-    cost = float(problem.cost([out], "heldout")[0]) if out else math.inf
-    for t in sorted(u for u in model if u.family in FRICTION_PAIR):
+    friction = sorted(u for u in model if u.family in FRICTION_PAIR)
+    if not friction:  # nothing to complete: no held-out replay
+        return out, records
+    cost = float(problem.cost([out], "heldout")[0])
+    for t in friction:
         other = Term(FRICTION_PAIR[1 - FRICTION_PAIR.index(t.family)], t.target)
         if other in out or t not in out or not term_allowed(other, problem.robot):
             continue

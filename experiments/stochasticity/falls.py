@@ -49,6 +49,7 @@ def grounded_falls(table1_dir: str, run_dir: str, executor, *, methods=("sgat", 
     Raises:
         ValueError: ``table1_dir`` has no finished run, or a method of it has no transformer.
     """
+    from common.defaults import EPISODE_SECONDS
     from experiments.runtime.rundir import EpisodeLog
     from experiments.runtime.seeds import derive_seeds
     from experiments.runtime.stats import wilson_interval
@@ -63,7 +64,7 @@ def grounded_falls(table1_dir: str, run_dir: str, executor, *, methods=("sgat", 
         t1 = json.load(f)
     cfg = t1["config"]
     methods = [m for m in methods if m in cfg["methods"]]
-    seconds = float(cfg.get("optimize", {}).get("seconds", 7.5))
+    seconds = float(cfg.get("optimize", {}).get("seconds", EPISODE_SECONDS))
     seeds = derive_seeds(seed, GROUNDED, n=episodes)
     log = EpisodeLog(run_dir, {"table1": os.path.abspath(table1_dir), "methods": methods, "episodes": episodes,
                                "seed": seed}, "grounded-falls check", ignore=("table1",), reporter=report)
@@ -120,7 +121,7 @@ def forward_calibration(fidelity_dir: str, method: str = "sgat") -> dict:
         method: the grounded world (``sgat``; ``hybrid`` and ``gat`` have forward models too).
 
     Returns:
-        ``{"dims": [names], "z_std": per-dimension z spread (members and pairs averaged),
+        ``{"method", "dims": [names], "z_std": per-dimension z spread (members and pairs averaged),
         "median_z_std", "overconfident_share" (dimensions above :data:`OVERCONFIDENT`), "worst":
         [(name, z spread)] x 3, "mixture_median_z_std" (the members' equal mixture), "transitions"}``.
 
@@ -142,14 +143,15 @@ def forward_calibration(fidelity_dir: str, method: str = "sgat") -> dict:
     if len(draws) < 2:
         raise ValueError(f"{fidelity_dir}: forward calibration needs two data draws with {method} models, "
                          f"found {len(draws)}")
+    recs = {e: [Recording.from_parquet(p)
+                for p in sorted(glob.glob(os.path.join(fidelity_dir, "data", f"real_d{e}_*.parquet")))]
+            for e in draws}
     zs, zmix, zin, names, n = [], [], [], None, 0
     for d in draws:
         tr = ActionTransformer.load(models[d])
         names = list(tr.spec.state_names)
         for e in draws:
-            recs = [Recording.from_parquet(p)
-                    for p in sorted(glob.glob(os.path.join(fidelity_dir, "data", f"real_d{e}_*.parquet")))]
-            t = recording_transitions(recs, layout, tr.spec, past=tr.forwards[0].commands, delay=tr.delay)
+            t = recording_transitions(recs[e], layout, tr.spec, past=tr.forwards[0].commands, delay=tr.delay)
             X, Y = t.forward_input(), t.dS
             preds = [f.predict(X) for f in tr.forwards]
             if e == d:  # the model's own data: how well it fits what it was fitted on
