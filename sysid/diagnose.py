@@ -1115,6 +1115,16 @@ BOUND_TOL = 0.01
 COMPENSATION_SHARE = 0.1
 
 
+def _series_parts(a: str, b: str) -> bool:
+    """Whether families ``a`` and ``b`` are the two parts of one transmission in series: a spring
+    (``joint_compliance``) and a gear play (:data:`sysid.candidates.PLAY_FAMILIES`), the dead-zone model of
+    a gear pair (M. Nordin and P.-O. Gutman, "Controlling mechanical systems with backlash: a survey",
+    Automatica 38(10), 2002). Neither is a small correction of the other: removing the spring from a
+    model that holds the play costs far more than the play's own need, whatever the play's size, so the
+    share rule of :func:`_vet` does not compare them (the refit rule still does)."""
+    return "joint_compliance" in (a, b) and (a in PLAY_FAMILIES or b in PLAY_FAMILIES)
+
+
 def _loaded_joints(t: Term, robot) -> set:
     """The joints a term acts on: its joint, or for a link term the (up to 3) joints its mass loads."""
     if t.fam.scope == "joint":
@@ -1138,7 +1148,8 @@ def _vet(problem: Problem, iv: _Intervals, robot, clock: _Clock,
     * it does not only compensate another term: with more than one term, the others refitted without
       it must not explain the held-out logs as well (cost rise below the margin), and its held-out
       need must not be below :data:`COMPENSATION_SHARE` of a stronger term's on the same joint
-      (a small correction riding on that term's model-form error).
+      (a small correction riding on that term's model-form error; a spring and a play at one joint,
+      the two parts of one transmission, are not compared so: :func:`_series_parts`).
 
     The terms all stay in the identified model (``report["model"]``: they lower the held-out error);
     only the claim of physics is withheld. Returns (found, uncertain), both lists of report entries
@@ -1165,7 +1176,8 @@ def _vet(problem: Problem, iv: _Intervals, robot, clock: _Clock,
                               "the family's shape does not fit, so the value means little")
         for j, o in enumerate(effects):
             if (j != i and places[i] & places[j] and o["heldout_cost_without"] > need
-                    and need < COMPENSATION_SHARE * o["heldout_cost_without"]):
+                    and need < COMPENSATION_SHARE * o["heldout_cost_without"]
+                    and not _series_parts(t.family, iv.terms[j].family)):
                 reasons[i].append(f"a small correction beside {o['words']} at {o['where']} (held-out need "
                                   f"{need:.2f} vs {o['heldout_cost_without']:.2f}): it compensates that term")
                 break
@@ -1222,13 +1234,15 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
     (:func:`sysid.equivalence.rival_families`) is fitted in its place (the effect's terms removed, the
     rival's terms fitted, grid starts for non-smooth families, the rest of the model kept; a Stribeck
     friction is fitted beside the Coulomb term it rivals, whose static excess it is: BAM's nested
-    comparison; a rival gear play replaces the play the model already holds at that joint, since one
-    joint holds one play). The candidate with the lowest held-out cost is the winner (one fitted at a bound of its
-    family only if no other comes within the margin of it), and the model keeps it. A candidate fitted
-    at a bound is otherwise no candidate (a distorted form), except a nested excess fitted to zero,
-    which is tested at its probe size beside the winner: could these logs show it? If not, the winner
-    (the excess's own restriction, i.e. the nested rival's best fit) stands and the excess is listed
-    as not excluded (``not_excluded``: [{family, terms at the probe size, segment, experiment}]). The winner is
+    comparison, with the joint's damping refitted beside them; a rival gear play replaces the play the
+    model already holds at that joint, since one joint holds one play). The candidate with the lowest
+    held-out cost is the winner (one fitted at a bound of its family only if no other comes within the
+    margin of it; a Stribeck friction over the Coulomb friction it nests only if it beats it by the
+    margin: parsimony, and otherwise listed as not excluded beside it), and the model keeps it. A
+    candidate fitted at a bound is otherwise no candidate (a distorted form), except a nested excess
+    fitted to zero, which is tested at its probe size beside the winner: could these logs show it? If
+    not, the winner (the excess's own restriction, i.e. the nested rival's best fit) stands and the
+    excess is listed as not excluded (``not_excluded``: [{family, terms at the probe size, segment, experiment}]). The winner is
     named (status ``"found"``) only if it beats every other candidate beyond the noise
     (:func:`sysid.equivalence.heldout_test`) and by at least the selection margin of this module (a
     difference the noise cannot make but smaller than what selection counts is a model-form detail
@@ -1286,7 +1300,11 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
         plausible += always
         for g in plausible:
             rts = rival_sets[g]
-            keep = {u: base_vals[u] for u in nested} if g == "stribeck_friction" else {}
+            # Stribeck's excess is fitted with the Coulomb level it sits on and the joint's damping beside
+            # them (BAM's M2 holds a viscous term: the excess trades against it at low speed)
+            keep = ({u: base_vals[u] for u in base_vals
+                     if u in nested or (u.family in DAMPING_FAMILIES and u.target in {n.target for n in nested})}
+                    if g == "stribeck_friction" else {})
             # a Stribeck friction is fitted with its Stribeck velocity (BAM's M2), from two starts: the
             # library's default and a slower fall-off (the fit is not convex in it)
             shape = [Term("stribeck_velocity", u.target) for u in rts if u.family == "stribeck_friction"]
@@ -1299,20 +1317,15 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
                 continue
             fit = min(fits, key=lambda f: f.cost)
             cands.append({"family": g, "values": dict(fit.values), "terms": rts + list(keep), "own": rts,
-                          "replaces": replaced.get(g, [])})
+                          "replaces": replaced.get(g, []), "nests": bool(keep)})
         if len(cands) == 1:
             continue
         costs = problem.cost([c["values"] for c in cands], "heldout")
         for c, cc in zip(cands, costs):
             c["heldout_cost"] = float(cc)
             c["at_bound"] = any(_at_bound(u, c["values"][u], robot) for u in c.get("own", c["terms"]))
-        win = int(np.argmin(costs))
-        gap = _margin(float(costs[win]), problem.k)
-        valid = [i for i, c in enumerate(cands) if not c["at_bound"]]
-        if valid:  # a form fitted at a bound of its family is a distorted one: a plausible form as good wins
-            best_valid = min(valid, key=lambda i: costs[i])
-            if costs[best_valid] - costs[win] < gap:
-                win = best_valid
+        gap = _margin(float(np.min(costs)), problem.k)
+        win = _winner(cands, costs, gap)
         w = cands[win]
         tied, unresolved = [w], []
         for i, c in enumerate(cands):
@@ -1336,10 +1349,11 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
             out.tests.append({"effect": ",".join(t.label() for t in grp), "winner": w["family"], "rival": c["family"],
                               "winner_cost": ht.cost_a, "rival_cost": ht.cost_b, "z": ht.z, "z_crit": ht.z_crit,
                               "tau": ht.tau, "margin": gap, "apart": apart})
-            if not apart and c.get("probed"):
-                # a nested excess the fit put at zero that these logs could not show at its probe size:
-                # the winner is that form's own restriction (the rival's best fit is the winner), so it
-                # stands; the excess is reported as not excluded, with the segment that would show it
+            if not apart and (c.get("probed") or (c.get("nests") and win == 0)):
+                # a nested excess the fit put at zero that these logs could not show at its probe size, or
+                # one fitted beside the winner that does not beat it by the margin: the winner is that
+                # form's own restriction, so it stands (parsimony); the excess is reported as not
+                # excluded, with the segment that would show it
                 seg_n, text_n = separating(w["family"], c["family"])
                 own = c.get("own", c["terms"])
                 unresolved.append({"family": c["family"], "terms": {u.label(): float(vals[u]) for u in own},
@@ -1352,9 +1366,12 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
             out.model = dict(w["values"])
             out.cost = w["heldout_cost"]
             for t in list(grp) + list(w.get("replaces", [])):
+                cmp = f"cost {w['heldout_cost']:.1f} vs {cands[0]['heldout_cost']:.1f}"
                 out.rejected.append({"term": t.label(), "family": t.family, "value": base_vals[t],
-                                     "reason": f"{w['family']} in its place fits the held-out logs better "
-                                               f"(cost {w['heldout_cost']:.1f} vs {cands[0]['heldout_cost']:.1f})"})
+                                     "reason": f"{w['family']} in its place fits the held-out logs better ({cmp})"
+                                     if status == "found" or t not in grp or all(c is not cands[0] for c in tied)
+                                     else f"{w['family']} in its place fits the held-out logs as well ({cmp}): "
+                                          "the two are named as a class"})
         seg, text = separating(w["family"], tied[1]["family"]) if len(tied) > 1 else (None, None)
         dec = {"terms": w["terms"], "status": status, "family": w["family"], "joint": joint,
                "not_excluded": unresolved,
@@ -1375,6 +1392,25 @@ def _equivalence(problem: Problem, model: dict, cost: float, robot, clock: _Cloc
     return out
 
 
+def _winner(cands: list[dict], costs: Sequence[float], gap: float) -> int:
+    """Index of the class test's winner among ``cands`` (the tested effect first; dicts with ``at_bound``
+    and optionally ``nests``) whose held-out costs are ``costs``: the lowest cost, but a candidate fitted
+    at a bound of its family (a distorted form) only if no other comes within ``gap`` of it, and a
+    candidate that nests the tested effect (``nests``: a Stribeck friction over its Coulomb level) only
+    if it beats the tested effect by ``gap`` (parsimony: the richer form must earn its parameters)."""
+    win = int(np.argmin(costs))
+    valid = [i for i, c in enumerate(cands) if not c["at_bound"]]
+    if valid:
+        best_valid = min(valid, key=lambda i: costs[i])
+        if costs[best_valid] - costs[win] < gap:
+            win = best_valid
+    if cands[win].get("nests") and not cands[0]["at_bound"] and costs[0] - costs[win] < gap:
+        win = 0
+    return win
+
+
+#: Families of a joint's velocity-proportional torque, refitted beside a Stribeck rival in the class test.
+DAMPING_FAMILIES = ("viscous_damping", "kd_gain")
 #: Second start [rad/s] of a Stribeck velocity fitted in the class test (the first is the library's
 #: :data:`sysid.model.STRIBECK_VELOCITY`): friction whose static excess fades over several tenths of a
 #: rad/s (BAM's servos, Duclusaud et al., arXiv:2410.08650) is far from the default's basin.

@@ -237,6 +237,16 @@ def test_a_stranger_is_named_right_by_its_family_or_its_class_and_a_wrong_findin
     extra = score(truth, _sreport([_eff("backlash_motor", joints=["LKneePitch"], value=0.01),
                                    _eff("coulomb_friction", joints=["RHipRoll"], value=0.05)]), r)
     assert extra["named_right"] and extra["wrong_found"] == ["coulomb_friction[RHipRoll]"] and not extra["wrong_at_truth"]
+    # the strangers' gear contact is a spring of 10 x kp in series with the play: a series compliance found
+    # there is part of the form (no wrong Found, its interval scored against 1 / kc), and does not name the play
+    from benchmarks.strangers.effects import contact_parameters
+
+    c = 1.0 / contact_parameters(r, "LKneePitch")[0]
+    spring = _eff("joint_compliance", joints=["LKneePitch"], value=c * 1.1, ci=(c * 0.5, c * 1.5))
+    both = score(truth, _sreport([spring], equivalent=[cls]), r)
+    assert both["named_right"] and not both["wrong_found"] and both["ci_cover"] == [True]
+    alone = score(truth, _sreport([spring]), r)
+    assert not alone["named_right"] and not alone["wrong_found"]
 
 
 def test_a_stribeck_stranger_named_as_coulomb_with_its_excess_not_excluded_is_named_by_its_class():

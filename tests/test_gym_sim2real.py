@@ -160,6 +160,27 @@ def test_summary_normalizes_to_real_and_selects_ane_sigma(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_paired_differences_pair_methods_by_run_with_a_t_interval():
+    cfg = GymConfig.from_preset("InvertedPendulum", "quick", runs=3)
+    rows = _rows(cfg)
+    get = {(p["noise"], p["a"], p["b"]): p for p in G.paired_differences(rows, cfg)}
+    same = get[(0.0, "sgat", "gat")]  # every run 180 apart: no spread to test with
+    assert same["runs"] == 3 and same["mean_diff"] == pytest.approx(180) and same["p_value"] is None
+    assert same["ci"] == [pytest.approx(180), pytest.approx(180)]
+    assert get[(0.3, "sgat", "sim")]["mean_diff"] == pytest.approx(400 * 0.6)
+    # run 0's SGAT 60 lower at noise 0: differences 120, 180, 180 -> mean 160, s.e. 20, t(2) = 4.303
+    moved = [dict(r, return_mean=r["return_mean"] - 60) if (r["method"], r["run"], r["noise"]) == ("sgat", 0, 0.0)
+             else r for r in rows]
+    q = next(p for p in G.paired_differences(moved, cfg) if (p["noise"], p["b"]) == (0.0, "gat"))
+    assert q["mean_diff"] == pytest.approx(160) and q["ci"][0] == pytest.approx(160 - 4.3027 * 20, rel=1e-4)
+    assert q["p_value"] == pytest.approx(0.0153, abs=5e-4)
+    # a run without one of the two methods is no pair
+    short = [r for r in moved if not (r["method"] == "gat" and r["run"] == 2)]
+    assert next(p for p in G.paired_differences(short, cfg) if (p["noise"], p["b"]) == (0.0, "gat"))["runs"] == 2
+    text = G.format_table(G.summarize(moved, cfg), cfg, G.paired_differences(moved, cfg))
+    assert "SGAT - GAT real return, paired by run" in text and "noise 0: +160 [+74, +246] p=0.015" in text
+
+
 def test_result_table_resumes_and_keeps_settings_apart(tmp_path):
     cfg = GymConfig.from_preset("InvertedPendulum", "quick", runs=2)
     table = G.ResultTable(tmp_path)

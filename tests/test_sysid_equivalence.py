@@ -110,6 +110,51 @@ def test_a_nested_excess_the_logs_cannot_show_leaves_the_winner_found_with_a_cav
         ["coulomb_friction", "backlash"]
 
 
+def test_a_form_that_nests_the_tested_effect_wins_only_beyond_the_margin():
+    """Parsimony in the class test: a Stribeck friction (Coulomb level + excess + damping) that fits the
+    held-out logs 0.1 better than the Coulomb friction it nests does not replace it (the two tie: a
+    class); one better by more than the margin does. A rival that nests nothing wins on any lead."""
+    from sysid.diagnose import _winner
+
+    coulomb, stribeck, other = {"at_bound": False}, {"at_bound": False, "nests": True}, {"at_bound": False}
+    assert _winner([coulomb, stribeck], [27.04, 26.94], 0.5) == 0
+    assert _winner([coulomb, stribeck], [27.04, 26.0], 0.5) == 1
+    assert _winner([coulomb, other], [27.04, 26.94], 0.5) == 1
+    # a form at a bound of its family gives way to a plausible one within the margin
+    assert _winner([coulomb, {"at_bound": True}], [27.0, 26.9], 0.5) == 0
+    assert _winner([coulomb, {"at_bound": True}], [27.0, 26.0], 0.5) == 1
+
+
+def test_a_spring_and_a_play_at_one_joint_are_not_a_correction_of_each_other():
+    """The share rule of the vetting (a term whose held-out need is under a tenth of a stronger term's at
+    the same joint compensates it) does not compare a series spring with a gear play: together they are
+    the dead-zone model of one gear pair. It still flags a small damping beside a dry friction."""
+    import types
+
+    from sysid.diagnose import _Clock, _Intervals, _series_parts, _vet
+
+    assert _series_parts("joint_compliance", "backlash_motor") and _series_parts("backlash", "joint_compliance")
+    assert not _series_parts("kd_gain", "coulomb_friction") and not _series_parts("backlash", "backlash_motor")
+    robot = nao_h25()
+    j = "RShoulderRoll"
+
+    def entry(t, value, need):
+        return {"term_label": t.label(), "words": t.fam.words, "where": j, "value": value, "nominal": t.fam.nominal,
+                "ci95": [value * 0.5, value * 1.5], "heldout_cost_without": need, "display": f"{value:g}"}
+
+    def flagged(terms):
+        iv = _Intervals(model={t: v for t, v, _ in terms}, cost=24.0,
+                        effects=[entry(t, v, n) for t, v, n in terms], indistinguishable=[],
+                        terms=[t for t, _, _ in terms])
+        _, uncertain = _vet(types.SimpleNamespace(k=0), iv, robot, _Clock(0.0, 0.0), lambda s: None)
+        return {e["term_label"] for e in uncertain}
+
+    spring, play = Term("joint_compliance", j), Term("backlash", j)
+    assert flagged([(spring, 0.011, 2647.0), (play, 0.0084, 26.4)]) == set()
+    dry, kd = Term("coulomb_friction", j), Term("kd_gain", j)
+    assert flagged([(dry, 0.067, 36.5), (kd, 1.3, 3.4)]) == {kd.label()}
+
+
 @pytest.mark.slow
 def test_a_rival_play_replaces_the_play_the_model_holds_at_that_joint():
     """A series spring beside a dead band at a joint with motor-side play: the spring's class test fits

@@ -45,9 +45,12 @@ KIND_FAMILIES = {
 #: beside the named-right rate, not in it.
 PARTIAL = {"friction_stribeck": ("coulomb_friction",), "latency_lowpass": ("latency",)}
 #: Families that are a part of a kind's form but do not name it alone: the viscous term of the strangers'
-#: Stribeck friction (its ``viscous`` parameter, drawn in every trial). A finding of one at the kind's
-#: place is no wrong Found; it does not make the kind named right either.
-COMPONENTS = {"friction_stribeck": ("viscous_damping",)}
+#: Stribeck friction (its ``viscous`` parameter, drawn in every trial) and the spring of the gear contact
+#: of the strangers' motor-side play (stiffness ``CONTACT_STIFFNESS_RATIO`` x kp in series with the play,
+#: :func:`benchmarks.strangers.effects.contact_parameters`: a series joint compliance of 1 / kc when
+#: engaged; the Nordin-Gutman dead-zone model; the link-side play has rigid teeth). A finding of one at
+#: the kind's place is no wrong Found; it does not make the kind named right either.
+COMPONENTS = {"friction_stribeck": ("viscous_damping",), "backlash_motor": ("joint_compliance",)}
 
 
 def kinds(fixed_base: bool) -> list[str]:
@@ -77,8 +80,10 @@ def truth_values(e: dict, robot) -> list[tuple[str, str | None, float]]:
     """(family, target, value) the diagnosis would report for hidden stranger effect ``e``, in the family's
     units: one entry per target of the headline family, and one per other family the kind carries
     (Stribeck's Coulomb level beside its static excess, the delay of a low-pass with one, a
-    centre-of-mass shift per axis). Targets: a joint, ``LINK:AXIS`` for a centre-of-mass axis, the root
-    link, or None (global)."""
+    centre-of-mass shift per axis, the gear contact's compliance 1 / kc [rad/(N m)] beside a motor-side
+    play). Targets: a joint, ``LINK:AXIS`` for a centre-of-mass axis, the root link, or None (global)."""
+    from benchmarks.strangers.effects import contact_parameters
+
     k = e["kind"] if "kind" in e else e["family"]
     params = e.get("params") or [{} for _ in e["targets"]]
     out = []
@@ -93,6 +98,8 @@ def truth_values(e: dict, robot) -> list[tuple[str, str | None, float]]:
             out.append(("kd_gain", tg, v))
         elif k in ("backlash_motor", "backlash_link"):
             out.append((k, tg, v))
+            if k == "backlash_motor":
+                out.append(("joint_compliance", tg, 1.0 / contact_parameters(robot, tg)[0]))
         elif k == "torque_saturation":
             out.append(("joint_torque_limit", tg, v))
         elif k == "torque_speed":

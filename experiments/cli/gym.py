@@ -104,14 +104,16 @@ def run(args) -> dict:
                 raise ValueError(f"--report: {table.path} has no rows for these settings; give the options "
                                  f"the sweep ran with")
         summary = G.summarize(rows, cfg)
-        text = G.format_table(summary, cfg)
+        paired = G.paired_differences(rows, cfg)
+        text = G.format_table(summary, cfg, paired)
         fig = Path(out) / f"gym_{cfg.env}_{cfg.experiment}.png"
         G.plot_bars(summary, cfg, fig)
         G._write_text(Path(out) / "table.txt", text + "\n")
         G.write_summary_csv(summary, Path(out) / "summary.csv")
         log(text)
         log(f"wrote {fig}")
-        return {"summary": summary, "table": text, "files": {"figure": str(fig)}, "config": cfg.to_dict()}
+        return {"summary": summary, "paired": paired, "table": text, "files": {"figure": str(fig)},
+                "config": cfg.to_dict()}
 
     ex = make_executor(args.workers, args.ray_address)
     t0 = time.perf_counter()

@@ -748,8 +748,8 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, reporter: Rep
     default: quiet).
 
     Returns:
-        ``{"summary": [...], "table": text, "files": {...}, "new_rows": n, "fingerprints": {...},
-        "wall_s": s, "tasks": n}``.
+        ``{"summary": [...], "paired": [...] (:func:`paired_differences`), "table": text, "files": {...},
+        "new_rows": n, "fingerprints": {...}, "wall_s": s, "tasks": n}``.
     """
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -813,13 +813,14 @@ def run_sweep(cfg: GymConfig, out: str | os.PathLike, executor, *, reporter: Rep
     wall = time.perf_counter() - t0
     rows = table.current(cfg)
     summary = summarize(rows, cfg)
-    text = format_table(summary, cfg)
+    paired = paired_differences(rows, cfg)
+    text = format_table(summary, cfg, paired)
     fig_path = out / f"gym_{cfg.env}_{cfg.experiment}.png"
     if summary:
         plot_bars(summary, cfg, fig_path)
     _write_text(out / "table.txt", text + "\n")
     write_summary_csv(summary, out / "summary.csv")
-    return {"summary": summary, "table": text, "new_rows": len(table.rows) - n0, "tasks": n_tasks,
+    return {"summary": summary, "paired": paired, "table": text, "new_rows": len(table.rows) - n0, "tasks": n_tasks,
             "fingerprints": fps, "wall_s": wall,
             "files": {"results": str(table.path), "summary": str(out / "summary.csv"), "table": str(out / "table.txt"),
                       "figure": str(fig_path) if summary else None, "config": str(out / "config.json")}}
@@ -890,8 +891,43 @@ def summarize(rows: list[dict], cfg: GymConfig) -> list[dict]:
     return out
 
 
-def format_table(summary: list[dict], cfg: GymConfig) -> str:
-    """Plain-text table: real return mean ± s.e. (normalised to real-trained) per noise and method."""
+#: Method pairs compared run by run (:func:`paired_differences`): SGAT against GAT (the paper's question)
+#: and against the plain sim's policy.
+PAIRS = (("sgat", "gat"), ("sgat", "sim"))
+
+
+def paired_differences(rows: list[dict], cfg: GymConfig, pairs=PAIRS) -> list[dict]:
+    """Real-return differences a - b per noise level, paired by run: both methods of a run start from
+    that run's sim policy and are evaluated on the same real episode seeds. The interval and test are a
+    one-sample t-test of the per-run differences against 0 (:func:`experiments.runtime.stats.seed_level_test`;
+    Student 1908); with 3 runs it has 2 degrees of freedom.
+
+    Returns:
+        one dict per (noise, pair) with both methods present in at least 2 runs: ``noise``, ``a``, ``b``,
+        ``runs``, ``mean_diff`` [return], ``ci`` ([lo, hi], 95 %; [d, d] when every run's difference is
+        the same d) and ``p_value`` (None without spread).
+    """
+    from experiments.runtime.stats import seed_level_test  # lazy: scipy.stats
+
+    out = []
+    for nz in cfg.noise:
+        at = {(r["method"], r["run"]): r["return_mean"] for r in rows
+              if abs(r["noise"] - nz) < 1e-9 and r["method"] != "ane"}
+        for a, b in pairs:
+            runs = sorted(r for m, r in at if m == a and (b, r) in at)
+            if len(runs) < 2:
+                continue
+            d = np.array([at[(a, r)] - at[(b, r)] for r in runs])
+            t = seed_level_test(d)
+            out.append({"noise": nz, "a": a, "b": b, "runs": len(runs), "mean_diff": float(d.mean()),
+                        "ci": t["ci"] if t else [float(d[0]), float(d[0])],
+                        "p_value": t["p_value"] if t else None})
+    return out
+
+
+def format_table(summary: list[dict], cfg: GymConfig, paired: list[dict] = ()) -> str:
+    """Plain-text table: real return mean ± s.e. (normalised to real-trained) per noise and method,
+    then the paired differences (:func:`paired_differences`), if given."""
     name = {"noisyreal": "Sim-to-NoisyReal", "noisysim": "Sim-to-NoisySim"}[cfg.experiment]
     mass = (f"pole x{cfg.pole_factor:g}" if cfg.env == "InvertedPendulum" else f"mass x{cfg.mass_factor:.4g}") \
         if cfg.mismatch else "no mass change"
@@ -920,6 +956,12 @@ def format_table(summary: list[dict], cfg: GymConfig) -> str:
         lines.append("one-step next-state error vs real (plain sim -> grounded): " +
                      "; ".join(f"{s['method'].upper()}@{s['noise']:g}: {s['step_err_sim']:.4f} -> "
                                f"{s['step_err_grounded']:.4f}" for s in err))
+    for a, b in dict.fromkeys((p["a"], p["b"]) for p in paired):
+        name_b = "SIM-ONLY" if b == "sim" else b.upper()
+        lines.append(f"{a.upper()} - {name_b} real return, paired by run (mean [95 % t-interval], t-test p): " +
+                     "; ".join(f"noise {p['noise']:g}: {p['mean_diff']:+.0f} [{p['ci'][0]:+.0f}, {p['ci'][1]:+.0f}]"
+                               + (f" p={p['p_value']:.2g}" if p["p_value"] is not None else " (no spread)")
+                               for p in paired if (p["a"], p["b"]) == (a, b)))
     return "\n".join(lines)
 
 

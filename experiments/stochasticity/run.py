@@ -273,6 +273,8 @@ def summarize(out: str, cfg: StudyConfig) -> dict:
             entry["table1"] = [{k: r[k] for k in ("method", "step", "n", "fitness_mean", "fitness_se", "falls", "falls_ci95")}
                                for r in t1["rows"]]
             entry["sgat_minus_gat"] = table1_contrast(t1)
+            if "ane" in t1["config"].get("methods", ()):
+                entry["sgat_minus_ane"] = table1_contrast(t1, "sgat", "ane")
         gf = _load(os.path.join(out, f"falls-{_tag(v)}", "falls.json"))
         if gf:
             entry["grounded_falls"] = {m: {k: r[k] for k in ("grounded", "real")} for m, r in gf["methods"].items()}
@@ -354,11 +356,12 @@ def format_table(res: dict) -> str:
                              f"{r['fitness_mean']:>+7.2f} ± {r['fitness_se']:<4.2f} {r['falls']:>4}/{r['n']:<4}")
         lines.append("")
     for e in res["levels"]:
-        for c in e.get("sgat_minus_gat", []):
+        for c in e.get("sgat_minus_gat", []) + e.get("sgat_minus_ane", []):
             f, x = c["fitness"], c["fall_rate"]
             ci = f"[{f['ci95'][0]:+.2f}, {f['ci95'][1]:+.2f}]" if f["ci95"] else "-"
             xci = f"[{100 * x['ci95'][0]:+.0f}, {100 * x['ci95'][1]:+.0f}]" if x["ci95"] else "-"
-            lines.append(f"level {e['level']:g} step {c['step']}: SGAT - GAT fitness {f['mean']:+.2f} {ci}, "
+            p = f", p = {f['p_value']:.2g}" if f.get("p_value") is not None else ""
+            lines.append(f"level {e['level']:g} step {c['step']}: SGAT - {c['b'].upper()} fitness {f['mean']:+.2f} {ci}{p}, "
                          f"fall rate {100 * x['mean']:+.0f} points {xci} (95 % over {f['seeds']} seeds)")
         for r in e.get("real_bound", []):
             lines.append(f"level {e['level']:g}: CMA-ES in the real world, step {r['step']}: fitness "
