@@ -112,8 +112,9 @@ def test_a_nested_excess_the_logs_cannot_show_leaves_the_winner_found_with_a_cav
 
 def test_a_form_that_nests_the_tested_effect_wins_only_beyond_the_margin():
     """Parsimony in the class test: a Stribeck friction (Coulomb level + excess + damping) that fits the
-    held-out logs 0.1 better than the Coulomb friction it nests does not replace it (the two tie: a
-    class); one better by more than the margin does. A rival that nests nothing wins on any lead."""
+    held-out logs 0.1 better than the Coulomb friction it nests does not replace it (the Coulomb friction
+    stays, the excess is listed as not excluded); one better by more than the margin does. A rival that
+    nests nothing wins on any lead."""
     from sysid.diagnose import _winner
 
     coulomb, stribeck, other = {"at_bound": False}, {"at_bound": False, "nests": True}, {"at_bound": False}
