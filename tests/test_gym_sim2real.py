@@ -216,6 +216,9 @@ def test_result_table_resumes_and_keeps_settings_apart(tmp_path):
     cfg4 = GymConfig.from_preset("InvertedPendulum", "quick", runs=2, pole_factor=20)
     assert len(G.plan_tasks(cfg4, table)["second"]) == 18
     assert len(table.current(cfg)) == len(rows) - 1 and table.current(cfg4) == []
+    # a summary of fewer runs leaves out the rows of the runs beyond them
+    cfg1 = GymConfig.from_preset("InvertedPendulum", "quick", runs=1)
+    assert table.current(cfg1) and {r["run"] for r in table.current(cfg1)} == {0}
 
 
 def test_config_validation():

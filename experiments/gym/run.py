@@ -650,9 +650,10 @@ class ResultTable:
                         "ane_sigma": ane_sigma}) in self._keys
 
     def current(self, cfg: GymConfig) -> list[dict]:
-        """The rows computed with ``cfg``'s settings (any noise, method, run)."""
+        """The rows computed with ``cfg``'s settings, of its runs 0 .. ``cfg.runs`` - 1 (any noise,
+        method): a sweep resumed with more runs leaves a summary of fewer runs what it was."""
         fps = {m: fingerprint_hash(cfg, m) for m in METHODS}
-        return [r for r in self.rows if fps.get(r["method"]) == r["fingerprint"]]
+        return [r for r in self.rows if fps.get(r["method"]) == r["fingerprint"] and int(r["run"]) < cfg.runs]
 
 
 # --------------------------------------------------------------------------------------------
