@@ -1607,11 +1607,17 @@ def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: lis
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
                    f"{1000 * noise_floor:.2f} mrad) with {len(uncertain)} fitted term(s), but none passes the tests "
                    f"for a finding (uncertain: {'; '.join(e['words'] + ' at ' + e['where'] for e in uncertain)})")
+    elif not effects and not equivalent and not flagged_joints(before.energy_heldout, base.names):
+        # the effect shows in the training logs only: the held-out logs cannot test any candidate
+        worst = flagged_joints(before.energy_train, base.names)[:3]
+        verdict = (f"cannot tell: the residual stands above the noise at {', '.join(worst) or '-'} in the training "
+                   f"logs only; the held-out logs leave it at the noise floor (held-out RMS {1000 * rms_before:.2f} "
+                   f"mrad vs {1000 * noise_floor:.2f} mrad), so no candidate can be confirmed there (record more "
+                   "logs that move those joints, e.g. sgatwalk excite --logs 6, and diagnose again)")
     elif not effects and not equivalent:
-        worst = (flagged_joints(before.energy_heldout, base.names)[:3]
-                 or flagged_joints(before.energy_train, base.names)[:3])
+        worst = flagged_joints(before.energy_heldout, base.names)[:3]
         verdict = (f"no candidate effect explains the residual: held-out RMS {1000 * rms_before:.2f} mrad vs noise "
-                   f"floor {1000 * noise_floor:.2f} mrad, largest at {', '.join(worst) or '-'} (an effect outside the "
+                   f"floor {1000 * noise_floor:.2f} mrad, largest at {', '.join(worst)} (an effect outside the "
                    "library, or an engine gap larger than calibrated)")
     else:
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "

@@ -76,3 +76,27 @@ def test_near_equivalent_fits_are_named_with_the_experiment_that_separates_them(
     assert {e["a"], e["b"]} == {"backlash[LElbowRoll]", "sensor_bias[LElbowRoll]"}
     assert e["heldout_cost_difference"] == pytest.approx(0.1)
     assert "opposite gravity load" in e["experiment"]
+
+
+def test_a_residual_in_the_training_logs_only_is_reported_as_undecided_not_as_outside_the_library():
+    """The verdict when no candidate is kept: a residual above the flag level in the held-out logs is
+    "no candidate effect explains the residual" (outside the library); one that shows in the training
+    logs only cannot be tested on held-out logs, and the verdict says so, with what to record."""
+    from sysid.diagnose import _After, _Baseline, _Before, _verdict
+
+    names = ["LAnklePitch", "RAnklePitch", "HeadYaw"]
+    base = _Baseline(nominal=[], floor=np.full(3, 1e-3), sigma={"encoders": 1e-3}, names=names,
+                     noise_floor=1e-3, floor_sq=1e-6)
+    after = _After(rms=1e-3, per_joint=np.full(3, 1e-3), energy=np.ones(3), gap_closed=None, localisation={},
+                   unexplained=[])
+
+    def verdict(e_train, e_heldout):
+        before = _Before(c0=3.0, energy_train=np.array(e_train), energy_heldout=np.array(e_heldout), rms=1e-3,
+                         per_joint=np.full(3, 1e-3), bic0=0.0, nothing=False)
+        return _verdict(before, after, [], [], base, None, {}, "encoders").text
+
+    train_only = verdict([1.8, 1.0, 0.9], [1.0, 0.9, 1.1])
+    assert train_only.startswith("cannot tell") and "LAnklePitch" in train_only and "--logs" in train_only
+    assert "outside the library" not in train_only
+    both = verdict([1.8, 1.0, 0.9], [1.7, 0.9, 1.1])
+    assert both.startswith("no candidate effect explains") and "largest at LAnklePitch" in both
