@@ -324,12 +324,15 @@ def _occupied(current: dict, family: str, joint) -> bool:
     return family in PLAY_FAMILIES and any(u.family in PLAY_FAMILIES and u.target == joint for u in current)
 
 
-def _block_diagonals(robot, f: str, families, current, joints: list, label: str) -> list[Column]:
+def _block_diagonals(robot, f: str, families, current, joints: list, label: str, *,
+                     one_factor: bool = False) -> list[Column]:
     """Columns that move every family of ``f``'s joint block (:data:`JOINT_BLOCKS`) together at
     ``joints``, each at its probe (and mirrored): the block's diagonal (kp and kd scaled together, a
     servo torque-constant error), which neither the kp nor the kd column alone matches. Only for
     the block's first family (one set of diagonals per block), and only where every family of the
-    block is considered and no term of it is in ``current``."""
+    block is considered and no term of it is in ``current``. ``one_factor``: every family at the first
+    family's probe instead (kp and kd both x0.85, the torque-constant direction itself; with kd at its
+    own probe, x0.6, the pair is mostly a damping error)."""
     partners = _block_partners(f, families)
     blk = next((b for b in JOINT_BLOCKS if f in b), None)
     if blk is None or f != blk[0] or len(partners) != len(blk) - 1:
@@ -339,8 +342,9 @@ def _block_diagonals(robot, f: str, families, current, joints: list, label: str)
         ts = [Term(g, j) for g in blk]
         if any(t in current or not term_allowed(t, robot) for t in ts):
             continue
+        p0 = term_probe(ts[0], robot)
         for t in ts:
-            up[t] = term_probe(t, robot)
+            up[t] = p0 if one_factor else term_probe(t, robot)
     if not up:
         return []
     name = "+".join(blk)
@@ -506,6 +510,17 @@ def screen(problem: Problem, robot, current: dict, families, *, max_terms: int =
     # at a shoulder does)
     Ds, owner, fam_score = _split_columns(D, r, cols_a, problem.k, [robot.joint_names.index(j) for j in lead],
                                           problem.n_joints)
+    # the servo block is also ranked by its torque-constant direction (kp and kd by one factor): with
+    # kd at its own probe, a kp and kd x0.72 at an ankle explained less than a foot mass and never
+    # reached stage B. It only ranks (the near-tie rule below), it is no OMP column: there it would also
+    # match an armature at a knee (tests/test_sysid_families.py)
+    tc_cols = [c for f in families for c in _block_diagonals(robot, f, families, current, lead, f, one_factor=True)]
+    if tc_cols:
+        Dt, _ = _dictionary(problem, current, tc_cols)
+        _, _, tc_score = _split_columns(Dt, r, tc_cols, problem.k, [robot.joint_names.index(j) for j in lead],
+                                        problem.n_joints)
+        for f, v in tc_score.items():
+            fam_score[f] = max(fam_score.get(f, 0.0), v)
     sel, w, _ = omp_bic(Ds, r, n_eff, max_k=2 * max_terms)
     expl = np.maximum(D.T @ r, 0.0) ** 2 / np.maximum((D ** 2).sum(axis=0), 1e-300)
     fams = []

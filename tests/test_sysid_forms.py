@@ -158,6 +158,36 @@ def test_the_joint_blocks_partner_joins_a_pick_at_its_nominal_value():
     assert sr.selected.get(Term("kd_gain", "LAnklePitch")) == 1.0
 
 
+def test_the_servo_blocks_torque_constant_direction_scales_kp_and_kd_by_one_factor():
+    """The servo block's diagonal for stage B moves kp and kd each by its own probe (x0.85, x0.6); the
+    one that ranks the block in stage A (``one_factor``) is the torque-constant direction: kp and kd both
+    x0.85 (and the mirror, both x1.15). Only for the block's first family, with its partner considered."""
+    from sysid.identify import _block_diagonals
+
+    robot = nao_h25()
+    fams, joints, label = ("pd_gain", "kd_gain", "latency"), ["LAnklePitch", "RKneePitch"], "pd_gain[LAnklePitch+RKneePitch]"
+    own = _block_diagonals(robot, "pd_gain", fams, {}, joints, label)
+    one = _block_diagonals(robot, "pd_gain", fams, {}, joints, label, one_factor=True)
+    assert [c.label for c in one] == ["pd_gain+kd_gain[LAnklePitch+RKneePitch]",
+                                      "pd_gain+kd_gain[LAnklePitch+RKneePitch](-)"]
+    terms = {Term(f, j) for f in ("pd_gain", "kd_gain") for j in joints}
+    for col, v in zip(one, (0.85, 1.15)):
+        assert set(col.terms) == terms and all(x == pytest.approx(v) for x in col.terms.values()), col.terms
+    assert {t.family: v for t, v in own[0].terms.items()} == {"pd_gain": pytest.approx(0.85), "kd_gain": pytest.approx(0.6)}
+    assert _block_diagonals(robot, "kd_gain", fams, {}, joints, "kd_gain[LAnklePitch]", one_factor=True) == []
+    assert _block_diagonals(robot, "pd_gain", ("pd_gain",), {}, joints, label, one_factor=True) == []
+
+
+def test_a_torque_constant_error_at_an_ankle_reaches_stage_b_as_the_servo_block():
+    """kp and kd x0.72 at LAnklePitch (the strangers' servo error): screened on the default fixed-base
+    families, the servo block (kp and kd at that joint) is selected, not a gear play or a series spring
+    in its place, because stage A ranks the block by its torque-constant direction as well."""
+    logs = synthetic_logs({Term("torque_constant", "LAnklePitch"): 0.72}, n_logs=3, seconds=3.0, seed=3, traj_seed=40)
+    problem = Problem(logs, whole_logs(logs, [0, 1]), whole_logs(logs, [2]), np.full(24, 1e-3))
+    sr = screen(problem, nao_h25(), {}, FIXED_BASE_FAMILIES)
+    assert {t.label() for t in sr.selected} == {"pd_gain[LAnklePitch]", "kd_gain[LAnklePitch]"}
+
+
 @pytest.mark.slow
 def test_a_stribeck_friction_is_fitted_with_its_stribeck_velocity():
     """BAM's M2 form: the static excess falls away over a fitted Stribeck velocity. Logs of moves at
