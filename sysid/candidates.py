@@ -295,7 +295,8 @@ FIXED_BASE_FAMILIES = tuple(n for n, f in FAMILIES.items()
 CONTACT_FAMILIES = tuple(n for n, f in FAMILIES.items() if f.contact)
 #: Families screened by default on floating-base logs: the contact families and the root's (the
 #: torso's) mass and centre of mass, which a stance phase identifies (the legs carry the torso's
-#: weight; on floating-base logs link terms are the root's only, :func:`sysid.identify.screen`).
+#: weight; on floating-base logs link terms are the root's only, :func:`sysid.identify.screen`). On
+#: logs with foot forces the root's mass is weighed instead (:mod:`sysid.weighing`, :func:`sysid.diagnose.diagnose`).
 FLOATING_BASE_FAMILIES = CONTACT_FAMILIES + ("link_mass", "link_com")
 
 

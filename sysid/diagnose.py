@@ -44,6 +44,7 @@ from sysid.model import STRIBECK_VELOCITY
 from sysid.replay import IMU_CHANNELS, MUJOCO_WARNINGS, Window, predict, whole_logs, windows
 from sysid.roughness import CORRELATION_RADIUS, RoughnessFit
 from sysid.stats import integrated_autocorr, localisation, noise_sigma
+from sysid.weighing import Weighing, weigh
 
 #: Minimum noise floor [rad] (noise-free logs would otherwise divide by ~0).
 MIN_FLOOR = 1e-5
@@ -325,7 +326,9 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True, *, use_ground_
         ``gap_rms`` (channel -> residual RMS of the baseline model without noise [rad]), ``rms``
         (channel -> raw residual RMS), ``baseline_model`` (term label -> value), ``n_logs``,
         ``fixed_base``, ``base_state`` (where the replays took the base state from:
-        :data:`sysid.data.BASE_FIXED`, ``BASE_ESTIMATED`` or ``BASE_GROUND_TRUTH``); and ``screen``
+        :data:`sysid.data.BASE_FIXED`, ``BASE_ESTIMATED`` or ``BASE_GROUND_TRUTH``); ``weight``
+        (floating-base logs with foot forces: ``per_log_kg``, what each log weighs, the reference of a
+        later diagnosis's weighing, :mod:`sysid.weighing`; else None); and ``screen``
         (the terms a plain screening picks on these logs, for the record).
 
     Args:
@@ -362,7 +365,10 @@ def calibrate(logs: list[Log], robot=None, baseline: bool = True, *, use_ground_
     problem = Problem(logs, wins, wins, floor, with_imu)
     fams = FIXED_BASE_FAMILIES if logs[0].fixed_base else FLOATING_BASE_FAMILIES
     sr = screen(problem, robot, {}, fams, floating=not logs[0].fixed_base)
+    w = weigh(logs, robot)
     return {"kind": "sgatwalk-sysid-calibration", "version": 2, "n_logs": len(logs),
+            "weight": None if w is None else {"per_log_kg": list(w.per_log_kg), "mass_kg": w.mass_kg,
+                                               "model_kg": w.model_kg},
             "fixed_base": logs[0].fixed_base, "base_state": source, "sigma": info["sigma"],
             "gap_rms": {nm: float(g) for nm, g in zip(names, gap)}, "rms": {nm: float(r) for nm, r in zip(names, rms)},
             "baseline_model": {t.label(): float(v) for t, v in base_model.items()},
@@ -418,7 +424,10 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
         ``mujoco_warnings`` (MuJoCo's own warnings during the replays, counted by message:
         :data:`sysid.replay.MUJOCO_WARNINGS`), ``equivalent`` (effects named only as their class:
         :func:`_split_classes`; an effect in ``effects`` may carry ``not_excluded``, a nested excess
-        these logs could not show) and ``class_tests`` (every held-out test of :func:`_equivalence`).
+        these logs could not show), ``class_tests`` (every held-out test of :func:`_equivalence`) and
+        ``weighing`` (floating-base logs with foot forces: what they weigh against the model,
+        :meth:`sysid.weighing.Weighing.to_dict`; a torso mass it finds is the first effect, with
+        ``"evidence": "weighing"``, and is in ``base_model``; else None).
 
     Raises:
         ValueError: a name in ``families`` is not a candidate family; ``robot`` is not the logs' robot;
@@ -430,6 +439,7 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     robot = _robot_of(logs, robot)
     logs, source = _replay_logs(logs, use_ground_truth)
     setup = _prepare(logs, families, calibration, base_model, say)
+    setup, weighing = _weigh(logs, setup, calibration, robot, say)
     base = _baseline(logs, setup, calibration, robot)
     loc = _localise(logs, setup, base)
     problem = Problem(logs, setup.train, setup.heldout, base.floor, setup.with_imu, base=setup.base_model)
@@ -444,6 +454,8 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
     found, equivalent = _split_classes(found, eq.decisions, robot)
     rough_rejected = _check_roughness(rough.fit, problem, iv.model, say)
     effects, indist = _roughness_effect(rough.fit, iv.model, found, indist)
+    if weighing is not None and weighing.found:
+        effects = [_weighed_effect(weighing, robot)] + effects
     after = _after(logs, problem, setup, base, before, iv.model)
     verdict = _verdict(before, after, effects, uncertain, base, rough.fit, calibration, source,
                        roughness_skipped=rough.budget_hit, equivalent=equivalent)
@@ -452,6 +464,7 @@ def diagnose(logs: list[Log], *, calibration: dict | None = None, families=None,
                      after, verdict, calibration, robot, clock, source)
     report["equivalent"] = equivalent
     report["class_tests"] = eq.tests
+    report["weighing"] = None if weighing is None else weighing.to_dict()
     report["mujoco_warnings"] = {m: n - warned.get(m, 0) for m, n in MUJOCO_WARNINGS.items() if n > warned.get(m, 0)}
     return report
 
@@ -664,6 +677,37 @@ def _prepare(logs: list[Log], families, calibration: dict | None, base_model: di
         base = {**terms_from_labels(calibration["baseline_model"]), **base}
     return _Setup(fixed=fixed, with_imu=with_imu, families=families, train_idx=tr_idx, heldout_idx=ho_idx,
                   split_note=split_note, train=train, heldout=held, all_windows=train + held, base_model=base)
+
+
+def _weigh(logs: list[Log], setup: _Setup, calibration: dict | None, robot,
+           say: Callable[[str], None]) -> tuple[_Setup, Weighing | None]:
+    """The torso's mass from the weight on the feet (:func:`sysid.weighing.weigh`), on floating-base logs
+    with foot forces: the weighing decides it, so ``link_mass`` (the root's only on a floating base)
+    leaves the screened families, and a difference it finds goes into the base model every replay
+    carries (the other effects are fitted around it) and into the findings (:func:`_weighed_effect`).
+    The reference is the calibration logs' weighing when the calibration has one, else the model's
+    mass. Fixed-base logs, a single log or logs without foot forces: ``setup`` unchanged and None."""
+    if setup.fixed:
+        return setup, None
+    w = weigh(logs, robot, base_model=setup.base_model,
+              reference_per_log_kg=((calibration or {}).get("weight") or {}).get("per_log_kg"))
+    if w is None:
+        return setup, None
+    say(f"weight on the feet: {w.sentence()}; " + (f"{w.root} mass x{w.root_scale:.3f}" if w.found else "no mass difference"))
+    base = dict(setup.base_model)
+    if w.found:
+        base[Term("link_mass", robot.root)] = w.root_scale
+    return dataclasses.replace(setup, families=tuple(f for f in setup.families if f != "link_mass"),
+                               base_model=base), w
+
+
+def _weighed_effect(w: Weighing, robot) -> dict:
+    """The report entry of a torso mass the weighing found (:func:`_weigh`): its interval is the weighing's."""
+    e = _entry(Term("link_mass", robot.root), w.root_scale, w.root_scale_ci95, robot)
+    e["where"] = (f"link {robot.root} (the root, weighed on the feet: {1000 * w.delta_kg:+.0f} g "
+                  f"[{1000 * w.delta_ci95[0]:+.0f}, {1000 * w.delta_ci95[1]:+.0f}] against {w.reference})")
+    e["evidence"] = "weighing"
+    return e
 
 
 def _baseline(logs: list[Log], setup: _Setup, calibration: dict | None, robot) -> _Baseline:
@@ -1600,9 +1644,12 @@ def _verdict(before: _Before, after: _After, effects: list[dict], uncertain: lis
         f" ({FAMILIES[n['family']].words} of {', '.join(f'{v:.3g}' for v in n['terms'].values())} "
         f"{FAMILIES[n['family']].unit} not excluded: the {n['segment']} segment would show it)"
         for n in e.get("not_excluded", ())) for e in effects)
-    if before.nothing:
+    if before.nothing and not effects:
         verdict = (f"no missing physics: held-out RMS {1000 * rms_before:.2f} mrad is at the noise floor "
                    f"({1000 * noise_floor:.2f} mrad); no joint's residual energy exceeds 1.5x its floor's")
+    elif before.nothing:  # only the weighing found something: replayed with it, nothing is left to explain
+        verdict = (f"Found: {words}. Replayed with it, held-out RMS {1000 * rms_before:.2f} mrad is at the noise "
+                   f"floor ({1000 * noise_floor:.2f} mrad); no joint's residual energy exceeds 1.5x its floor's")
     elif not effects and not equivalent and uncertain:
         verdict = (f"held-out RMS {1000 * rms_before:.2f} -> {1000 * rms_after:.2f} mrad (noise floor "
                    f"{1000 * noise_floor:.2f} mrad) with {len(uncertain)} fitted term(s), but none passes the tests "

@@ -71,6 +71,10 @@ def format_report(rep: dict) -> str:
                  f"held out {', '.join(rep['split']['heldout'])}")
     if rep.get("base_state"):
         lines.append(f"base state of the replays: {rep['base_state']}")
+    if rep.get("weighing"):
+        w = rep["weighing"]
+        lines.append(f"weight on the feet: {w['text']}; "
+                     + (f"{w['root']} mass x{w['root_scale']:.3f} in every replay" if w["found"] else "no mass difference"))
     for wtxt in rep.get("warnings", []):
         if wtxt not in rep["verdict"]:
             lines.append(f"WARNING: {wtxt}")

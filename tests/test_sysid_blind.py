@@ -75,8 +75,9 @@ def _floating_logs(terms: dict, seeds, seconds: float = 4.0):
 
 def test_torso_mass_is_found_from_standing_logs_without_ground_truth(monkeypatch):
     """A torso (root link) 30 % heavier, standing and stepping logs with gt.* columns the diagnosis
-    must not use: link_mass on the torso is the effect the held-out logs need most, at x1.3; every
-    window started from the estimated base state."""
+    must not use: the logs weigh more on their feet than the model (sysid.weighing), so the torso's
+    mass is found at x1.3 with the weighing's interval, and every window is replayed with it from the
+    estimated base state."""
     import sysid.estimate
 
     robot = nao_h25()
@@ -94,7 +95,12 @@ def test_torso_mass_is_found_from_standing_logs_without_ground_truth(monkeypatch
     top = rep["effects"][0]
     assert top["family"] == "link_mass" and top["links"] == [robot.root], rep["effects"]
     assert abs(top["value"] - 1.3) < 0.05, top
-    assert "root" in top["where"]
+    assert top["evidence"] == "weighing" and top["ci95"][0] < 1.3 < top["ci95"][1], top
+    assert "root" in top["where"] and "weighed on the feet" in top["where"]
+    assert rep["weighing"]["found"] and rep["weighing"]["reference"].startswith("the 3 calibration logs")
+    assert rep["base_model"]["link_mass[torso]"] == pytest.approx(top["value"])  # every replay carries it
+    assert "link_mass" not in rep["families_considered"]  # the weighing decides the torso's mass, not screening
+    assert cal["weight"]["per_log_kg"] and rep["verdict"].startswith(("Found: link mass error", "held-out RMS"))
 
 
 def test_ground_truth_only_when_asked(tmp_path, capsys):

@@ -47,7 +47,8 @@ def register(sub) -> argparse.ArgumentParser:
     p.add_argument("--calibrate", action="store_true", help="the recordings have no injected effects: write "
                    "REPORT_DIR/calibration.json (engine-gap baseline) instead of a diagnosis")
     p.add_argument("--families", help="comma list of candidate families (default: actuator families for fixed-base "
-                   "logs, contact families (foot_friction, ground_compliance) for floating-base logs); "
+                   "logs; contact families (foot_friction, ground_compliance) and the torso's mass and centre of mass for "
+                   "floating-base logs, whose torso mass is weighed on the feet when they have foot forces); "
                    "torque_constant (a servo error scaling kp and kd together), parallel_spring (a passive "
                    "-k q toward the zero angle), pd_gain_all (one kp scale common to every servo), coulomb_friction_all and "
                    "viscous_damping_all (one dry / viscous friction on every joint) are screened only "
