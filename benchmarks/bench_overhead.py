@@ -1,5 +1,5 @@
-"""What does a hybrid optimization spend besides the physics? The old way against the new, side by side
-in one run.
+"""What does a hybrid optimization spend besides the physics? Each piece done apart (per episode, per
+member) against together (for the batch, on a pool), side by side in one run.
 
 Two pieces of ``sgatwalk optimize``'s default (hybrid) run that are bookkeeping, not simulation:
 
@@ -8,17 +8,17 @@ Two pieces of ``sgatwalk optimize``'s default (hybrid) run that are bookkeeping,
   random surface. Timed for ``--episodes`` episodes (a worker's share of a 12-candidate generation on 2
   cores: 6) on their own surfaces (``terrain.gaussian``, the identified sim's correlation radius, 4 cm
   cells), over ``--steps`` control steps of torso positions within the surfaces and beyond their
-  edges: one :func:`envs.base.ground_height` call per episode (the batch's earlier code) against one
+  edges: one :func:`envs.base.ground_height` call per episode (apart) against one
   :class:`envs.base.GroundStack` call for the batch (the fields stacked once per batch). The heights
   must agree bit for bit.
 * **The grounding fit's ensemble.** A grounding step fits the ensemble of the world ``sgat`` (5
   forward/inverse pairs at its defaults, its history and models) on its real and sim walks of θ0 (the
   first grounding step's data: the real world against the sim with the world's exploration noise);
-  timed fitted one after another in this process (as ``optimize`` fitted them before) against one
+  timed fitted one after another in this process (apart) against one
   member per worker of a warm process pool of ``--workers`` (``fit_grounding``'s ``map_fn``, what
-  ``optimize`` passes now). Every weight must agree bit for bit.
+  ``optimize`` passes: together). Every weight must agree bit for bit.
 
-Interleaved over ``--repeats`` repeats; medians and their ratios (old / new: above 1, the new way is
+Interleaved over ``--repeats`` repeats; medians and their ratios (apart / together: above 1, together is
 faster). Prints a table or, with ``--json``, one JSON object (its ``"text"`` the table); progress goes
 to stderr. Exits 1 unless both ways agree bit for bit. Defaults (3 repeats) take about 1.5 minutes
 on 2 idle cores.
@@ -50,13 +50,13 @@ def lookup_times(fields, xs, ys) -> dict:
     B = len(fields)
     ep = np.arange(B)
     t0 = time.perf_counter()
-    old = np.array([[float(ground_height(fields[i], xs[k, i], ys[k, i])) for i in range(B)] for k in range(len(xs))])
-    t_old = time.perf_counter() - t0
+    apart = np.array([[float(ground_height(fields[i], xs[k, i], ys[k, i])) for i in range(B)] for k in range(len(xs))])
+    t_apart = time.perf_counter() - t0
     t0 = time.perf_counter()
     stack = GroundStack(fields)  # once per batch, at its reset
-    new = np.array([stack.height(ep, xs[k], ys[k]) for k in range(len(xs))])
-    t_new = time.perf_counter() - t0
-    return {"old_s": t_old / len(xs), "new_s": t_new / len(xs), "same": bool(np.array_equal(old, new))}
+    together = np.array([stack.height(ep, xs[k], ys[k]) for k in range(len(xs))])
+    t_together = time.perf_counter() - t0
+    return {"apart_s": t_apart / len(xs), "together_s": t_together / len(xs), "same": bool(np.array_equal(apart, together))}
 
 
 #: The training world whose grounding data and ensemble are timed.
@@ -102,13 +102,13 @@ def fit_times(real, sim, ex) -> dict:
 
     t0 = time.perf_counter()
     a = fit_walk_grounding(real, sim, cfg, history=history, seed=1)
-    t_old = time.perf_counter() - t0
+    t_apart = time.perf_counter() - t0
     t0 = time.perf_counter()
     b = fit_walk_grounding(real, sim, cfg, history=history, seed=1, map_fn=ex.map)
-    t_new = time.perf_counter() - t0
+    t_together = time.perf_counter() - t0
     wa, wb = weights(a), weights(b)
     same = len(wa) == len(wb) and all(torch.equal(x, y) for x, y in zip(wa, wb))
-    return {"old_s": t_old, "new_s": t_new, "same": bool(same), "members": a.transformer.n_members}
+    return {"apart_s": t_apart, "together_s": t_together, "same": bool(same), "members": a.transformer.n_members}
 
 
 def _warm(_):
@@ -153,19 +153,19 @@ def main(argv=None) -> int:
     med = lambda rs, k: statistics.median(x[k] for x in rs)  # noqa: E731
     out = {"episodes": args.episodes, "steps": args.steps, "repeats": args.repeats, "workers": args.workers,
            "rms_height": args.rms, "world": WORLD, "grounding_walks": [len(real), len(sim)],
-           "lookup": {"old_us_per_step": 1e6 * med(look, "old_s"), "new_us_per_step": 1e6 * med(look, "new_s"),
-                      "ratio": med(look, "old_s") / med(look, "new_s"), "bit_identical": all(x["same"] for x in look)},
-           "ensemble_fit": {"members": fits[0]["members"], "old_s": med(fits, "old_s"), "new_s": med(fits, "new_s"),
-                            "ratio": med(fits, "old_s") / med(fits, "new_s"), "bit_identical": all(x["same"] for x in fits)}}
+           "lookup": {"apart_us_per_step": 1e6 * med(look, "apart_s"), "together_us_per_step": 1e6 * med(look, "together_s"),
+                      "ratio": med(look, "apart_s") / med(look, "together_s"), "bit_identical": all(x["same"] for x in look)},
+           "ensemble_fit": {"members": fits[0]["members"], "apart_s": med(fits, "apart_s"), "together_s": med(fits, "together_s"),
+                            "ratio": med(fits, "apart_s") / med(fits, "together_s"), "bit_identical": all(x["same"] for x in fits)}}
     lk, ft = out["lookup"], out["ensemble_fit"]
     lookup_name = f"fall-check ground lookup, {args.episodes} episodes [us/step]"
     fit_name = f"ensemble fit, {ft['members']} members, {args.workers} workers [s]"
     out["text"] = "\n".join([
-        f"medians of {args.repeats} interleaved repeats; old / new: above 1, the new way is faster",
-        f"{'piece':44s} {'old':>10s} {'new':>10s} {'old/new':>8s} {'bit-identical':>13s}",
-        f"{lookup_name:44s} {lk['old_us_per_step']:10.0f} "
-        f"{lk['new_us_per_step']:10.0f} {lk['ratio']:8.1f} {str(lk['bit_identical']).lower():>13s}",
-        f"{fit_name:44s} {ft['old_s']:10.1f} {ft['new_s']:10.1f} "
+        f"medians of {args.repeats} interleaved repeats; apart / together: above 1, together is faster",
+        f"{'piece':44s} {'apart':>10s} {'together':>10s} {'ratio':>8s} {'bit-identical':>13s}",
+        f"{lookup_name:44s} {lk['apart_us_per_step']:10.0f} "
+        f"{lk['together_us_per_step']:10.0f} {lk['ratio']:8.1f} {str(lk['bit_identical']).lower():>13s}",
+        f"{fit_name:44s} {ft['apart_s']:10.1f} {ft['together_s']:10.1f} "
         f"{ft['ratio']:8.2f} {str(ft['bit_identical']).lower():>13s}",
     ])
     print(json.dumps(out) if args.json else out["text"], flush=True)

@@ -1,5 +1,5 @@
 """``benchmarks/bench_overhead.py`` times the batch's ground lookup and the grounding fit's ensemble,
-old way against new; it exits 1 unless both ways give the same numbers bit for bit."""
+each apart and together; it exits 1 unless both ways give the same numbers bit for bit."""
 
 import json
 
