@@ -73,6 +73,7 @@ class Weighing:
 
     @property
     def root_scale_ci95(self) -> tuple[float, float]:
+        """The 95 % interval of :attr:`root_scale`: ``delta_ci95`` put on the root's mass, (low, high)."""
         return tuple((self.root_kg + d) / self.root_nominal_kg for d in self.delta_ci95)
 
     def sentence(self) -> str:

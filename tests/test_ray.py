@@ -63,8 +63,10 @@ def cluster():
     # this cluster, given to the head and, through the environment, to every command the tests run.
     # Ray replaces a node address of 127.0.0.1 by the machine's outward IP unless clusters of several
     # machines are off (RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0, as on macOS): then every address is loopback.
+    # Ray starts its workers at nice 15 (its worker_niceness); at 0 they share the cores fairly with
+    # whatever else runs (the other long tests beside them in .ci/run) instead of waiting for it to end.
     auth = {"RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32), "RAY_USAGE_STATS_ENABLED": "0",
-            "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+            "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_worker_niceness": "0"}
     saved = {k: os.environ.get(k) for k in auth}
     os.environ.update(auth)
     env = dict(os.environ)
