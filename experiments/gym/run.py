@@ -927,13 +927,14 @@ def paired_differences(rows: list[dict], cfg: GymConfig, pairs=PAIRS) -> list[di
 
 
 def format_table(summary: list[dict], cfg: GymConfig, paired: list[dict] = ()) -> str:
-    """Plain-text table: real return mean ± s.e. (normalised to real-trained) per noise and method,
-    then the paired differences (:func:`paired_differences`), if given."""
+    """Plain-text table: real return mean ± s.e. per noise and method (normalised to the real-trained
+    policy's when ``real`` is among the methods), then the paired differences
+    (:func:`paired_differences`), if given."""
     name = {"noisyreal": "Sim-to-NoisyReal", "noisysim": "Sim-to-NoisySim"}[cfg.experiment]
     mass = (f"pole x{cfg.pole_factor:g}" if cfg.env == "InvertedPendulum" else f"mass x{cfg.mass_factor:.4g}") \
         if cfg.mismatch else "no mass change"
     lines = [f"{cfg.env} {name} ({mass}), TRPO, {cfg.runs} runs/cell; return on real over {cfg.eval_episodes} "
-             f"episodes, mean ± s.e. over runs (normalized to real-trained)"]
+             f"episodes, mean ± s.e. over runs" + (" (normalized to real-trained)" if "real" in cfg.methods else "")]
     ms = [m for m in METHODS if m in cfg.methods]
     head = f"{'noise':>5}  " + "  ".join(f"{m.upper() if m != 'sim' else 'SIM-ONLY':>22}" for m in ms)
     lines += [head, "-" * len(head)]
