@@ -55,7 +55,7 @@ def register(sub) -> argparse.ArgumentParser:
                    "when listed here; +NAME adds to the default")
     p.add_argument("--base-report", type=A.in_file, metavar="REPORT_JSON", help="keep the effects of an earlier diagnosis fixed "
                    "(bottom-up staging: diagnose fixed-base logs first, then stepping logs with their report)")
-    p.add_argument("--rounds", type=A.count(1, 100), default=3, help="screen/refit passes (default 3)")
+    p.add_argument("--passes", type=A.count(1, 100), default=3, help="screen/refit passes (default 3)")
     p.add_argument("--time-budget", type=A.real(0.0, 86400.0, unit='s'), default=300.0, metavar="SECONDS",
                    help="start no new search step after this long (default 300; 0 = no limit)")
     p.add_argument("--use-ground-truth", action="store_true",
@@ -85,7 +85,7 @@ def run(args) -> dict:
                   f"{', '.join(f'{k} = {v:.4g}' for k, v in cal['baseline_model'].items()) or 'none'}; "
                   f"base state {cal['base_state']}; wrote {p}")
         return {"calibration": p, **public_json(cal)}
-    rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.rounds, progress=say, base_model=base,
+    rep = diagnose(logs, calibration=cal, families=fams, max_rounds=args.passes, progress=say, base_model=base,
                    time_budget_s=args.time_budget or None, robot=robot, use_ground_truth=args.use_ground_truth)
     paths = write_report(rep, logs, args.out, plots=not args.no_plots)
     if not args.json:

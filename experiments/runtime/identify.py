@@ -256,9 +256,9 @@ def identify_real(out_dir: str, *, seed: int, profile="real", calibration: dict 
         n_fixed, n_floating: excitation logs in the air and stepping on the walking ground (0 skips
             the stage).
         seconds: length of each log [s].
-        time_budget_s, rounds: of each diagnosis (``sgatwalk diagnose --time-budget --rounds``). Two
-            rounds: the first finds what walking feels most (latency in the air, uneven ground on the
-            floor); later rounds mostly add friction of the light arm joints, which the walk does not
+        time_budget_s, rounds: of each diagnosis (``sgatwalk diagnose --time-budget --passes``). Two
+            screen/refit passes: the first finds what walking feels most (latency in the air, uneven ground on the
+            floor); later passes mostly add friction of the light arm joints, which the walk does not
             feel, for another minute per diagnosis.
         progress: a callable given each of the diagnoses' progress lines (None: quiet).
 
